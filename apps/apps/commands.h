@@ -1,0 +1,7 @@
+#pragma once
+// Entry points of the catpaq subcommands (argv[0] is the subcommand name).
+namespace catpaq {
+
+int cmd_info(int argc, char** argv);
+
+}  // namespace catpaq
