@@ -16,7 +16,9 @@ struct Command {
 };
 
 const Command kCommands[] = {
+    {"convert", "convert a mesh into a streamable dataset", catpaq::cmd_convert},
     {"info", "print facts about a mesh file", catpaq::cmd_info},
+    {"verify", "check a dataset's invariants and measure its error", catpaq::cmd_verify},
 };
 
 void usage(FILE* out) {

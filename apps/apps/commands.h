@@ -3,5 +3,7 @@
 namespace catpaq {
 
 int cmd_info(int argc, char** argv);
+int cmd_convert(int argc, char** argv);
+int cmd_verify(int argc, char** argv);
 
 }  // namespace catpaq

@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <cstring>
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
@@ -90,14 +91,15 @@ bool InputFile::next_line(std::string_view& line) {
     }
 }
 
-bool InputFile::skip(uint64_t n) {
-    while (n > 0) {
-        if (available() == 0 && !refill(1)) return false;
-        size_t take = size_t(std::min<uint64_t>(n, available()));
+uint64_t InputFile::skip(uint64_t n) {
+    uint64_t skipped = 0;
+    while (skipped < n) {
+        if (available() == 0 && !refill(1)) break;
+        size_t take = size_t(std::min<uint64_t>(n - skipped, available()));
         consume(take);
-        n -= take;
+        skipped += take;
     }
-    return true;
+    return skipped;
 }
 
 bool InputFile::only_whitespace_left() {
@@ -123,6 +125,13 @@ void InputFile::fail_line(const char* format, ...) const {
     std::string message = vformat(format, args);
     va_end(args);
     throw Error("'" + path_ + "' line " + std::to_string(line_) + ": " + message);
+}
+
+void advise_huge_pages(void* data, size_t bytes) {
+    constexpr uintptr_t kHuge = uintptr_t(2) << 20;
+    uintptr_t begin = (reinterpret_cast<uintptr_t>(data) + kHuge - 1) & ~(kHuge - 1);
+    uintptr_t end = (reinterpret_cast<uintptr_t>(data) + bytes) & ~(kHuge - 1);
+    if (end > begin) madvise(reinterpret_cast<void*>(begin), end - begin, MADV_HUGEPAGE);  // a hint: errors are fine
 }
 
 }  // namespace catpaq::mesh_io

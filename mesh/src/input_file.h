@@ -43,8 +43,8 @@ public:
         pos_ += n;
         consumed_ += n;
     }
-    // Skips `n` bytes; false if the file ends first.
-    bool skip(uint64_t n);
+    // Skips up to `n` bytes and returns how many were skipped (fewer only at end of file).
+    uint64_t skip(uint64_t n);
     // True if everything left in the file is ASCII whitespace (or nothing is left).
     bool only_whitespace_left();
 

@@ -4,6 +4,7 @@
 // empty-mesh check on top.
 #include <cmath>
 #include <string>
+#include <vector>
 
 #include "mesh/mesh.h"
 
@@ -30,6 +31,24 @@ inline uint8_t unit_to_byte(double v) {
     if (v <= 0.0) return 0;
     if (v >= 1.0) return 255;
     return uint8_t(std::floor(v * 255.0 + 0.5));
+}
+
+// Reserves room for `n` elements and asks the kernel to back the (fresh, untouched) buffer with
+// transparent huge pages where it allows them: one first-touch page fault per 4 KB costs more
+// than parsing the data (measured: half of binary PLY reading time in a VM).
+void advise_huge_pages(void* data, size_t bytes);
+template <class T>
+void reserve_huge(std::vector<T>& v, size_t n) {
+    v.reserve(n);
+    advise_huge_pages(v.data(), n * sizeof(T));
+}
+
+// Appends one triangle. (push_back beats insert({a, b, c}), which memmoves 12 bytes per call:
+// that alone cost a tenth of binary PLY reading time.)
+inline void push_triangle(std::vector<uint32_t>& indices, uint32_t a, uint32_t b, uint32_t c) {
+    indices.push_back(a);
+    indices.push_back(b);
+    indices.push_back(c);
 }
 
 inline bool finite3(double x, double y, double z) {

@@ -59,6 +59,15 @@ inline bool parse_double(std::string_view token, double& out) {
     return error == std::errc() && end == token.data() + token.size();
 }
 
+// As parse_double, rounding once, straight to float: a float written in shortest form reads back
+// with the same bits (going through double could round twice).
+inline bool parse_float(std::string_view token, float& out) {
+    if (!token.empty() && token.front() == '+') token.remove_prefix(1);
+    if (token.empty()) return false;
+    auto [end, error] = std::from_chars(token.data(), token.data() + token.size(), out);
+    return error == std::errc() && end == token.data() + token.size();
+}
+
 inline bool parse_int(std::string_view token, int64_t& out) {
     if (!token.empty() && token.front() == '+') token.remove_prefix(1);
     if (token.empty()) return false;

@@ -1,0 +1,81 @@
+// catpaq convert: a mesh in, a streamable multiresolution dataset out.
+#include <cstdio>
+
+#include "apps/commands.h"
+#include "base/error.h"
+#include "base/options.h"
+#include "base/sysinfo.h"
+#include "catp/builder.h"
+#include "catp/lattice.h"
+#include "mesh/io.h"
+
+namespace catpaq {
+
+static const char* kConvertUsage =
+    "usage: catpaq convert INPUT -o OUTPUT.cpq [options]\n"
+    "  Converts a mesh (PLY, OBJ, OFF, STL) into a streamable multiresolution dataset.\n"
+    "options:\n"
+    "  -o, --output FILE        output dataset (.cpq), written atomically\n"
+    "  --format catp            output format (catp: Compact Adaptive TetraPuzzles)\n"
+    "  --leaf-triangles N       target triangles per leaf fragment (default 2000)\n"
+    "  --leaf-level L           force the leaf level of the diamond hierarchy\n"
+    "  --threads N              worker threads (default: all cores)\n"
+    "  --quiet                  no progress bar or report\n";
+
+int cmd_convert(int argc, char** argv) {
+    // Accept -o as an alias of --output.
+    std::vector<char*> args(argv, argv + argc);
+    std::string output_flag = "--output";
+    for (auto& a : args)
+        if (std::string(a) == "-o") a = output_flag.data();
+    Options options(int(args.size()), args.data(), kConvertUsage, {"quiet"});
+    if (options.help()) {
+        std::printf("%s", kConvertUsage);
+        return 0;
+    }
+    if (options.positional().size() != 1) fail("expected one input mesh (see --help)");
+    std::string input = options.positional()[0];
+    std::string output = options.require("output");
+    std::string format = options.get("format", "catp");
+    if (format != "catp") fail("unknown --format '%s' (available: catp)", format.c_str());
+    CatpBuildSettings settings;
+    settings.leaf_triangles = size_t(options.integer("leaf-triangles", 2000, 50, 1000000));
+    settings.leaf_level = int(options.integer("leaf-level", -1, -1, kMaxLevel - 3));
+    settings.threads = unsigned(options.integer("threads", 0, 0, 1024));
+    bool quiet = options.flag("quiet");
+    settings.progress = !quiet;
+    options.finish();
+
+    double t0 = now_seconds();
+    Mesh mesh = read_mesh(input);
+    double read_seconds = now_seconds() - t0;
+    CatpBuildReport r = build_catp(mesh, output, settings);
+    if (quiet) return 0;
+    double total = now_seconds() - t0;
+    size_t vertices = 0, triangles = 0;
+    for (const CatpLevelStats& l : r.levels) {
+        vertices += l.vertices;
+        triangles += l.triangles;
+    }
+    std::printf("input:      %s: %zu vertices, %zu triangles (read in %.2f s)\n", input.c_str(), r.input_vertices,
+                r.input_triangles, read_seconds);
+    std::printf("output:     %s: %llu bytes, %zu diamonds, leaf level %d\n", output.c_str(),
+                (unsigned long long)r.file_bytes, r.nodes, r.leaf_level);
+    std::printf("build:      %.2f s, %.0f input triangles/s (with reading: %.0f/s), peak memory %.1f MiB\n", r.seconds,
+                double(r.input_triangles) / r.seconds, double(r.input_triangles) / total,
+                double(r.peak_rss) / (1 << 20));
+    std::printf("size:       %.2f bits per stored vertex over all levels (%zu vertices, %zu triangles)\n",
+                vertices ? 8.0 * double(r.file_bytes) / double(vertices) : 0.0, vertices, triangles);
+    std::printf("%6s %9s %10s %10s %12s %14s %12s\n", "level", "diamonds", "fragments", "triangles", "bytes",
+                "bits/vertex", "error");
+    for (const CatpLevelStats& l : r.levels) {
+        if (!l.diamonds) continue;
+        std::printf("%6d %9zu %10zu %10zu %12llu %14.2f %12.4g\n", l.level, l.diamonds, l.fragments, l.triangles,
+                    (unsigned long long)l.bytes, l.vertices ? 8.0 * double(l.bytes) / double(l.vertices) : 0.0,
+                    l.max_error);
+    }
+    std::printf("error is in model units; the bounding-box diagonal is %.6g\n", r.diagonal);
+    return 0;
+}
+
+}  // namespace catpaq

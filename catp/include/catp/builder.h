@@ -1,0 +1,50 @@
+#pragma once
+// The CATP converter: a mesh in, a CATP dataset (catp/format.h) out.
+//
+// 1. The model is placed in a power-of-two cube and mapped to the integer lattice.
+// 2. The leaf level is chosen from the triangle density (about `leaf_triangles` per tetrahedron).
+// 3. Leaves: the mesh is clipped by the leaf tetrahedra (catp/src/clip.h: canonical, exactly
+//    snapped constructions decided by exact predicates).
+// 4. Coarser diamonds, bottom-up: the fragments of a diamond's children are gathered and welded,
+//    simplified to about half (vertices on the diamond's outer faces locked), then clipped by the
+//    diamond's interior faces into one fragment per tetrahedron. Errors are made monotone.
+// 5. Vertices are quantized to the 64-bit vertex with the face rule, fragments compressed, and the
+//    archive written atomically.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "mesh/mesh.h"
+
+namespace catpaq {
+
+struct CatpBuildSettings {
+    size_t leaf_triangles = 2000;  // target triangles per leaf tetrahedron
+    int leaf_level = -1;           // force a leaf level (-1: choose from the density)
+    unsigned threads = 0;          // 0: all cores
+    bool progress = true;          // progress bar on a terminal
+};
+
+struct CatpLevelStats {
+    int level = 0;
+    size_t diamonds = 0, fragments = 0, triangles = 0, vertices = 0;
+    uint64_t bytes = 0;
+    double max_error = 0;  // world units
+};
+
+struct CatpBuildReport {
+    size_t input_vertices = 0, input_triangles = 0;
+    int leaf_level = 0;
+    size_t nodes = 0;
+    uint64_t file_bytes = 0;
+    double seconds = 0;
+    uint64_t peak_rss = 0;
+    double diagonal = 0;                 // world units
+    std::vector<CatpLevelStats> levels;  // coarse to fine
+};
+
+// Converts `mesh` (validated: finite, indices in range) into a dataset at `output_path`.
+// Throws Error with a clear message for inputs it refuses (no triangles, zero extent).
+CatpBuildReport build_catp(const Mesh& mesh, const std::string& output_path, const CatpBuildSettings& settings);
+
+}  // namespace catpaq

@@ -1,0 +1,54 @@
+#pragma once
+// The CATP dataset: an archive (common_codec/archive.h) of kind Catp whose nodes are diamonds.
+//
+// Meta (little-endian):
+//   char[8] "CATPMETA" | u32 version (1) | u32 lattice_bits
+//   f64 origin[3] | f64 cell            world = origin + lattice * cell (cell is a power of two)
+//   u32 leaf_level | u32 flags (bit 0: input had colours, bit 1: input had normals)
+//   u64 input_vertices | u64 input_triangles | f64 bounds_min[3] | f64 bounds_max[3] (world)
+//   u32 default_rgb (0x00BBGGRR used when the input has no colours)
+//
+// Node (one diamond; key = DiamondId bits, level = diamond level, flags = slot mask (bits 0-7) |
+// leaf (bit 8), count = triangles, error = object-space error bound in world units):
+//   u8 slot_mask | for each set bit s, ascending: u32 size | fragment (common_codec/fragment_codec.h)
+// A fragment's vertices are quantized in the canonical corners of tetrahedron `s` of the diamond
+// (catp/lattice.h: diamond_tetrahedron + canonical_tetrahedron).
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "common_codec/fragment_codec.h"
+#include "catp/lattice.h"
+
+namespace catpaq {
+
+constexpr uint32_t kCatpMetaVersion = 1;
+constexpr uint16_t kCatpLeafFlag = 1u << 8;
+
+struct CatpMeta {
+    uint32_t lattice_bits = kLatticeBits;
+    double origin[3] = {0, 0, 0};
+    double cell = 1.0;
+    uint32_t leaf_level = 0;
+    uint32_t flags = 0;
+    uint64_t input_vertices = 0, input_triangles = 0;
+    double bounds_min[3] = {0, 0, 0}, bounds_max[3] = {0, 0, 0};
+    uint32_t default_rgb = 0x00b4b4b4;
+};
+
+std::vector<uint8_t> encode_catp_meta(const CatpMeta& meta);
+// Empty string on success, else what is wrong.
+std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& out);
+
+// A diamond's decoded fragments, one per existing slot with geometry.
+struct DiamondFragments {
+    uint8_t slot_mask = 0;
+    std::array<FragmentMesh, 8> slots;
+};
+
+std::vector<uint8_t> encode_diamond_node(const DiamondFragments& fragments);
+// Empty string on success, else what is wrong (truncated, corrupt fragment, ...).
+std::string decode_diamond_node(const uint8_t* data, size_t size, DiamondFragments& out);
+
+}  // namespace catpaq

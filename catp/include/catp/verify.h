@@ -1,0 +1,44 @@
+#pragma once
+// `catpaq verify`: decodes a CATP dataset and checks its invariants; with the original mesh it
+// also measures, per level, the distance between the level's surface and the original.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "mesh/mesh.h"
+
+namespace catpaq {
+
+struct VerifyLevel {
+    int level = 0;
+    size_t diamonds = 0, fragments = 0, triangles = 0, vertices = 0;
+    uint64_t bytes = 0;
+    double stored_error = 0;     // largest stored error bound of the level's diamonds (world)
+    double quantization_step = 0;  // largest tetrahedron edge / grid of the level (world)
+    // Measured on the uniform cut at this level (every coarser diamond refined), world units:
+    double distance_to_original_max = -1, distance_to_original_rms = -1;    // level -> original
+    double distance_from_original_max = -1, distance_from_original_rms = -1;  // original -> level
+};
+
+struct VerifyReport {
+    size_t nodes = 0, fragments = 0, triangles = 0;
+    uint64_t file_bytes = 0;
+    double diagonal = 0;  // of the stored bounds
+    size_t checksum_failures = 0, corrupt_nodes = 0, monotonicity_violations = 0, bad_flags = 0;
+    size_t face_mismatches = 0, faces_checked = 0;
+    std::vector<VerifyLevel> levels;
+    std::vector<std::string> problems;  // first few, human readable
+    bool ok() const {
+        return checksum_failures == 0 && corrupt_nodes == 0 && monotonicity_violations == 0 && bad_flags == 0 &&
+               face_mismatches == 0;
+    }
+};
+
+struct VerifySettings {
+    size_t samples_per_level = 50000;  // surface samples for the distance measures
+};
+
+// Throws Error if the file cannot be opened as a CATP dataset at all; everything else is reported.
+VerifyReport verify_catp(const std::string& path, const Mesh* original, const VerifySettings& settings);
+
+}  // namespace catpaq

@@ -1,0 +1,88 @@
+#include "catp/dataset.h"
+
+#include "base/error.h"
+
+namespace catpaq {
+
+CatpIndex::CatpIndex(const ArchiveHeader& header, std::vector<uint8_t> meta, std::vector<ArchiveEntry> entries,
+                     const std::string& source)
+    : header_(header), entries_(std::move(entries)) {
+    if (header.kind != ArchiveKind::Catp)
+        fail("'%s' is a %s dataset, not CATP", source.c_str(), archive_kind_name(header.kind));
+    std::string problem = decode_catp_meta(meta.data(), meta.size(), meta_);
+    if (!problem.empty()) fail("'%s': %s", source.c_str(), problem.c_str());
+    by_key_.reserve(entries_.size() * 2);
+    for (size_t i = 0; i < entries_.size(); ++i) {
+        const ArchiveEntry& e = entries_[i];
+        DiamondId id{e.key};
+        if (!is_valid_diamond_centre(id.centre()) || diamond_level(id) != e.level)
+            fail("'%s': index entry %zu is not a valid diamond", source.c_str(), i);
+        by_key_[e.key] = i;
+    }
+}
+
+CatpIndex CatpIndex::from_prefix(const uint8_t* data, size_t size, const std::string& source) {
+    ArchiveHeader header;
+    std::string problem = parse_archive_header(data, size, header);
+    if (problem.empty() && size < header.index_offset + header.index_size) problem = "prefix is truncated";
+    std::vector<ArchiveEntry> entries;
+    if (problem.empty()) problem = parse_archive_index(header, data + header.index_offset, header.index_size, entries);
+    if (!problem.empty()) fail("'%s': %s", source.c_str(), problem.c_str());
+    std::vector<uint8_t> meta(data + header.meta_offset, data + header.meta_offset + header.meta_size);
+    return CatpIndex(header, std::move(meta), std::move(entries), source);
+}
+
+const ArchiveEntry* CatpIndex::find(DiamondId id) const {
+    auto it = by_key_.find(id.bits);
+    return it == by_key_.end() ? nullptr : &entries_[it->second];
+}
+
+void CatpIndex::lattice_to_world(const double lattice[3], double world[3]) const {
+    for (int i = 0; i < 3; ++i) world[i] = meta_.origin[i] + lattice[i] * meta_.cell;
+}
+
+CatpFile::CatpFile(const std::string& path) : archive_(new ArchiveReader(path)) {
+    index_.reset(new CatpIndex(archive_->header(), archive_->meta(), archive_->entries(), path));
+}
+
+DiamondFragments CatpFile::decode(const ArchiveEntry& entry) const {
+    std::string error;
+    const uint8_t* bytes = archive_->node(index_->entry_index(&entry), &error);
+    if (!bytes) fail("%s", error.c_str());
+    DiamondFragments out;
+    std::string problem = decode_diamond_node(bytes, entry.size, out);
+    if (!problem.empty()) fail("diamond %llu: %s", (unsigned long long)entry.key, problem.c_str());
+    return out;
+}
+
+bool decode_fragment_integer_positions(const FragmentMesh& fragment, const DiamondInfo& diamond, int slot,
+                                       std::vector<std::array<int64_t, 3>>& out) {
+    Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(diamond, slot));
+    std::array<LatticePoint, 4> c = {t[0], t[1], t[2], t[3]};
+    out.clear();
+    out.reserve(fragment.vertices.size());
+    for (const PackedVertex& v : fragment.vertices) {
+        BaryWeights w;
+        if (!bary_unpack(v.position_index(), w)) return false;
+        std::array<int64_t, 3> s;
+        for (int k = 0; k < 3; ++k)
+            s[k] = int64_t(w[0]) * c[0][k] + int64_t(w[1]) * c[1][k] + int64_t(w[2]) * c[2][k] + int64_t(w[3]) * c[3][k];
+        out.push_back(s);
+    }
+    return true;
+}
+
+bool decode_fragment_positions(const FragmentMesh& fragment, const DiamondInfo& diamond, int slot,
+                               const std::array<int32_t, 3>& anchor_times_grid, float scale,
+                               std::vector<float>& positions_out) {
+    Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(diamond, slot));
+    std::array<LatticePoint, 4> c = {t[0], t[1], t[2], t[3]};
+    for (const PackedVertex& v : fragment.vertices) {
+        DecodedVertex d;
+        if (!decode_packed_vertex(v, c, anchor_times_grid, scale, d)) return false;
+        positions_out.insert(positions_out.end(), d.position, d.position + 3);
+    }
+    return true;
+}
+
+}  // namespace catpaq

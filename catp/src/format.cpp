@@ -1,0 +1,87 @@
+#include "catp/format.h"
+
+#include <cmath>
+#include <cstring>
+
+#include "base/bytes.h"
+#include "base/error.h"
+
+namespace catpaq {
+
+std::vector<uint8_t> encode_catp_meta(const CatpMeta& m) {
+    ByteWriter w;
+    w.raw("CATPMETA", 8);
+    w.u32(kCatpMetaVersion);
+    w.u32(m.lattice_bits);
+    for (double v : m.origin) w.f64(v);
+    w.f64(m.cell);
+    w.u32(m.leaf_level);
+    w.u32(m.flags);
+    w.u64(m.input_vertices);
+    w.u64(m.input_triangles);
+    for (double v : m.bounds_min) w.f64(v);
+    for (double v : m.bounds_max) w.f64(v);
+    w.u32(m.default_rgb);
+    return std::move(w.bytes());
+}
+
+std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m) {
+    if (size < 8 || std::memcmp(data, "CATPMETA", 8) != 0) return "not CATP metadata";
+    ByteReader r(data + 8, size - 8);
+    uint32_t version = r.u32();
+    if (!r.ok()) return "CATP metadata truncated";
+    if (version != kCatpMetaVersion)
+        return strprintf("unsupported CATP metadata version %u (this build reads %u)", version, kCatpMetaVersion);
+    m.lattice_bits = r.u32();
+    for (double& v : m.origin) v = r.f64();
+    m.cell = r.f64();
+    m.leaf_level = r.u32();
+    m.flags = r.u32();
+    m.input_vertices = r.u64();
+    m.input_triangles = r.u64();
+    for (double& v : m.bounds_min) v = r.f64();
+    for (double& v : m.bounds_max) v = r.f64();
+    m.default_rgb = r.u32();
+    if (!r.ok()) return "CATP metadata truncated";
+    if (m.lattice_bits != uint32_t(kLatticeBits))
+        return strprintf("CATP lattice of %u bits is not supported (this build uses %d)", m.lattice_bits, kLatticeBits);
+    if (!(m.cell > 0) || !std::isfinite(m.cell)) return "CATP metadata has an invalid cell size";
+    for (double v : m.origin)
+        if (!std::isfinite(v)) return "CATP metadata has an invalid origin";
+    if (m.leaf_level > uint32_t(kMaxLevel)) return "CATP metadata has an invalid leaf level";
+    return "";
+}
+
+std::vector<uint8_t> encode_diamond_node(const DiamondFragments& f) {
+    std::vector<uint8_t> out;
+    out.push_back(f.slot_mask);
+    for (int s = 0; s < 8; ++s) {
+        if (!(f.slot_mask & (1 << s))) continue;
+        size_t at = out.size();
+        out.resize(at + 4);
+        size_t n = fragment_encode(f.slots[s], out);
+        for (int i = 0; i < 4; ++i) out[at + i] = uint8_t(n >> (8 * i));
+    }
+    return out;
+}
+
+std::string decode_diamond_node(const uint8_t* data, size_t size, DiamondFragments& out) {
+    ByteReader r(data, size);
+    out.slot_mask = r.u8();
+    if (!r.ok()) return "empty diamond node";
+    for (int s = 0; s < 8; ++s) {
+        out.slots[s].vertices.clear();
+        out.slots[s].indices.clear();
+        if (!(out.slot_mask & (1 << s))) continue;
+        uint32_t n = r.u32();
+        const uint8_t* p = r.take(n);
+        if (!p) return strprintf("diamond node truncated in slot %d", s);
+        FragmentStatus status = fragment_decode(p, n, out.slots[s]);
+        if (status != FragmentStatus::Ok)
+            return strprintf("slot %d: fragment %s", s, fragment_status_name(status));
+    }
+    if (r.remaining() != 0) return "trailing bytes after the diamond's fragments";
+    return "";
+}
+
+}  // namespace catpaq

@@ -1,0 +1,195 @@
+#include "fragment_build.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "catp/simplify.h"
+#include "common_codec/barycentric.h"
+#include "common_codec/octahedral.h"
+#include "common_codec/packed_vertex.h"
+
+namespace catpaq {
+
+size_t PositionHash::operator()(const Vec3d& p) const {
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (int i = 0; i < 3; ++i) {
+        uint64_t bits;
+        std::memcpy(&bits, &p[i], 8);
+        h = (h ^ bits) * 0x100000001b3ull;
+        h ^= h >> 29;
+    }
+    return size_t(h);
+}
+
+FragmentWelder::FragmentWelder(WorkFragment& fragment) : f_(fragment) {
+    index_.reserve(fragment.positions.size() * 2 + 16);
+    for (uint32_t i = 0; i < fragment.positions.size(); ++i) index_.emplace(fragment.positions[i], i);
+}
+
+uint32_t FragmentWelder::add(const Vec3d& position, const float normal[3], const float color[3]) {
+    auto [it, inserted] = index_.emplace(position, uint32_t(f_.positions.size()));
+    if (!inserted) return it->second;
+    float len = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
+    Vec3f n = len > 0 ? Vec3f{normal[0] / len, normal[1] / len, normal[2] / len} : Vec3f{0, 0, 1};
+    Rgb8 c;
+    for (int i = 0; i < 3; ++i) c[i] = uint8_t(std::clamp(std::lround(color[i]), 0l, 255l));
+    f_.positions.push_back(position);
+    f_.normals.push_back(n);
+    f_.colors.push_back(c);
+    return it->second;
+}
+
+uint32_t FragmentWelder::add(const Vec3d& position, const Vec3f& normal, const Rgb8& color) {
+    auto [it, inserted] = index_.emplace(position, uint32_t(f_.positions.size()));
+    if (!inserted) return it->second;
+    f_.positions.push_back(position);
+    f_.normals.push_back(normal);
+    f_.colors.push_back(color);
+    return it->second;
+}
+
+void FragmentWelder::triangle(uint32_t a, uint32_t b, uint32_t c) {
+    if (a == b || b == c || a == c) return;
+    f_.indices.insert(f_.indices.end(), {a, b, c});
+}
+
+void FragmentWelder::append(const WorkFragment& other) {
+    std::vector<uint32_t> remap(other.positions.size());
+    for (size_t v = 0; v < other.positions.size(); ++v)
+        remap[v] = add(other.positions[v], other.normals[v], other.colors[v]);
+    for (size_t i = 0; i + 2 < other.indices.size(); i += 3)
+        triangle(remap[other.indices[i]], remap[other.indices[i + 1]], remap[other.indices[i + 2]]);
+}
+
+static ClipPlane face_clip_plane(const LatticePoint& a, const LatticePoint& b, const LatticePoint& c,
+                                 const LatticePoint& keep) {
+    ClipPlane cp;
+    cp.plane = make_plane(a, b, c);
+    Vec3d k = {double(keep[0]), double(keep[1]), double(keep[2])};
+    cp.sign = plane_side(cp.plane, k) > 0 ? 1 : -1;
+    cp.corners = {a, b, c};
+    cp.lines = {{a, b}, {b, c}, {a, c}};
+    return cp;
+}
+
+std::vector<ClipPlane> tetrahedron_clip_planes(const Tetrahedron& t, unsigned face_mask) {
+    std::vector<ClipPlane> planes;
+    for (int f = 0; f < 4; ++f)
+        if (face_mask & (1u << f)) planes.push_back(face_clip_plane(t[(f + 1) % 4], t[(f + 2) % 4], t[(f + 3) % 4], t[f]));
+    return planes;
+}
+
+void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, FragmentMesh& out) {
+    out.vertices.clear();
+    out.indices.clear();
+    LatticePlane faces[4];
+    for (int f = 0; f < 4; ++f) faces[f] = make_plane(corners[(f + 1) % 4], corners[(f + 2) % 4], corners[(f + 3) % 4]);
+    std::array<LatticePoint, 4> c = {corners[0], corners[1], corners[2], corners[3]};
+    // Vertices closer than a grid step quantize to the same position: merge them (keeping the
+    // first one's normal and colour) and drop the triangles that collapse.
+    std::vector<uint32_t> remap(in.positions.size());
+    std::unordered_map<uint32_t, uint32_t> by_position;
+    by_position.reserve(in.positions.size() * 2);
+    for (size_t v = 0; v < in.positions.size(); ++v) {
+        const Vec3d& p = in.positions[v];
+        SupportMask support = 0;
+        for (int f = 0; f < 4; ++f)
+            if (plane_side(faces[f], p) != 0) support |= SupportMask(1 << f);
+        if (support == 0) support = 0xf;  // cannot happen for a point in the tetrahedron
+        BaryWeights w = bary_quantize(p.data(), c, support);
+        uint32_t index = bary_pack(w);
+        auto [it, inserted] = by_position.emplace(index, uint32_t(out.vertices.size()));
+        remap[v] = it->second;
+        if (!inserted) continue;
+        const Vec3f& n = in.normals[v];
+        out.vertices.push_back(PackedVertex::make(index, oct_encode_precise(n[0], n[1], n[2]), in.colors[v][0],
+                                                  in.colors[v][1], in.colors[v][2]));
+    }
+    for (size_t i = 0; i + 2 < in.indices.size(); i += 3) {
+        uint32_t a = remap[in.indices[i]], b = remap[in.indices[i + 1]], d = remap[in.indices[i + 2]];
+        if (a == b || b == d || a == d) continue;
+        out.indices.insert(out.indices.end(), {a, b, d});
+    }
+}
+
+double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
+    for (auto& f : out) f = WorkFragment{};
+    uint8_t slots = existing_slots(d);
+    int n = int(d.ring.size());
+    // Outer faces: those not containing the spine; plus interior faces on the root boundary of a
+    // partial diamond (their neighbour slot does not exist).
+    std::vector<LatticePlane> outer;
+    for (int s = 0; s < n; ++s) {
+        if (!(slots & (1 << s))) continue;
+        const LatticePoint &r0 = d.ring[s], &r1 = d.ring[(s + 1) % n];
+        outer.push_back(make_plane(d.spine_a, r0, r1));
+        outer.push_back(make_plane(d.spine_b, r0, r1));
+        if (!(slots & (1 << ((s + n - 1) % n)))) outer.push_back(make_plane(d.spine_a, d.spine_b, r0));
+        if (!(slots & (1 << ((s + 1) % n)))) outer.push_back(make_plane(d.spine_a, d.spine_b, r1));
+    }
+    size_t vertex_count = gathered.positions.size();
+    std::vector<uint8_t> locked(vertex_count, 0);
+    for (size_t v = 0; v < vertex_count; ++v) {
+        const Vec3d& p = gathered.positions[v];
+        for (const LatticePlane& plane : outer) {
+            double value = plane.n[0] * p[0] + plane.n[1] * p[1] + plane.n[2] * p[2] - double(plane.d);
+            if (std::fabs(value) < 1e-3 && plane_side(plane, p) == 0) {
+                locked[v] = 1;
+                break;
+            }
+        }
+    }
+    SimplifySettings settings;
+    settings.target_triangles = gathered.indices.size() / 3 / 2;
+    SimplifyResult simplified = simplify_mesh(&gathered.positions[0][0], vertex_count, gathered.indices.data(),
+                                              gathered.indices.size(), locked.data(), settings);
+
+    // Clip by the interior faces into the slots.
+    std::vector<std::vector<ClipPlane>> slot_planes(n);
+    std::vector<FragmentWelder> welders;
+    welders.reserve(8);
+    for (int s = 0; s < 8; ++s) welders.emplace_back(out[s]);
+    for (int s = 0; s < n; ++s) {
+        if (!(slots & (1 << s))) continue;
+        Tetrahedron t = diamond_tetrahedron(d, s);
+        // Faces opposite corners 3 and 2 are (A, B, r0) and (A, B, r1): the interior ones.
+        slot_planes[s] = tetrahedron_clip_planes(t, (1u << 2) | (1u << 3));
+    }
+    std::vector<ClipVertex> polygon;
+    std::vector<std::array<int, 3>> tris;
+    for (size_t i = 0; i + 2 < simplified.indices.size(); i += 3) {
+        const uint32_t* f = &simplified.indices[i];
+        std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
+        for (int s = 0; s < n; ++s) {
+            if (slot_planes[s].empty()) continue;
+            clip_triangle(tri, slot_planes[s], polygon);
+            if (polygon.size() < 3) continue;
+            tris.clear();
+            triangulate_polygon(polygon, tris);
+            uint32_t ids[16];
+            for (size_t k = 0; k < polygon.size() && k < 16; ++k) {
+                const ClipVertex& cv = polygon[k];
+                // Original vertices keep their attributes exactly; new ones interpolate.
+                int corner = -1;
+                for (int j = 0; j < 3; ++j)
+                    if (cv.weights[j] == 1.0) corner = j;
+                if (corner >= 0) {
+                    ids[k] = welders[s].add(cv.position, gathered.normals[f[corner]], gathered.colors[f[corner]]);
+                    continue;
+                }
+                float nrm[3] = {0, 0, 0}, col[3] = {0, 0, 0};
+                for (int j = 0; j < 3; ++j)
+                    for (int a = 0; a < 3; ++a) {
+                        nrm[a] += float(cv.weights[j]) * gathered.normals[f[j]][a];
+                        col[a] += float(cv.weights[j]) * gathered.colors[f[j]][a];
+                    }
+                ids[k] = welders[s].add(cv.position, nrm, col);
+            }
+            for (auto& tr : tris) welders[s].triangle(ids[tr[0]], ids[tr[1]], ids[tr[2]]);
+        }
+    }
+    return simplified.error;
+}
+
+}  // namespace catpaq

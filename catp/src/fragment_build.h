@@ -1,0 +1,60 @@
+#pragma once
+// Fragments under construction in the converter (private to the catp module): lattice-space
+// double positions, welding by exact position, quantization to the 64-bit vertex, and the
+// coarsening step of one diamond (gather -> simplify with locked outer faces -> clip).
+#include <array>
+#include <cstdint>
+#include <unordered_map>
+#include <vector>
+
+#include "catp/lattice.h"
+#include "clip.h"
+#include "common_codec/fragment_codec.h"
+#include "mesh/mesh.h"
+
+namespace catpaq {
+
+struct WorkFragment {
+    std::vector<Vec3d> positions;  // lattice units, on the 2^-32 snapping grid
+    std::vector<Vec3f> normals;    // unit
+    std::vector<Rgb8> colors;
+    std::vector<uint32_t> indices;
+};
+
+struct PositionHash {
+    size_t operator()(const Vec3d& p) const;
+};
+
+// Adds vertices to a fragment, merging those at exactly the same position (the clipper makes
+// shared vertices bit-identical, so exact welding is the right test).
+class FragmentWelder {
+public:
+    explicit FragmentWelder(WorkFragment& fragment);
+    // normal: not necessarily unit; color: 0..255 floats.
+    uint32_t add(const Vec3d& position, const float normal[3], const float color[3]);
+    uint32_t add(const Vec3d& position, const Vec3f& normal, const Rgb8& color);
+    // Adds a triangle unless two corners coincide.
+    void triangle(uint32_t a, uint32_t b, uint32_t c);
+    // Appends a whole fragment (welding its vertices).
+    void append(const WorkFragment& other);
+
+private:
+    WorkFragment& f_;
+    std::unordered_map<Vec3d, uint32_t, PositionHash> index_;
+};
+
+// Half-spaces of the faces of tetrahedron t selected by face_mask (bit f: the face opposite
+// corner f), each keeping the side of the opposite corner.
+std::vector<ClipPlane> tetrahedron_clip_planes(const Tetrahedron& t, unsigned face_mask);
+
+// Quantizes a fragment in the tetrahedron with canonical corners `corners` (face rule by exact
+// predicates) into 64-bit vertices. Triangles that collapse (two corners with the same position)
+// are dropped.
+void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, FragmentMesh& out);
+
+// One coarsening step: `gathered` holds the welded fragments of the diamond's child tetrahedra.
+// Simplifies to about half with every vertex on the diamond's outer faces locked, then clips by
+// the interior faces into one fragment per slot. Returns the simplification error (lattice units).
+double coarsen_diamond(const DiamondInfo& diamond, const WorkFragment& gathered, std::array<WorkFragment, 8>& out);
+
+}  // namespace catpaq

@@ -1,0 +1,744 @@
+// Half-edge collapse simplification with quadric error and per-vertex locks (see catp/simplify.h).
+//
+// Data layout: the live triangles are a flat index buffer. Every pass rebuilds a compact
+// vertex -> triangle adjacency (CSR) in which each incident triangle (x, a, b) of vertex x is
+// stored, rotated to start at x, as the pair (a, b): the pair list of x is x's fan. From it come
+// the candidates (the cheapest allowed target of each removable vertex), which are radix-sorted by
+// cost; then the cheapest candidates are collapsed, each vertex taking part in at most one
+// collapse per pass. Collapses inside a pass are recorded in a remap table (removed vertex ->
+// kept vertex) that the checks of later collapses in the same pass resolve through, so the
+// adjacency need not be updated until the next pass, which compacts the index buffer through the
+// remap and rebuilds it.
+//
+// Why the checks stay valid within a pass: a vertex that took part in a collapse is frozen for
+// the rest of the pass, so the two vertices of any later collapse in that pass have their
+// original fans (their triangles are the pass's pairs with remapped vertices; triangles that a
+// collapse removed are exactly those whose remapped vertices repeat), and their quadrics are
+// unchanged, so the candidate costs computed at the start of the pass are still exact.
+#include "catp/simplify.h"
+
+#include <algorithm>
+#include <bit>
+#include <cassert>
+#include <cmath>
+#include <memory>
+#include <stdexcept>
+#include <type_traits>
+
+#ifdef __linux__
+#include <sys/mman.h>
+#endif
+
+namespace catpaq {
+namespace {
+
+// Vertex kinds. Kinds never change during simplification: collapses preserve the manifold
+// structure (link condition), so interior vertices stay interior and border vertices stay border.
+constexpr uint8_t kInterior = 0;  // manifold, closed fan (a disk)
+constexpr uint8_t kBorder = 1;    // manifold, open fan (a half-disk): may slide along the border
+constexpr uint8_t kLocked = 2;    // locked by the caller, non-manifold, or locked border
+constexpr uint8_t kFrozen = 0x80;  // flag: took part in a collapse in the current pass
+
+// Weight of a border edge's perpendicular plane, relative to the squared edge length.
+constexpr double kBorderWeight = 1.0;
+// A collapse may not turn a triangle's normal by more than acos(kMinCosine) (~78 degrees).
+constexpr double kMinCosine = 0.2;
+// ... nor leave a triangle with sin^2(angle at the kept vertex) below this (zero area).
+constexpr double kMinSine2 = 1e-12;
+// Pass schedule: the error allowed in a pass is kPassSlack times the cost of the candidate at
+// kPassQuantile of the sorted candidates. Independent of the target (see simplify.h).
+constexpr double kPassQuantile = 0.25;
+constexpr double kPassSlack = 1.5;
+// Fans up to this size are searched linearly, larger ones through sorted copies.
+constexpr uint32_t kLinearFan = 16;
+
+struct Vec {
+    double x, y, z;
+};
+inline Vec operator-(const Vec& a, const Vec& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+inline Vec cross(const Vec& a, const Vec& b) {
+    return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline double dot(const Vec& a, const Vec& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+
+// Symmetric 4x4 quadric: sum of w * (n.p + d)^2 over planes. Its total weight is kept apart
+// (VertexData::w), next to the position, where the cost evaluation reads it.
+struct Quadric {
+    double a00, a11, a22, a01, a02, a12, b0, b1, b2, c;
+
+    void add_plane(const Vec& n, double d, double weight) {
+        const double nx = n.x * weight, ny = n.y * weight, nz = n.z * weight;
+        a00 += nx * n.x;
+        a11 += ny * n.y;
+        a22 += nz * n.z;
+        a01 += nx * n.y;
+        a02 += nx * n.z;
+        a12 += ny * n.z;
+        b0 += nx * d;
+        b1 += ny * d;
+        b2 += nz * d;
+        c += weight * d * d;
+    }
+    void add(const Quadric& q) {
+        a00 += q.a00;
+        a11 += q.a11;
+        a22 += q.a22;
+        a01 += q.a01;
+        a02 += q.a02;
+        a12 += q.a12;
+        b0 += q.b0;
+        b1 += q.b1;
+        b2 += q.b2;
+        c += q.c;
+    }
+    double eval(const Vec& p) const {
+        const double rx = a00 * p.x + a01 * p.y + a02 * p.z;
+        const double ry = a01 * p.x + a11 * p.y + a12 * p.z;
+        const double rz = a02 * p.x + a12 * p.y + a22 * p.z;
+        return p.x * rx + p.y * ry + p.z * rz + 2 * (b0 * p.x + b1 * p.y + b2 * p.z) + c;
+    }
+};
+
+// Triangle (x, a, b) around vertex x, stored as (a, b).
+struct Pair {
+    uint32_t a, b;
+};
+
+struct Candidate {
+    uint32_t x, y;  // collapse x onto y
+    float cost;     // normalized quadric cost (squared distance), for ordering
+};
+
+// Per-vertex data read when a vertex is a collapse target, packed for locality.
+struct VertexData {
+    Vec p;     // position, relative to the centre of the mesh
+    double e;  // the vertex's quadric at its own position (0 until it absorbs a vertex)
+    double w;  // the quadric's total weight (area, plus border-edge weights)
+};
+
+inline uint32_t sort_key(float cost) {
+    // Costs are >= 0, so the float's bits order like the values; 21 bits keep 12 of mantissa.
+    return std::bit_cast<uint32_t>(cost) >> 10;
+}
+
+// Stable LSD radix sort of the candidates by sort_key, in two 11-bit digits.
+void radix_sort(Candidate* items, Candidate* tmp, size_t n) {
+    constexpr uint32_t kBits = 11, kSize = 1u << kBits, kMask = kSize - 1;
+    uint32_t h0[kSize] = {}, h1[kSize] = {};
+    for (size_t i = 0; i < n; ++i) {
+        const uint32_t k = sort_key(items[i].cost);
+        ++h0[k & kMask];
+        ++h1[(k >> kBits) & kMask];
+    }
+    uint32_t s0 = 0, s1 = 0;
+    for (uint32_t i = 0; i < kSize; ++i) {
+        const uint32_t c0 = h0[i], c1 = h1[i];
+        h0[i] = s0;
+        h1[i] = s1;
+        s0 += c0;
+        s1 += c1;
+    }
+    for (size_t i = 0; i < n; ++i) tmp[h0[sort_key(items[i].cost) & kMask]++] = items[i];
+    for (size_t i = 0; i < n; ++i) items[h1[(sort_key(tmp[i].cost) >> kBits) & kMask]++] = tmp[i];
+}
+
+// Queries on one fan (the pairs of one vertex): linear for small fans, binary search in sorted
+// copies for large ones. Scratch storage is owned by the caller's Simplifier and reused.
+class FanQuery {
+public:
+    FanQuery(std::vector<uint64_t>& as, std::vector<uint32_t>& bs) : as_(as), bs_(bs) {}
+
+    void reset(const Pair* p, uint32_t k) {
+        p_ = p;
+        k_ = k;
+        if (k > kLinearFan) {
+            as_.resize(k);
+            bs_.resize(k);
+            for (uint32_t i = 0; i < k; ++i) {
+                as_[i] = uint64_t(p[i].a) << 32 | i;
+                bs_[i] = p[i].b;
+            }
+            std::sort(as_.begin(), as_.end());
+            std::sort(bs_.begin(), bs_.end());
+        }
+    }
+    // Index of the pair whose first element is v (the first such), or k if none.
+    uint32_t find_a(uint32_t v) const {
+        if (k_ > kLinearFan) {
+            const auto it = std::lower_bound(as_.begin(), as_.end(), uint64_t(v) << 32);
+            return it != as_.end() && uint32_t(*it >> 32) == v ? uint32_t(*it) : k_;
+        }
+        for (uint32_t i = 0; i < k_; ++i)
+            if (p_[i].a == v) return i;
+        return k_;
+    }
+    bool has_a(uint32_t v) const { return find_a(v) != k_; }
+    bool has_b(uint32_t v) const {
+        if (k_ > kLinearFan) return std::binary_search(bs_.begin(), bs_.end(), v);
+        for (uint32_t i = 0; i < k_; ++i)
+            if (p_[i].b == v) return true;
+        return false;
+    }
+    // True when some vertex appears twice as a first or twice as a second element.
+    bool has_repeats() const {
+        if (k_ > kLinearFan) {
+            for (uint32_t i = 1; i < k_; ++i)
+                if ((as_[i] >> 32) == (as_[i - 1] >> 32) || bs_[i] == bs_[i - 1]) return true;
+            return false;
+        }
+        for (uint32_t i = 0; i < k_; ++i)
+            for (uint32_t j = i + 1; j < k_; ++j)
+                if (p_[i].a == p_[j].a || p_[i].b == p_[j].b) return true;
+        return false;
+    }
+
+private:
+    const Pair* p_ = nullptr;
+    uint32_t k_ = 0;
+    std::vector<uint64_t>& as_;
+    std::vector<uint32_t>& bs_;
+};
+
+// All working memory of one call lives in one block, carved into arrays: one allocation and one
+// free per call. Fresh memory costs a page fault per 4 KiB page on first touch, which on virtual
+// machines (11 us measured on the development VM) can cost more than the simplification itself.
+// Small blocks come from the heap, whose allocator hands the same warm pages to the next call;
+// large blocks (big meshes; the allocator maps those afresh every time) are mapped here with
+// transparent huge pages requested, one fault per 2 MiB.
+class Arena {
+public:
+    Arena() = default;
+    Arena(const Arena&) = delete;
+    Arena& operator=(const Arena&) = delete;
+    ~Arena() {
+#ifdef __linux__
+        if (map_) munmap(map_, map_bytes_);
+#endif
+    }
+
+    // Reserves n elements of T (trivial types only; contents uninitialized) before allocate().
+    template <class T>
+    void reserve(T*& out, size_t n) {
+        static_assert(std::is_trivially_copyable_v<T> && std::is_trivially_destructible_v<T>);
+        assert(count_ < kMaxSlots);
+        slots_[count_++] = {reinterpret_cast<void**>(&out), (n * sizeof(T) + 63) & ~size_t(63)};
+    }
+    void allocate() {
+        size_t total = 0;
+        for (size_t i = 0; i < count_; ++i) total += slots_[i].bytes;
+        std::byte* p = nullptr;
+#ifdef __linux__
+        constexpr size_t kHuge = size_t(2) << 20;
+        if (total >= 4 * kHuge) {
+            const size_t bytes = (total + kHuge - 1) / kHuge * kHuge + kHuge;
+            void* map = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+            if (map != MAP_FAILED) {
+                map_ = map;
+                map_bytes_ = bytes;
+                const uintptr_t start = (reinterpret_cast<uintptr_t>(map) + kHuge - 1) / kHuge * kHuge;
+                p = static_cast<std::byte*>(map) + (start - reinterpret_cast<uintptr_t>(map));
+                madvise(p, bytes - kHuge, MADV_HUGEPAGE);  // a hint: failure is harmless
+            }
+        }
+#endif
+        if (!p) {
+            block_ = std::make_unique_for_overwrite<std::byte[]>(total + 64);
+            p = block_.get();
+            p += (64 - reinterpret_cast<uintptr_t>(p) % 64) % 64;
+        }
+        for (size_t i = 0; i < count_; ++i) {
+            *slots_[i].out = p;
+            p += slots_[i].bytes;
+        }
+    }
+
+private:
+    struct Slot {
+        void** out;
+        size_t bytes;
+    };
+    static constexpr size_t kMaxSlots = 16;
+    Slot slots_[kMaxSlots];
+    size_t count_ = 0;
+    std::unique_ptr<std::byte[]> block_;
+    void* map_ = nullptr;
+    size_t map_bytes_ = 0;
+};
+
+class Simplifier {
+public:
+    Simplifier(const SimplifySettings& settings, size_t vertex_count, size_t index_count)
+        : settings_(settings), vertex_count_(uint32_t(vertex_count)) {
+        const size_t v = vertex_count;
+        arena_.reserve(tris_, index_count);
+        arena_.reserve(pairs_, index_count);
+        arena_.reserve(start_, v + 1);
+        arena_.reserve(valence_, v);
+        arena_.reserve(remap_, v);
+        arena_.reserve(mark_, v);
+        arena_.reserve(kind_, v);
+        arena_.reserve(vertex_, v);
+        arena_.reserve(quadric_, v);
+        arena_.reserve(candidates_, v);
+        arena_.reserve(sort_tmp_, v);
+        arena_.allocate();
+    }
+
+    // Copies the input's non-degenerate triangles; throws on indices out of range.
+    void load(const double* positions, const uint32_t* indices, size_t index_count, const uint8_t* locked);
+    SimplifyResult run();
+
+private:
+    void init_positions(const double* positions);
+    void build_adjacency();
+    bool has_duplicate_triangles();
+    void remove_duplicate_triangles();
+    void classify(const uint8_t* locked);
+    void init_quadrics();
+    void collect_candidates();
+    bool border_neighbours(uint32_t x, uint32_t& first, uint32_t& last);
+    bool try_collapse(uint32_t x, uint32_t y, double max_error2);
+    void compact();
+
+    // Quadric cost of collapsing a vertex with quadric q and weight w onto y, before division
+    // by the total weight.
+    double cost(const Quadric& q, double w, uint32_t y) const {
+        const VertexData& t = vertex_[y];
+        const double v = std::max(q.eval(t.p) + t.e, 0.0);
+        const double tw = w + t.w;
+        return tw > 0 ? v / tw : 0;
+    }
+
+    const SimplifySettings settings_;
+    const uint32_t vertex_count_;
+    Arena arena_;
+    uint32_t* tris_ = nullptr;  // live triangles, 3 indices each
+    size_t tri_count_ = 0;      // in the buffer; live_ counts them within a pass
+    // Adjacency of the current pass: the pairs of v are [start_[v], start_[v + 1]).
+    Pair* pairs_ = nullptr;
+    uint32_t* start_ = nullptr;
+    uint32_t* valence_ = nullptr;  // live triangles per vertex, kept up to date within a pass
+    uint32_t* remap_ = nullptr;    // collapses of the current pass: removed -> kept; else identity
+    uint32_t* mark_ = nullptr;     // neighbour marks of the link check, by check number
+    uint8_t* kind_ = nullptr;      // kInterior, kBorder or kLocked, | kFrozen
+    VertexData* vertex_ = nullptr;
+    Quadric* quadric_ = nullptr;
+    Candidate* candidates_ = nullptr;
+    Candidate* sort_tmp_ = nullptr;
+    size_t candidate_count_ = 0;
+    uint32_t check_ = 0;
+    size_t live_ = 0;
+    double error2_ = 0;
+    // Scratch for large fans and for the duplicate check (rarely used).
+    std::vector<uint64_t> scratch_a_;
+    std::vector<uint32_t> scratch_b_;
+};
+
+void Simplifier::load(const double* positions, const uint32_t* indices, size_t index_count, const uint8_t* locked) {
+    size_t w = 0;
+    for (size_t i = 0; i < index_count; i += 3) {
+        const uint32_t a = indices[i], b = indices[i + 1], c = indices[i + 2];
+        if (a >= vertex_count_ || b >= vertex_count_ || c >= vertex_count_)
+            throw std::invalid_argument("simplify_mesh: vertex index out of range");
+        tris_[w] = a;
+        tris_[w + 1] = b;
+        tris_[w + 2] = c;
+        w += (a != b && b != c && a != c) ? 3 : 0;
+    }
+    tri_count_ = w / 3;
+    init_positions(positions);
+    build_adjacency();
+    if (has_duplicate_triangles()) {
+        remove_duplicate_triangles();
+        build_adjacency();
+    }
+    classify(locked);
+    init_quadrics();
+}
+
+void Simplifier::init_positions(const double* positions) {
+    // Work relative to the centre of the referenced vertices: quadrics of coordinates around 1e6
+    // would lose their precision to cancellation.
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < tri_count_ * 3; ++i) {
+        const double* p = positions + size_t(tris_[i]) * 3;
+        for (int k = 0; k < 3; ++k) {
+            lo[k] = std::min(lo[k], p[k]);
+            hi[k] = std::max(hi[k], p[k]);
+        }
+    }
+    Vec centre{0, 0, 0};
+    if (tri_count_ > 0) centre = {(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2};
+    for (uint32_t v = 0; v < vertex_count_; ++v) {
+        const double* p = positions + size_t(v) * 3;
+        vertex_[v] = {Vec{p[0], p[1], p[2]} - centre, 0, 0};
+    }
+}
+
+void Simplifier::build_adjacency() {
+    const size_t n = tri_count_ * 3;
+    std::fill(valence_, valence_ + vertex_count_, 0u);
+    for (size_t i = 0; i < n; ++i) ++valence_[tris_[i]];
+    uint32_t sum = 0;
+    for (uint32_t v = 0; v < vertex_count_; ++v) {
+        sum += valence_[v];
+        start_[v] = sum;  // end of v's range for now
+    }
+    start_[vertex_count_] = sum;
+    // Filling backwards by decrementing leaves start_[v] at the beginning of v's range, with
+    // each fan in triangle order.
+    for (size_t t = n; t > 0;) {
+        t -= 3;
+        const uint32_t i0 = tris_[t], i1 = tris_[t + 1], i2 = tris_[t + 2];
+        pairs_[--start_[i2]] = {i0, i1};
+        pairs_[--start_[i1]] = {i2, i0};
+        pairs_[--start_[i0]] = {i1, i2};
+    }
+}
+
+bool Simplifier::has_duplicate_triangles() {
+    // Two triangles on the same three vertices meet in the fan of their smallest vertex x as
+    // pairs (a, b) and (a, b) or (b, a) with both a and b above x.
+    for (uint32_t x = 0; x < vertex_count_; ++x) {
+        const uint32_t b0 = start_[x], b1 = start_[x + 1];
+        if (b1 - b0 < 2) continue;
+        if (b1 - b0 <= kLinearFan) {
+            for (uint32_t i = b0; i < b1; ++i) {
+                const Pair p = pairs_[i];
+                if (p.a < x || p.b < x) continue;
+                for (uint32_t j = i + 1; j < b1; ++j) {
+                    const Pair q = pairs_[j];
+                    if ((q.a == p.a && q.b == p.b) || (q.a == p.b && q.b == p.a)) return true;
+                }
+            }
+        } else {
+            scratch_a_.clear();
+            for (uint32_t i = b0; i < b1; ++i) {
+                const Pair p = pairs_[i];
+                if (p.a < x || p.b < x) continue;
+                scratch_a_.push_back(uint64_t(std::min(p.a, p.b)) << 32 | std::max(p.a, p.b));
+            }
+            std::sort(scratch_a_.begin(), scratch_a_.end());
+            if (std::adjacent_find(scratch_a_.begin(), scratch_a_.end()) != scratch_a_.end()) return true;
+        }
+    }
+    return false;
+}
+
+void Simplifier::remove_duplicate_triangles() {
+    // Rare path: sort the triangles by their vertex set and keep the first of each set.
+    struct Key {
+        uint32_t v[3];
+        uint32_t t;
+    };
+    const size_t n = tri_count_;
+    std::vector<Key> keys(n);
+    for (size_t t = 0; t < n; ++t) {
+        Key& k = keys[t];
+        std::copy(tris_ + 3 * t, tris_ + 3 * t + 3, k.v);
+        std::sort(k.v, k.v + 3);
+        k.t = uint32_t(t);
+    }
+    std::sort(keys.begin(), keys.end(), [](const Key& a, const Key& b) {
+        for (int i = 0; i < 3; ++i)
+            if (a.v[i] != b.v[i]) return a.v[i] < b.v[i];
+        return a.t < b.t;
+    });
+    std::vector<uint8_t> keep(n, 1);
+    for (size_t i = 1; i < n; ++i)
+        if (std::equal(keys[i].v, keys[i].v + 3, keys[i - 1].v)) keep[keys[i].t] = 0;
+    size_t w = 0;
+    for (size_t t = 0; t < n; ++t)
+        if (keep[t])
+            for (int j = 0; j < 3; ++j) tris_[w++] = tris_[3 * t + j];
+    tri_count_ = w / 3;
+}
+
+void Simplifier::classify(const uint8_t* locked) {
+    std::fill(kind_, kind_ + vertex_count_, kLocked);
+    FanQuery fan(scratch_a_, scratch_b_);
+    for (uint32_t x = 0; x < vertex_count_; ++x) {
+        const uint32_t b0 = start_[x], k = start_[x + 1] - b0;
+        if (k == 0 || (locked && locked[x])) continue;
+        const Pair* p = pairs_ + b0;
+        fan.reset(p, k);
+        // A vertex repeated as a first (second) element means an edge used twice in the same
+        // direction: a non-manifold or inconsistently oriented edge.
+        if (fan.has_repeats()) continue;
+        // Each directed edge x -> a of a pair (a, b) has a twin a -> x iff a is some pair's b.
+        // With no repeats, the fan maps a -> b injectively: one chain (half-disk) or one cycle
+        // (disk) covering all k pairs is manifold; anything else is a bow tie.
+        uint32_t starts = 0, first = 0;
+        for (uint32_t i = 0; i < k; ++i)
+            if (!fan.has_b(p[i].a)) {
+                if (starts++ == 0) first = i;
+            }
+        if (starts > 1) continue;
+        if (starts == 0 && k < 3) continue;  // two triangles folded onto each other
+        uint32_t steps = 1, cur = p[first].b;
+        const uint32_t stop = starts == 0 ? p[first].a : UINT32_MAX;
+        while (cur != stop && steps <= k) {
+            const uint32_t i = fan.find_a(cur);
+            if (i == k) break;
+            cur = p[i].b;
+            ++steps;
+        }
+        if (steps != k || (starts == 0 && cur != stop)) continue;
+        if (starts == 0)
+            kind_[x] = kInterior;
+        else if (!settings_.lock_topological_border)
+            kind_[x] = kBorder;
+    }
+}
+
+void Simplifier::init_quadrics() {
+    std::fill(quadric_, quadric_ + vertex_count_, Quadric{});
+    for (size_t t = 0; t < tri_count_ * 3; t += 3) {
+        const uint32_t i0 = tris_[t], i1 = tris_[t + 1], i2 = tris_[t + 2];
+        const Vec& p0 = vertex_[i0].p;
+        const Vec nrm = cross(vertex_[i1].p - p0, vertex_[i2].p - p0);
+        const double len = std::sqrt(dot(nrm, nrm));
+        if (!(len > 0)) continue;
+        const Vec u{nrm.x / len, nrm.y / len, nrm.z / len};
+        Quadric q{};
+        q.add_plane(u, -dot(u, p0), len / 2);
+        quadric_[i0].add(q);
+        quadric_[i1].add(q);
+        quadric_[i2].add(q);
+        vertex_[i0].w += len / 2;
+        vertex_[i1].w += len / 2;
+        vertex_[i2].w += len / 2;
+    }
+    if (settings_.lock_topological_border) return;
+    // Border edges: the directed edge x -> a of pair (a, b) of x with no twin (a is no pair's b).
+    // Only border-kind vertices can slide, so only they need the perpendicular planes.
+    FanQuery fan(scratch_a_, scratch_b_);
+    for (uint32_t x = 0; x < vertex_count_; ++x) {
+        const uint32_t b0 = start_[x], k = start_[x + 1] - b0;
+        if (k == 0) continue;
+        const Pair* p = pairs_ + b0;
+        bool any = kind_[x] == kBorder;
+        for (uint32_t i = 0; i < k && !any; ++i) any = kind_[p[i].a] == kBorder;
+        if (!any) continue;
+        fan.reset(p, k);
+        for (uint32_t i = 0; i < k; ++i) {
+            const uint32_t a = p[i].a;
+            if (kind_[x] != kBorder && kind_[a] != kBorder) continue;
+            if (fan.has_b(a)) continue;
+            const Vec& px = vertex_[x].p;
+            const Vec e = vertex_[a].p - px;
+            const Vec nrm = cross(e, vertex_[p[i].b].p - px);
+            const Vec perp = cross(e, nrm);
+            const double len = std::sqrt(dot(perp, perp));
+            if (!(len > 0)) continue;
+            const Vec u{perp.x / len, perp.y / len, perp.z / len};
+            const double weight = dot(e, e) * kBorderWeight;
+            Quadric q{};
+            q.add_plane(u, -dot(u, px), weight);
+            for (uint32_t v : {x, a})
+                if (kind_[v] == kBorder) {
+                    quadric_[v].add(q);
+                    vertex_[v].w += weight;
+                }
+        }
+    }
+}
+
+// The two border neighbours of border vertex x in the current adjacency: the first element of
+// the pair starting its fan and the second element of the pair ending it.
+bool Simplifier::border_neighbours(uint32_t x, uint32_t& first, uint32_t& last) {
+    const uint32_t b0 = start_[x], k = start_[x + 1] - b0;
+    const Pair* p = pairs_ + b0;
+    FanQuery fan(scratch_a_, scratch_b_);
+    fan.reset(p, k);
+    uint32_t nf = 0, nl = 0;
+    for (uint32_t i = 0; i < k; ++i) {
+        if (!fan.has_b(p[i].a)) {
+            first = p[i].a;
+            ++nf;
+        }
+        if (!fan.has_a(p[i].b)) {
+            last = p[i].b;
+            ++nl;
+        }
+    }
+    return nf == 1 && nl == 1;
+}
+
+void Simplifier::collect_candidates() {
+    size_t n = 0;
+    for (uint32_t x = 0; x < vertex_count_; ++x) {
+        const uint32_t b0 = start_[x], b1 = start_[x + 1];
+        if (b0 == b1 || kind_[x] == kLocked) continue;
+        const Quadric q = quadric_[x];
+        const double w = vertex_[x].w;
+        double best = INFINITY;
+        uint32_t best_y = UINT32_MAX;
+        if (kind_[x] == kInterior) {
+            for (uint32_t i = b0; i < b1; ++i) {
+                const uint32_t y = pairs_[i].a;
+                const double c = cost(q, w, y);
+                if (c < best) {
+                    best = c;
+                    best_y = y;
+                }
+            }
+        } else {
+            uint32_t first = 0, last = 0;
+            if (!border_neighbours(x, first, last)) continue;
+            best = cost(q, w, first);
+            best_y = first;
+            const double c = cost(q, w, last);
+            if (c < best) {
+                best = c;
+                best_y = last;
+            }
+        }
+        candidates_[n++] = {x, best_y, float(best)};
+    }
+    candidate_count_ = n;
+}
+
+bool Simplifier::try_collapse(uint32_t x, uint32_t y, double max_error2) {
+    if ((kind_[x] | kind_[y]) & kFrozen) return false;
+    // The exact cost (candidates hold it rounded to float, for sorting).
+    VertexData& vy = vertex_[y];
+    const double merged_e = std::max(quadric_[x].eval(vy.p) + vy.e, 0.0);
+    const double merged_w = vertex_[x].w + vy.w;
+    const double cost = merged_w > 0 ? merged_e / merged_w : 0;
+    if (cost > max_error2) return false;
+    const Pair* px = pairs_ + start_[x];
+    const uint32_t kx = start_[x + 1] - start_[x];
+    const Pair* py = pairs_ + start_[y];
+    const uint32_t ky = start_[y + 1] - start_[y];
+
+    // Triangles on the edge x-y are removed; their third vertices are the opposites.
+    uint32_t opp[2] = {UINT32_MAX, UINT32_MAX}, nopp = 0;
+    for (uint32_t i = 0; i < kx; ++i) {
+        const uint32_t a = remap_[px[i].a], b = remap_[px[i].b];
+        if (a == b) continue;  // removed earlier in this pass
+        if (a == y || b == y) {
+            if (nopp == 2) return false;
+            opp[nopp++] = a == y ? b : a;
+        }
+    }
+    if (nopp != (kind_[x] == kInterior ? 2u : 1u)) return false;
+    if (nopp == 2 && opp[0] == opp[1]) return false;
+    // An opposite whose only triangle is removed would vanish (and its border with it).
+    for (uint32_t j = 0; j < nopp; ++j)
+        if (valence_[opp[j]] < 2) return false;
+
+    // Link condition: the only common neighbours of x and y may be the opposites.
+    const uint32_t check = ++check_;
+    for (uint32_t i = 0; i < ky; ++i) {
+        mark_[remap_[py[i].a]] = check;
+        mark_[remap_[py[i].b]] = check;
+    }
+    const Vec& p0 = vertex_[x].p;
+    const Vec& p1 = vertex_[y].p;
+    for (uint32_t i = 0; i < kx; ++i) {
+        const uint32_t a = remap_[px[i].a], b = remap_[px[i].b];
+        if (a == b || a == y || b == y) continue;
+        const bool a_opp = a == opp[0] || a == opp[1];
+        const bool b_opp = b == opp[0] || b == opp[1];
+        if ((mark_[a] == check && !a_opp) || (mark_[b] == check && !b_opp)) return false;
+        if (a_opp && b_opp) {
+            // (x, o0, o1) becomes (y, o0, o1): a duplicate if y already has that triangle.
+            for (uint32_t j = 0; j < ky; ++j) {
+                const uint32_t c = remap_[py[j].a], d = remap_[py[j].b];
+                if ((c == a && d == b) || (c == b && d == a)) return false;
+            }
+        }
+        // Normal flips and zero areas.
+        const Vec& pa = vertex_[a].p;
+        const Vec& pb = vertex_[b].p;
+        const Vec n0 = cross(pa - p0, pb - p0);
+        const Vec ea = pa - p1, eb = pb - p1;
+        const Vec n1 = cross(ea, eb);
+        const double d = dot(n0, n1);
+        if (!(d > 0)) return false;
+        const double l0 = dot(n0, n0), l1 = dot(n1, n1);
+        if (d * d < kMinCosine * kMinCosine * l0 * l1) return false;
+        if (l1 <= kMinSine2 * dot(ea, ea) * dot(eb, eb)) return false;
+    }
+
+    remap_[x] = y;
+    vy.e = merged_e;
+    vy.w = merged_w;
+    quadric_[y].add(quadric_[x]);
+    kind_[x] |= kFrozen;
+    kind_[y] |= kFrozen;
+    for (uint32_t j = 0; j < nopp; ++j) --valence_[opp[j]];
+    valence_[y] += valence_[x] - 2 * nopp;
+    valence_[x] = 0;
+    live_ -= nopp;
+    error2_ = std::max(error2_, cost);
+    return true;
+}
+
+void Simplifier::compact() {
+    const size_t n = tri_count_ * 3;
+    size_t w = 0;
+    for (size_t t = 0; t < n; t += 3) {
+        const uint32_t a = remap_[tris_[t]], b = remap_[tris_[t + 1]], c = remap_[tris_[t + 2]];
+        tris_[w] = a;
+        tris_[w + 1] = b;
+        tris_[w + 2] = c;
+        w += (a != b && b != c && a != c) ? 3 : 0;
+    }
+    tri_count_ = w / 3;
+}
+
+SimplifyResult Simplifier::run() {
+    live_ = tri_count_;
+    const size_t target = settings_.target_triangles;
+    const double max_error2 = settings_.max_error >= 0 ? settings_.max_error * settings_.max_error : 0;
+    if (live_ > target) {
+        for (uint32_t v = 0; v < vertex_count_; ++v) remap_[v] = v;
+        std::fill(mark_, mark_ + vertex_count_, 0u);
+        bool adjacency_current = true;  // load() built it
+        while (live_ > target) {
+            if (!adjacency_current) {
+                build_adjacency();
+                for (uint32_t v = 0; v < vertex_count_; ++v) kind_[v] &= uint8_t(~kFrozen);
+            }
+            adjacency_current = false;
+            collect_candidates();
+            const size_t n = candidate_count_;
+            if (n == 0) break;
+            radix_sort(candidates_, sort_tmp_, n);
+            const double pass_limit = candidates_[std::min(n - 1, size_t(double(n) * kPassQuantile))].cost * kPassSlack;
+            size_t done = 0;
+            for (size_t i = 0; i < n; ++i) {
+                const Candidate& c = candidates_[i];
+                if (live_ <= target || c.cost > max_error2) break;
+                if (c.cost > pass_limit && done > 0) break;
+                done += try_collapse(c.x, c.y, max_error2);
+            }
+            if (done == 0) break;
+            compact();
+            assert(tri_count_ == live_);
+        }
+    }
+    SimplifyResult result;
+    result.indices.assign(tris_, tris_ + tri_count_ * 3);
+    result.error = std::sqrt(error2_);
+    return result;
+}
+
+}  // namespace
+
+SimplifyResult simplify_mesh(const double* positions, size_t vertex_count, const uint32_t* indices,
+                             size_t index_count, const uint8_t* locked,
+                             const SimplifySettings& settings) {
+    if (index_count % 3 != 0) throw std::invalid_argument("simplify_mesh: index count is not a multiple of 3");
+    if (index_count >= (size_t(1) << 32) || vertex_count > UINT32_MAX)
+        throw std::invalid_argument("simplify_mesh: mesh too large (2^32 indices or vertices)");
+    if (index_count == 0) return {};
+    if (!indices || !positions) throw std::invalid_argument("simplify_mesh: null positions or indices");
+    Simplifier simplifier(settings, vertex_count, index_count);
+    simplifier.load(positions, indices, index_count, locked);
+    return simplifier.run();
+}
+
+}  // namespace catpaq

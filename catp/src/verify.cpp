@@ -1,0 +1,304 @@
+#include "catp/verify.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <random>
+#include <unordered_map>
+
+#include <tbb/parallel_for.h>
+
+#include "base/error.h"
+#include "catp/cut.h"
+#include "catp/dataset.h"
+#include "catp/distance.h"
+
+namespace catpaq {
+
+namespace {
+
+using IntPoint = std::array<int64_t, 3>;
+using FaceKey = std::array<LatticePoint, 3>;
+
+struct DecodedCut {
+    std::vector<std::array<double, 3>> positions;  // world, welded by exact integer position
+    std::vector<uint32_t> indices;
+};
+
+double longest_edge(const Tetrahedron& t) {
+    double best = 0;
+    for (int i = 0; i < 4; ++i)
+        for (int j = i + 1; j < 4; ++j) {
+            double s = 0;
+            for (int k = 0; k < 3; ++k) s += double(t[i][k] - t[j][k]) * double(t[i][k] - t[j][k]);
+            best = std::max(best, std::sqrt(s));
+        }
+    return best;
+}
+
+class Checker {
+public:
+    Checker(const CatpFile& file, VerifyReport& report) : file_(file), report_(report) {}
+
+    const DiamondFragments* node(const ArchiveEntry& e) {
+        auto it = cache_.find(e.key);
+        if (it != cache_.end()) return it->second.get();
+        std::unique_ptr<DiamondFragments> out;
+        std::string error;
+        const uint8_t* bytes = file_.archive().node(file_.index().entry_index(&e), &error);
+        if (!bytes) {
+            report_.checksum_failures++;
+            problem(error);
+        } else {
+            out.reset(new DiamondFragments);
+            std::string bad = decode_diamond_node(bytes, e.size, *out);
+            if (!bad.empty()) {
+                report_.corrupt_nodes++;
+                problem(strprintf("diamond %llu: %s", (unsigned long long)e.key, bad.c_str()));
+                out.reset();
+            }
+        }
+        return (cache_[e.key] = std::move(out)).get();
+    }
+
+    void problem(const std::string& text) {
+        if (report_.problems.size() < 20) report_.problems.push_back(text);
+    }
+
+    // Decodes cut R; checks that the fragment borders on every face shared by two drawn
+    // tetrahedra match (as multisets of integer edges). Returns the welded world mesh.
+    DecodedCut decode_cut(const RefinedSet& refined) {
+        DecodedCut out;
+        std::map<IntPoint, uint32_t> weld;
+        std::map<FaceKey, std::vector<std::vector<std::pair<IntPoint, IntPoint>>>> faces;
+        const CatpMeta& meta = file_.index().meta();
+        std::vector<std::array<int64_t, 3>> ints;
+        for (const DrawnSlot& d : drawn_slots(file_.index(), refined)) {
+            const DiamondFragments* f = node(*d.entry);
+            if (!f) continue;
+            const FragmentMesh& frag = f->slots[d.slot];
+            DiamondInfo info = diamond_info(DiamondId{d.entry->key});
+            if (!decode_fragment_integer_positions(frag, info, d.slot, ints)) {
+                report_.corrupt_nodes++;
+                continue;
+            }
+            Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, d.slot));
+            std::vector<BaryWeights> w(frag.vertices.size());
+            for (size_t v = 0; v < w.size(); ++v) bary_unpack(frag.vertices[v].position_index(), w[v]);
+            std::vector<uint32_t> ids(ints.size());
+            for (size_t v = 0; v < ints.size(); ++v) {
+                auto [it, inserted] = weld.emplace(ints[v], uint32_t(out.positions.size()));
+                if (inserted) {
+                    double lattice[3], world[3];
+                    for (int k = 0; k < 3; ++k) lattice[k] = double(ints[v][k]) / kBaryGrid;
+                    for (int k = 0; k < 3; ++k) world[k] = meta.origin[k] + lattice[k] * meta.cell;
+                    out.positions.push_back({world[0], world[1], world[2]});
+                }
+                ids[v] = it->second;
+            }
+            // Border edges of this fragment, keyed by the face they lie on.
+            std::map<std::pair<uint32_t, uint32_t>, std::pair<int, std::pair<uint32_t, uint32_t>>> edge_use;
+            for (size_t i = 0; i + 2 < frag.indices.size(); i += 3) {
+                uint32_t a = frag.indices[i], b = frag.indices[i + 1], c = frag.indices[i + 2];
+                if (ids[a] == ids[b] || ids[b] == ids[c] || ids[a] == ids[c]) continue;
+                out.indices.insert(out.indices.end(), {ids[a], ids[b], ids[c]});
+                for (auto [u, v] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}}) {
+                    // Count by welded position (a fragment may repeat a position), keep a local id.
+                    auto key = std::minmax(ids[u], ids[v]);
+                    auto& slot = edge_use[{key.first, key.second}];
+                    slot.first++;
+                    slot.second = {u, v};
+                }
+            }
+            std::map<FaceKey, std::vector<std::pair<IntPoint, IntPoint>>> local;
+            for (auto& [welded, use] : edge_use) {
+                if (use.first != 1) continue;
+                const auto& e = use.second;
+                const BaryWeights &wa = w[e.first], &wb = w[e.second];
+                int zero_face = -1, shared_nonzero = 0;
+                for (int k = 0; k < 4; ++k) {
+                    if (wa[k] == 0 && wb[k] == 0) zero_face = zero_face < 0 ? k : 4;  // 4: on an edge
+                    shared_nonzero += (wa[k] != 0 || wb[k] != 0);
+                }
+                if (zero_face < 0 || zero_face == 4 || shared_nonzero < 3) continue;
+                FaceKey key;
+                int m = 0;
+                for (int k = 0; k < 4; ++k)
+                    if (k != zero_face) key[m++] = t[k];
+                IntPoint pa = ints[e.first], pb = ints[e.second];
+                if (pb < pa) std::swap(pa, pb);
+                local[key].push_back({pa, pb});
+            }
+            for (auto& [key, edges] : local) {
+                std::sort(edges.begin(), edges.end());
+                faces[key].push_back(std::move(edges));
+            }
+        }
+        for (auto& [key, sides] : faces) {
+            if (sides.size() != 2) continue;
+            report_.faces_checked++;
+            if (sides[0] != sides[1]) {
+                report_.face_mismatches++;
+                if (getenv("CATPAQ_DEBUG_FACES")) {
+                    for (int sd = 0; sd < 2; ++sd) {
+                        fprintf(stderr, "side %d:\n", sd);
+                        for (auto& e : sides[sd])
+                            fprintf(stderr, "  (%ld %ld %ld)-(%ld %ld %ld)\n", (long)e.first[0], (long)e.first[1],
+                                    (long)e.first[2], (long)e.second[0], (long)e.second[1], (long)e.second[2]);
+                    }
+                }
+                problem(strprintf("face (%d,%d,%d)-(%d,%d,%d)-(%d,%d,%d): the two sides' borders differ (%zu vs %zu edges)",
+                                  key[0][0], key[0][1], key[0][2], key[1][0], key[1][1], key[1][2], key[2][0], key[2][1],
+                                  key[2][2], sides[0].size(), sides[1].size()));
+            }
+        }
+        return out;
+    }
+
+private:
+    const CatpFile& file_;
+    VerifyReport& report_;
+    std::unordered_map<uint64_t, std::unique_ptr<DiamondFragments>> cache_;
+};
+
+// Samples points on a mesh: every vertex, then uniformly by area up to `count`.
+std::vector<std::array<double, 3>> sample_surface(const std::vector<std::array<double, 3>>& p,
+                                                  const std::vector<uint32_t>& idx, size_t count) {
+    std::vector<std::array<double, 3>> out;
+    std::mt19937_64 rng(7);
+    size_t vertices = p.size();
+    size_t stride = std::max<size_t>(1, vertices / std::max<size_t>(1, count / 2));
+    for (size_t v = 0; v < vertices; v += stride) out.push_back(p[v]);
+    size_t triangles = idx.size() / 3;
+    if (triangles == 0) return out;
+    std::uniform_int_distribution<size_t> pick(0, triangles - 1);
+    std::uniform_real_distribution<double> u(0, 1);
+    while (out.size() < count) {
+        size_t t = pick(rng);
+        double a = u(rng), b = u(rng);
+        if (a + b > 1) {
+            a = 1 - a;
+            b = 1 - b;
+        }
+        const auto &p0 = p[idx[3 * t]], &p1 = p[idx[3 * t + 1]], &p2 = p[idx[3 * t + 2]];
+        out.push_back({p0[0] + a * (p1[0] - p0[0]) + b * (p2[0] - p0[0]), p0[1] + a * (p1[1] - p0[1]) + b * (p2[1] - p0[1]),
+                       p0[2] + a * (p1[2] - p0[2]) + b * (p2[2] - p0[2])});
+    }
+    return out;
+}
+
+void measure(const SurfaceDistance& to, const std::vector<std::array<double, 3>>& points, double& max_out, double& rms_out) {
+    std::vector<double> d(points.size());
+    tbb::parallel_for(size_t(0), points.size(), [&](size_t i) { d[i] = to.distance(points[i]); });
+    double mx = 0, sum = 0;
+    for (double v : d) {
+        mx = std::max(mx, v);
+        sum += v * v;
+    }
+    max_out = mx;
+    rms_out = points.empty() ? 0 : std::sqrt(sum / double(points.size()));
+}
+
+}  // namespace
+
+VerifyReport verify_catp(const std::string& path, const Mesh* original, const VerifySettings& settings) {
+    CatpFile file(path);
+    const CatpIndex& index = file.index();
+    const CatpMeta& meta = index.meta();
+    VerifyReport report;
+    report.file_bytes = file.archive().size();
+    double d2 = 0;
+    for (int i = 0; i < 3; ++i) d2 += (meta.bounds_max[i] - meta.bounds_min[i]) * (meta.bounds_max[i] - meta.bounds_min[i]);
+    report.diagonal = std::sqrt(d2);
+    Checker checker(file, report);
+
+    int max_level = 0;
+    for (const ArchiveEntry& e : index.entries()) max_level = std::max(max_level, int(e.level));
+    report.levels.resize(max_level + 1);
+    for (int l = 0; l <= max_level; ++l) report.levels[l].level = l;
+
+    // Per node: decode, flags, counts, monotone errors.
+    for (const ArchiveEntry& e : index.entries()) {
+        report.nodes++;
+        DiamondId id{e.key};
+        DiamondInfo info = diamond_info(id);
+        VerifyLevel& lv = report.levels[e.level];
+        lv.diamonds++;
+        lv.bytes += e.size;
+        lv.stored_error = std::max(lv.stored_error, double(e.error));
+        uint8_t mask = uint8_t(e.flags & 0xff);
+        if ((mask & ~existing_slots(info)) != 0) {
+            report.bad_flags++;
+            checker.problem(strprintf("diamond %llu claims slots that do not exist", (unsigned long long)e.key));
+        }
+        bool leaf = e.flags & kCatpLeafFlag;
+        if (leaf != (uint32_t(e.level) == meta.leaf_level)) {
+            report.bad_flags++;
+            checker.problem(strprintf("diamond %llu: leaf flag does not match its level", (unsigned long long)e.key));
+        }
+        for (DiamondId p : diamond_parents(id)) {
+            const ArchiveEntry* pe = index.find(p);
+            if (pe && pe->error < e.error) {
+                report.monotonicity_violations++;
+                checker.problem(strprintf("diamond %llu: error %g exceeds its parent's %g", (unsigned long long)e.key,
+                                          double(e.error), double(pe->error)));
+            }
+        }
+        const DiamondFragments* f = checker.node(e);
+        if (!f) continue;
+        if (f->slot_mask != mask) {
+            report.bad_flags++;
+            checker.problem(strprintf("diamond %llu: slot mask differs between index and payload", (unsigned long long)e.key));
+        }
+        size_t triangles = 0;
+        for (int s = 0; s < 8; ++s) {
+            if (!(f->slot_mask & (1 << s))) continue;
+            triangles += f->slots[s].triangle_count();
+            lv.vertices += f->slots[s].vertices.size();
+            lv.fragments++;
+            report.fragments++;
+            lv.quantization_step = std::max(lv.quantization_step,
+                                            longest_edge(diamond_tetrahedron(info, s)) * meta.cell / kBaryGrid);
+        }
+        if (triangles != e.count) {
+            report.bad_flags++;
+            checker.problem(strprintf("diamond %llu: index says %u triangles, payload has %zu", (unsigned long long)e.key,
+                                      e.count, triangles));
+        }
+        lv.triangles += triangles;
+        report.triangles += triangles;
+    }
+
+    // Uniform cuts, coarse to fine: face consistency and (with the original) distances.
+    std::unique_ptr<SurfaceDistance> to_original;
+    std::vector<std::array<double, 3>> original_samples;
+    if (original) {
+        std::vector<std::array<double, 3>> p(original->positions.begin(), original->positions.end());
+        to_original.reset(new SurfaceDistance(p, original->indices));
+        original_samples = sample_surface(p, original->indices, settings.samples_per_level);
+    }
+    for (int level = 0; level <= max_level; ++level) {
+        RefinedSet refined;
+        for (const ArchiveEntry& e : index.entries())
+            if (e.level < level && !(e.flags & kCatpLeafFlag)) refined.refine(DiamondId{e.key});
+        DecodedCut cut = checker.decode_cut(refined);
+        if (!original || cut.indices.empty()) continue;
+        VerifyLevel& lv = report.levels[level];
+        measure(*to_original, sample_surface(cut.positions, cut.indices, settings.samples_per_level),
+                lv.distance_to_original_max, lv.distance_to_original_rms);
+        SurfaceDistance to_level(cut.positions, cut.indices);
+        measure(to_level, original_samples, lv.distance_from_original_max, lv.distance_from_original_rms);
+    }
+    // A random mixed cut too.
+    {
+        std::mt19937_64 rng(5);
+        RefinedSet refined;
+        std::uniform_real_distribution<double> u(0, 1);
+        for (const ArchiveEntry& e : index.entries())
+            if (!(e.flags & kCatpLeafFlag) && u(rng) < 0.5) refined.refine(DiamondId{e.key});
+        checker.decode_cut(refined);
+    }
+    return report;
+}
+
+}  // namespace catpaq

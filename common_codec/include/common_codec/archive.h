@@ -1,0 +1,111 @@
+#pragma once
+// The dataset container shared by every format (CATP now, AQP and points later), the server
+// and the client. One file, laid out so that a stock static web server can serve it with HTTP
+// Range requests: the header, the format's metadata and the node index come first, then the node
+// payloads ordered coarse to fine, so a client's first request (the first 64 KiB) holds the index
+// and the coarsest nodes.
+//
+//   offset 0   Header (96 bytes, below)
+//   meta       format-specific metadata (catp/format.h documents CATP's), meta_size bytes
+//   index      node_count entries of 40 bytes, sorted by (level, key)
+//   payload    node bytes, in index order
+//
+// Every part carries an XXH3-64 checksum; readers reject unknown magic and versions.
+// Byte tables: docs/formats/archive.md.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+namespace catpaq {
+
+constexpr char kArchiveMagic[8] = {'C', 'P', 'Q', 'A', 'R', 'C', 'H', '\x1a'};
+constexpr uint32_t kArchiveVersion = 1;
+constexpr size_t kArchiveHeaderSize = 96;
+constexpr size_t kArchiveEntrySize = 40;
+
+enum class ArchiveKind : uint32_t { Catp = 1, Aqp = 2, Points = 3 };
+const char* archive_kind_name(ArchiveKind kind);
+
+struct ArchiveHeader {
+    uint32_t version = kArchiveVersion;
+    ArchiveKind kind = ArchiveKind::Catp;
+    uint64_t file_size = 0;
+    uint64_t meta_offset = 0;
+    uint32_t meta_size = 0;
+    uint32_t node_count = 0;
+    uint64_t index_offset = 0;
+    uint64_t index_size = 0;
+    uint64_t meta_checksum = 0;
+    uint64_t index_checksum = 0;
+};
+
+// One node of the hierarchy. `key` is the format's node id (CATP: DiamondId bits); `level` orders
+// coarse to fine; `flags` and `count` are format-specific (CATP: slot mask and leaf bit; triangles);
+// `error` is the node's object-space error bound (monotone: parent >= child).
+struct ArchiveEntry {
+    uint64_t key = 0;
+    uint64_t offset = 0;
+    uint32_t size = 0;
+    uint16_t level = 0;
+    uint16_t flags = 0;
+    uint32_t count = 0;
+    float error = 0.0f;
+    uint64_t checksum = 0;  // XXH3-64 of the node's bytes
+};
+
+// Parses and validates a header from the first bytes of a file. Returns an empty string on
+// success, else a message saying what is wrong (bad magic, unsupported version, checksum, sizes).
+std::string parse_archive_header(const uint8_t* data, size_t size, ArchiveHeader& out);
+// Parses the index bytes (validated against the header's checksum and size). Entries must lie
+// inside the file, be sorted by (level, key) and unique. Empty string on success.
+std::string parse_archive_index(const ArchiveHeader& header, const uint8_t* data, size_t size,
+                                std::vector<ArchiveEntry>& out);
+
+// Builds an archive: nodes are appended in any order (spilled to a temporary file next to the
+// output, so memory stays bounded), then finish() writes header, meta, index and the payload in
+// (level, key) order under a temporary name and renames it into place.
+class ArchiveWriter {
+public:
+    ArchiveWriter(std::string path, ArchiveKind kind);  // throws Error
+    ~ArchiveWriter();
+
+    // Thread-safe. `entry.offset`, `size` and `checksum` are filled in by the writer.
+    void add_node(ArchiveEntry entry, const uint8_t* data, size_t size);
+    // Returns the final file size. Throws Error on I/O failure (nothing is left behind).
+    uint64_t finish(const std::vector<uint8_t>& meta);
+
+    uint64_t payload_bytes() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+// Reads an archive from a local file (memory-mapped). Validates header, meta and index on open;
+// node bytes are checked against their checksum when read.
+class ArchiveReader {
+public:
+    explicit ArchiveReader(const std::string& path);  // throws Error naming the file and the problem
+    ~ArchiveReader();
+
+    const ArchiveHeader& header() const;
+    const std::vector<uint8_t>& meta() const;
+    const std::vector<ArchiveEntry>& entries() const;
+    // Index of the entry with `key`, or -1.
+    int64_t find(uint64_t key) const;
+    // The node's bytes inside the mapping (valid while the reader lives). Returns nullptr and
+    // sets `error` if the checksum does not match.
+    const uint8_t* node(size_t entry_index, std::string* error) const;
+    // The whole file, for serving raw ranges.
+    const uint8_t* data() const;
+    uint64_t size() const;
+    // Bytes from the start of the file up to the end of the index (what a client needs first).
+    uint64_t prefix_size() const;
+
+private:
+    struct Impl;
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace catpaq

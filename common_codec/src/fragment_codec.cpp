@@ -1,0 +1,1166 @@
+// The lossless fragment codec (see common_codec/fragment_codec.h for the API).
+//
+// Bitstream, version 1 (all little-endian)
+// ----------------------------------------
+//   header (24 bytes): u32 magic "CFRG" | u8 version = 1 | u8 flags = 0 | u16 reserved = 0 |
+//                      u32 vertex_count V | u32 triangle_count T | u64 checksum = XXH3-64 of the
+//                      payload (every byte after this field)
+//   payload:
+//     u16 header_fold   XOR of the six u16 words at header bytes 4..15 (version .. T), so a
+//                       change to a header field is detected although the checksum does not
+//                       cover the header
+//     u8  coding        0 = compressed (below); 1 = stored: V x (u32 word0, u32 word1), then
+//                       T x 3 x u32 indices, nothing else (used when it is smaller)
+//   compressed:
+//     u8  modes         bits 0-1 position coding: 0 = cumulative weights (a, b, c) =
+//                       (w1+w2+w3, w2+w3, w3), 1 = weights (w1, w2, w3), 2 = raw 24-bit index;
+//                       bits 2-3 normal predictor: 0 = gate average, 1 = parallelogram,
+//                       2 = geometric; bit 4 colour predictor: 0 = gate average,
+//                       1 = parallelogram; bit 5: colour residuals of R and B are coded
+//                       relative to the residual of G; bits 6-7 zero
+//     i8 x 9            only for the geometric normal predictor: row-major 3x3 matrix M that
+//                       maps a normal computed in (a, b, c) space to the frame of the normals
+//     varint E          number of degenerate triangles (a repeated index), coded explicitly
+//     rANS stream       (rans.h): u32 state0 | u32 state1 | bytes. Symbols in decode order:
+//       tables          connectivity (6 symbols), then 3 position tables (unless raw), 2 normal
+//                       tables (u, v), 3 colour tables (R, G, B)
+//       connectivity    traversal of the T - E regular triangles (below), then E x 3 indices
+//                       (bit_width(V - 1) raw bits each)
+//       positions       per vertex, in decoded order: 3 residual values (or 24 raw bits)
+//       normals         per vertex: 2 residual values (mod 256)
+//       colours         per vertex: 3 residual values (mod 256)
+//     The stream must end exactly at the end of the payload with both rANS states back at
+//     their initial value.
+//
+// Connectivity: a deterministic front traversal (in the spirit of the cut-border machine and
+// Corto's coder). The front is a set of directed edge loops, each edge (v0 -> v1) remembering
+// the third vertex `opp` of the triangle it came from; edges are kept in one array processed
+// in FIFO order. When the queue is exhausted and triangles remain, a new component starts with a
+// triangle whose three vertices are each coded NEW or SPLIT. Per popped edge one symbol:
+//   NEW       the triangle across the edge is (v1, v0, v) with a vertex v never seen before
+//   LEFT      ... with v = next edge's v1 (the next edge is consumed)
+//   RIGHT     ... with v = previous edge's v0 (the previous edge is consumed)
+//   END       both (closes a loop of three)
+//   SPLIT     ... with an already seen vertex v given explicitly: bit_width(seen - 1) raw bits
+//   BOUNDARY  no further triangle across this edge
+// The traversal stops as soon as T - E triangles have been produced. Vertices are numbered in
+// order of first appearance; vertices not used by any regular triangle follow in their original
+// order. Any input is expressible: non-manifold edges, inconsistent orientation, duplicate
+// triangles and touching components simply cost restarts and SPLITs; only degenerate triangles
+// (which the front cannot express) are sent as explicit index triples.
+//
+// Attribute prediction: each vertex created by NEW at gate (v0, v1, opp) is predicted from
+// v0 + v1 - opp (parallelogram) or (v0 + v1) / 2; other vertices from the previous vertex in
+// decoded order (the first from zero). Positions are predicted coordinate by coordinate, each
+// prediction clamped to the range the already decoded coordinates allow (a in [0, 463], b in
+// [0, a], c in [0, b]; in weight space w1 in [0, 463], w2 in [0, 463 - w1], w3 in
+// [0, 463 - w1 - w2]). The geometric normal predictor computes for every vertex the sum of the
+// cross products of its triangles in (a, b, c) space, maps it by M and projects it to the
+// octahedral code with exact-rounding double arithmetic (floor(x + 0.5)); vertices where that
+// vector is zero are predicted from the previous vertex. Normal and colour residuals wrap
+// modulo 256.
+//
+// Residual values: zig-zag mapped z; symbol z for z < 8, otherwise with k = floor(log2 z)
+// symbol 8 + 2 (k - 3) + (bit k-1 of z) followed by the k - 1 low bits of z raw.
+#include "common_codec/fragment_codec.h"
+
+#include <algorithm>
+#include <array>
+#include <bit>
+#include <cassert>
+#include <cmath>
+#include <cstring>
+
+#include "base/checksum.h"
+#include "common_codec/octahedral.h"
+#include "rans.h"
+
+namespace catpaq {
+
+namespace {
+
+constexpr uint8_t kMagicBytes[4] = {'C', 'F', 'R', 'G'};
+constexpr uint8_t kVersion = 1;
+constexpr size_t kHeaderBytes = 24;
+constexpr size_t kChecksumOffset = 16;
+constexpr uint8_t kCodingCompressed = 0;
+constexpr uint8_t kCodingStored = 1;
+
+enum ConnSymbol : uint32_t { kNew = 0, kLeft, kRight, kEnd, kSplit, kBoundary, kConnSymbols };
+
+enum Stream : int {
+    kStreamConn = 0,
+    kStreamPos0,
+    kStreamPos1,
+    kStreamPos2,
+    kStreamNormU,
+    kStreamNormV,
+    kStreamColR,
+    kStreamColG,
+    kStreamColB,
+    kStreamCount,
+    kStreamRaw = 255,
+};
+
+enum PositionMode { kPosCumulative = 0, kPosWeights = 1, kPosRaw = 2 };
+enum NormalMode { kNormalAverage = 0, kNormalParallelogram = 1, kNormalGeometric = 2 };
+
+constexpr int32_t kGrid = kBaryGrid;
+constexpr uint32_t kNone = 0xffffffffu;
+constexpr uint32_t kDead = 0xffffffffu;
+
+uint32_t zigzag(int32_t v) { return (uint32_t(v) << 1) ^ uint32_t(v >> 31); }
+int32_t unzigzag(uint32_t z) { return int32_t(z >> 1) ^ -int32_t(z & 1); }
+
+int bit_width_u32(uint32_t v) { return int(std::bit_width(v)); }
+
+// Value buckets: symbol, number of extra bits, extra bits value.
+struct Bucket {
+    uint32_t sym, nbits, extra;
+};
+Bucket bucket_of(uint32_t z) {
+    if (z < 8) return {z, 0, 0};
+    int k = bit_width_u32(z) - 1;
+    return {uint32_t(8 + 2 * (k - 3)) + ((z >> (k - 1)) & 1u), uint32_t(k - 1), z & ((1u << (k - 1)) - 1)};
+}
+struct BucketDecode {
+    std::array<uint32_t, rans::kMaxAlphabet> base{};
+    std::array<uint8_t, rans::kMaxAlphabet> nbits{};
+    constexpr BucketDecode() {
+        for (uint32_t s = 0; s < uint32_t(rans::kMaxAlphabet); ++s) {
+            if (s < 8) {
+                base[s] = s;
+                nbits[s] = 0;
+            } else {
+                uint32_t k = 3 + (s - 8) / 2, hi = (s - 8) & 1;
+                base[s] = (1u << k) | (hi << (k - 1));
+                nbits[s] = uint8_t(k - 1);
+            }
+        }
+    }
+};
+constexpr BucketDecode kBucketDecode{};
+static_assert(kBucketDecode.nbits[rans::kMaxAlphabet - 1] <= rans::kMaxRawBits);
+
+// Tetrahedral-number enumeration of barycentric.h: index = tet(a) + tri(b) + c.
+struct BaryTables {
+    std::array<uint32_t, kBaryGrid + 1> tet{}, tri{};
+    constexpr BaryTables() {
+        for (uint32_t a = 0; a <= uint32_t(kBaryGrid); ++a) {
+            tet[a] = a * (a + 1) * (a + 2) / 6;
+            tri[a] = a * (a + 1) / 2;
+        }
+    }
+};
+constexpr BaryTables kBaryTables{};
+static_assert(kBaryTables.tet[kBaryGrid] + kBaryTables.tri[kBaryGrid] + kBaryGrid + 1 == kBaryIndexCount);
+
+// ---------------------------------------------------------------------------------------------
+// The front, shared by encoder and decoder so both evolve it identically. Edges live in one
+// array (FIFO order = array order); callers reserve room for 3 more edges before each step.
+
+struct FrontEdge {
+    uint32_t v0, v1, opp, prev, next;  // prev == kDead: consumed
+};
+
+struct Front {
+    std::vector<FrontEdge> store;
+    FrontEdge* e = nullptr;
+    uint32_t size = 0, head = 0;
+
+    void reset(size_t expected) {
+        if (store.size() < expected) store.resize(expected);
+        e = store.data();
+        size = head = 0;
+    }
+    void reserve3() {
+        if (size + 3 > store.size()) [[unlikely]] {
+            store.resize(store.size() * 2 + 16);
+            e = store.data();
+        }
+    }
+    // Next live edge in FIFO order, or false when the queue is exhausted.
+    bool pop(uint32_t& i) {
+        while (head < size && e[head].prev == kDead) ++head;
+        if (head == size) return false;
+        i = head++;
+        return true;
+    }
+    void start(uint32_t a, uint32_t b, uint32_t c) {
+        uint32_t i = size;
+        e[i] = {a, b, c, i + 2, i + 1};
+        e[i + 1] = {b, c, a, i, i + 2};
+        e[i + 2] = {c, a, b, i + 1, i};
+        size += 3;
+    }
+    // Triangle (v1, v0, v) with v new or split: edge i is replaced by (v0 -> v), (v -> v1).
+    void add_vertex(uint32_t i, const FrontEdge& ei, uint32_t v) {
+        uint32_t a = size, b = a + 1;
+        e[a] = {ei.v0, v, ei.v1, ei.prev, b};
+        e[b] = {v, ei.v1, ei.v0, a, ei.next};
+        e[ei.prev].next = a;
+        e[ei.next].prev = b;
+        e[i].prev = kDead;
+        size += 2;
+    }
+    // v = e[next].v1: edges i and next are replaced by (v0 -> v). Needs a loop of >= 3 edges.
+    void left(uint32_t i, const FrontEdge& ei, uint32_t v) {
+        const uint32_t n = ei.next, nn = e[n].next;
+        uint32_t c = size++;
+        e[c] = {ei.v0, v, ei.v1, ei.prev, nn};
+        e[ei.prev].next = c;
+        e[nn].prev = c;
+        e[i].prev = kDead;
+        e[n].prev = kDead;
+    }
+    // v = e[prev].v0: edges prev and i are replaced by (v -> v1).
+    void right(uint32_t i, const FrontEdge& ei, uint32_t v) {
+        const uint32_t p = ei.prev, pp = e[p].prev;
+        uint32_t c = size++;
+        e[c] = {v, ei.v1, ei.v0, pp, ei.next};
+        e[pp].next = c;
+        e[ei.next].prev = c;
+        e[i].prev = kDead;
+        e[p].prev = kDead;
+    }
+    // prev, i and next are removed (e[prev].v0 == e[next].v1).
+    void end(uint32_t i, const FrontEdge& ei) {
+        const uint32_t p = ei.prev, n = ei.next, pp = e[p].prev, nn = e[n].next;
+        e[i].prev = kDead;
+        e[p].prev = kDead;
+        e[n].prev = kDead;
+        if (pp != n) {
+            e[pp].next = nn;
+            e[nn].prev = pp;
+        }
+    }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Encoder side: symbols are collected per stream, in decode order, before the tables exist.
+
+struct Sink {
+    struct Item {
+        uint32_t value;  // symbol, or raw bits
+        uint32_t extra;  // raw bits following a symbol on the same rANS state
+        uint8_t stream;  // kStreamRaw: raw bits
+        uint8_t nbits;
+    };
+    std::vector<Item> items;
+    std::array<std::array<uint32_t, rans::kMaxAlphabet>, kStreamCount> counts{};
+    size_t raw_bits = 0;
+
+    void sym(int stream, uint32_t s) {
+        items.push_back({s, 0, uint8_t(stream), 0});
+        ++counts[size_t(stream)][s];
+    }
+    void bits(uint32_t v, int n) {  // n <= 32
+        raw_bits += size_t(n);
+        if (n > 0) items.push_back({v, 0, uint8_t(kStreamRaw), uint8_t(n)});
+    }
+    void value(int stream, uint32_t z) {
+        Bucket b = bucket_of(z);
+        items.push_back({b.sym, b.extra, uint8_t(stream), uint8_t(b.nbits)});
+        ++counts[size_t(stream)][b.sym];
+        raw_bits += b.nbits;
+    }
+    void append(const Sink& o) {
+        items.insert(items.end(), o.items.begin(), o.items.end());
+        for (size_t s = 0; s < counts.size(); ++s)
+            for (size_t i = 0; i < counts[s].size(); ++i) counts[s][i] += o.counts[s][i];
+        raw_bits += o.raw_bits;
+    }
+    // Estimated coded size of the given streams plus all raw bits, tables included.
+    double cost(int first_stream, int last_stream) const {
+        double bits_total = double(raw_bits);
+        for (int s = first_stream; s <= last_stream; ++s) {
+            const uint32_t* c = counts[size_t(s)].data();
+            rans::TableDesc d = rans::describe_counts(c, rans::kMaxAlphabet);
+            rans::FreqTable f;
+            rans::build_freqs(d, f);
+            bits_total += rans::data_cost_bits(c, f) + 8 + 3.5 * d.nsym;
+        }
+        return bits_total;
+    }
+};
+
+// Per-vertex prediction sources (new numbering); index V stands for a virtual zero vertex.
+struct Pred {
+    uint32_t a, b, c;  // gate v0, gate v1, opposite (all equal for "previous vertex")
+};
+
+// Geometric normal: projects a vector to the octahedral code (signed bytes, c / 127).
+bool project_oct(int64_t x, int64_t y, int64_t z, int& cu, int& cv) {
+    double ax = std::fabs(double(x)), ay = std::fabs(double(y)), az = std::fabs(double(z));
+    double l1 = ax + ay + az;
+    if (!(l1 > 0.0)) return false;
+    double s = 127.0 / l1;
+    double u = double(x) * s, v = double(y) * s;
+    if (z < 0) {
+        double fu = (127.0 - std::fabs(v)) * (u < 0.0 ? -1.0 : 1.0);
+        double fv = (127.0 - std::fabs(u)) * (v < 0.0 ? -1.0 : 1.0);
+        u = fu;
+        v = fv;
+    }
+    // Round half up: |u|, |v| <= 127, so u + 128.5 > 0 and truncation is floor.
+    cu = std::clamp(int(u + 128.5) - 128, -127, 127);
+    cv = std::clamp(int(v + 128.5) - 128, -127, 127);
+    return true;
+}
+
+using Vec3l = std::array<int64_t, 3>;
+
+// Area-weighted normals in (a, b, c) space: sum of the cross products of each vertex's triangles.
+void accumulate_normals(const uint32_t* indices, size_t triangles, const int32_t* sa, const int32_t* sb,
+                        const int32_t* sc, std::vector<Vec3l>& acc) {
+    for (size_t t = 0; t < triangles; ++t) {
+        uint32_t i = indices[3 * t], j = indices[3 * t + 1], k = indices[3 * t + 2];
+        int64_t e1x = sa[j] - sa[i], e1y = sb[j] - sb[i], e1z = sc[j] - sc[i];
+        int64_t e2x = sa[k] - sa[i], e2y = sb[k] - sb[i], e2z = sc[k] - sc[i];
+        int64_t nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+        for (uint32_t v : {i, j, k}) {
+            acc[v][0] += nx;
+            acc[v][1] += ny;
+            acc[v][2] += nz;
+        }
+    }
+}
+
+// Predicted normal of vertex v under the geometric predictor; `prev_u/v` is the fallback.
+inline void geometric_prediction(const Vec3l& n, const std::array<int8_t, 9>& m, int prev_u, int prev_v, int& pu,
+                                 int& pv) {
+    int64_t x = m[0] * n[0] + m[1] * n[1] + m[2] * n[2];
+    int64_t y = m[3] * n[0] + m[4] * n[1] + m[5] * n[2];
+    int64_t z = m[6] * n[0] + m[7] * n[1] + m[8] * n[2];
+    if (!project_oct(x, y, z, pu, pv)) {
+        pu = prev_u;
+        pv = prev_v;
+    }
+}
+
+uint16_t read_u16(const uint8_t* p) { return uint16_t(p[0] | (p[1] << 8)); }
+uint32_t read_u32(const uint8_t* p) {
+    return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
+}
+void put_u16(std::vector<uint8_t>& out, uint16_t v) {
+    out.push_back(uint8_t(v));
+    out.push_back(uint8_t(v >> 8));
+}
+void put_u32(std::vector<uint8_t>& out, uint32_t v) {
+    for (int i = 0; i < 4; ++i) out.push_back(uint8_t(v >> (8 * i)));
+}
+void put_varint(std::vector<uint8_t>& out, uint64_t v) {
+    while (v >= 0x80) {
+        out.push_back(uint8_t(v | 0x80));
+        v >>= 7;
+    }
+    out.push_back(uint8_t(v));
+}
+
+uint16_t header_fold(const uint8_t* header) {
+    uint16_t f = 0;
+    for (size_t at = 4; at < kChecksumOffset; at += 2) f ^= read_u16(header + at);
+    return f;
+}
+
+// Colour channel helpers (r = 0, g = 1, b = 2) of word1.
+inline int channel(uint32_t word1, int c) { return int((word1 >> (8 + 8 * c)) & 0xffu); }
+
+// ---------------------------------------------------------------------------------------------
+// Encoder
+
+struct EncoderState {
+    uint32_t V = 0;
+    std::vector<PackedVertex> verts;  // new order, plus the virtual zero vertex at V
+    std::vector<Pred> pred;           // per new vertex
+    std::vector<uint32_t> indices;    // all triangles, new numbering (regular then degenerate)
+};
+
+void emit_positions(const EncoderState& st, int mode, const std::vector<int32_t>& sa, const std::vector<int32_t>& sb,
+                    const std::vector<int32_t>& sc, Sink& sink) {
+    const uint32_t V = st.V;
+    if (mode == kPosRaw) {
+        for (uint32_t v = 0; v < V; ++v) sink.bits(st.verts[v].position_index(), 24);
+        return;
+    }
+    // Coordinates in the coding space (index V: the virtual zero vertex).
+    std::vector<int32_t> q0(V + 1), q1(V + 1), q2(V + 1);
+    for (uint32_t v = 0; v <= V; ++v) {
+        if (mode == kPosCumulative) {
+            q0[v] = sa[v], q1[v] = sb[v], q2[v] = sc[v];
+        } else {
+            q0[v] = sa[v] - sb[v], q1[v] = sb[v] - sc[v], q2[v] = sc[v];
+        }
+    }
+    for (uint32_t v = 0; v < V; ++v) {
+        const Pred& p = st.pred[v];
+        int32_t x0 = q0[v], x1 = q1[v], x2 = q2[v];
+        int32_t hi0 = kGrid;
+        int32_t hi1 = mode == kPosCumulative ? x0 : kGrid - x0;
+        int32_t p0 = std::clamp(q0[p.a] + q0[p.b] - q0[p.c], 0, hi0);
+        int32_t p1 = std::clamp(q1[p.a] + q1[p.b] - q1[p.c], 0, hi1);
+        int32_t hi2 = mode == kPosCumulative ? x1 : kGrid - x0 - x1;
+        int32_t p2 = std::clamp(q2[p.a] + q2[p.b] - q2[p.c], 0, hi2);
+        sink.value(kStreamPos0, zigzag(x0 - p0));
+        sink.value(kStreamPos1, zigzag(x1 - p1));
+        sink.value(kStreamPos2, zigzag(x2 - p2));
+    }
+}
+
+inline int normal_u(const PackedVertex& v) { return int8_t(uint8_t(v.word0 >> 24)); }
+inline int normal_v(const PackedVertex& v) { return int8_t(uint8_t(v.word1)); }
+inline uint32_t wrap_residual(int actual, int pred) { return zigzag(int32_t(int8_t(uint8_t(actual - pred)))); }
+
+void emit_normals(const EncoderState& st, int mode, const std::vector<Vec3l>* acc, const std::array<int8_t, 9>& m,
+                  Sink& sink) {
+    const uint32_t V = st.V;
+    for (uint32_t v = 0; v < V; ++v) {
+        const Pred& p = st.pred[v];
+        int pu, pv;
+        if (mode == kNormalGeometric) {
+            const PackedVertex& prev = st.verts[v == 0 ? V : v - 1];
+            geometric_prediction((*acc)[v], m, normal_u(prev), normal_v(prev), pu, pv);
+        } else if (mode == kNormalAverage) {
+            pu = (normal_u(st.verts[p.a]) + normal_u(st.verts[p.b])) >> 1;
+            pv = (normal_v(st.verts[p.a]) + normal_v(st.verts[p.b])) >> 1;
+        } else {
+            pu = std::clamp(normal_u(st.verts[p.a]) + normal_u(st.verts[p.b]) - normal_u(st.verts[p.c]), -127, 127);
+            pv = std::clamp(normal_v(st.verts[p.a]) + normal_v(st.verts[p.b]) - normal_v(st.verts[p.c]), -127, 127);
+        }
+        sink.value(kStreamNormU, wrap_residual(normal_u(st.verts[v]), pu));
+        sink.value(kStreamNormV, wrap_residual(normal_v(st.verts[v]), pv));
+    }
+}
+
+void emit_colors(const EncoderState& st, bool parallelogram, bool decorrelate, Sink& sink) {
+    const uint32_t V = st.V;
+    for (uint32_t v = 0; v < V; ++v) {
+        const Pred& p = st.pred[v];
+        int r[3];
+        for (int c = 0; c < 3; ++c) {
+            int a = channel(st.verts[p.a].word1, c), b = channel(st.verts[p.b].word1, c);
+            int pc = parallelogram ? std::clamp(a + b - channel(st.verts[p.c].word1, c), 0, 255) : (a + b + 1) >> 1;
+            r[c] = channel(st.verts[v].word1, c) - pc;
+        }
+        if (decorrelate) {
+            r[0] -= r[1];
+            r[2] -= r[1];
+        }
+        sink.value(kStreamColG, zigzag(int8_t(uint8_t(r[1]))));
+        sink.value(kStreamColR, zigzag(int8_t(uint8_t(r[0]))));
+        sink.value(kStreamColB, zigzag(int8_t(uint8_t(r[2]))));
+    }
+}
+
+// Fits M (normals ~ M * geometric normal) by least squares over unit vectors; false if
+// degenerate.
+bool fit_normal_matrix(const EncoderState& st, const std::vector<Vec3l>& acc, std::array<int8_t, 9>& m) {
+    double g[3][3] = {}, h[3][3] = {};
+    size_t used = 0;
+    for (uint32_t v = 0; v < st.V; ++v) {
+        double n[3] = {double(acc[v][0]), double(acc[v][1]), double(acc[v][2])};
+        double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        if (!(len > 0.0)) continue;
+        for (double& x : n) x /= len;
+        float t[3];
+        oct_decode(st.verts[v].normal(), t);
+        for (int i = 0; i < 3; ++i)
+            for (int j = 0; j < 3; ++j) {
+                g[i][j] += n[i] * n[j];
+                h[i][j] += double(t[i]) * n[j];
+            }
+        ++used;
+    }
+    if (used < 3) return false;
+    // M = H G^-1.
+    double det = g[0][0] * (g[1][1] * g[2][2] - g[1][2] * g[2][1]) - g[0][1] * (g[1][0] * g[2][2] - g[1][2] * g[2][0]) +
+                 g[0][2] * (g[1][0] * g[2][1] - g[1][1] * g[2][0]);
+    if (!(std::fabs(det) > 1e-9 * double(used) * double(used) * double(used))) return false;
+    double inv[3][3];
+    inv[0][0] = (g[1][1] * g[2][2] - g[1][2] * g[2][1]) / det;
+    inv[0][1] = (g[0][2] * g[2][1] - g[0][1] * g[2][2]) / det;
+    inv[0][2] = (g[0][1] * g[1][2] - g[0][2] * g[1][1]) / det;
+    inv[1][0] = (g[1][2] * g[2][0] - g[1][0] * g[2][2]) / det;
+    inv[1][1] = (g[0][0] * g[2][2] - g[0][2] * g[2][0]) / det;
+    inv[1][2] = (g[0][2] * g[1][0] - g[0][0] * g[1][2]) / det;
+    inv[2][0] = (g[1][0] * g[2][1] - g[1][1] * g[2][0]) / det;
+    inv[2][1] = (g[0][1] * g[2][0] - g[0][0] * g[2][1]) / det;
+    inv[2][2] = (g[0][0] * g[1][1] - g[0][1] * g[1][0]) / det;
+    double mm[9], top = 0;
+    for (int i = 0; i < 3; ++i)
+        for (int j = 0; j < 3; ++j) {
+            double s = 0;
+            for (int k = 0; k < 3; ++k) s += h[i][k] * inv[k][j];
+            mm[3 * i + j] = s;
+            top = std::max(top, std::fabs(s));
+        }
+    if (!(top > 0.0) || !std::isfinite(top)) return false;
+    for (int i = 0; i < 9; ++i) m[size_t(i)] = int8_t(std::lround(mm[i] * 127.0 / top));
+    return true;
+}
+
+}  // namespace
+
+const char* fragment_status_name(FragmentStatus status) {
+    switch (status) {
+        case FragmentStatus::Ok: return "ok";
+        case FragmentStatus::Truncated: return "truncated";
+        case FragmentStatus::BadMagic: return "bad magic";
+        case FragmentStatus::UnsupportedVersion: return "unsupported version";
+        case FragmentStatus::ChecksumMismatch: return "checksum mismatch";
+        case FragmentStatus::Corrupt: return "corrupt";
+        case FragmentStatus::TooLarge: return "too large";
+    }
+    return "unknown";
+}
+
+size_t fragment_encode_bound(size_t vertex_count, size_t triangle_count) {
+    return kHeaderBytes + 3 + 8 * vertex_count + 12 * triangle_count;
+}
+
+size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, FragmentEncodeStats* stats) {
+    const size_t V_size = mesh.vertices.size(), T_size = mesh.triangle_count();
+    assert(mesh.indices.size() % 3 == 0);
+    assert(V_size <= kFragmentMaxVertices && T_size <= kFragmentMaxTriangles);
+    const uint32_t V = uint32_t(V_size), T = uint32_t(T_size);
+    const uint32_t* idx = mesh.indices.data();
+    for (size_t i = 0; i < mesh.indices.size(); ++i) assert(idx[i] < V);
+
+    // Split regular and degenerate triangles.
+    std::vector<uint32_t> regular, degenerate;
+    regular.reserve(T);
+    for (uint32_t t = 0; t < T; ++t) {
+        uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
+        (a == b || b == c || c == a ? degenerate : regular).push_back(t);
+    }
+    const uint32_t R = uint32_t(regular.size());
+
+    // Directed half-edges of regular triangles by origin vertex (CSR): (target, triangle).
+    std::vector<uint32_t> first(V + 1, 0);
+    for (uint32_t t : regular)
+        for (int k = 0; k < 3; ++k) ++first[idx[3 * t + k] + 1];
+    for (uint32_t v = 0; v < V; ++v) first[v + 1] += first[v];
+    std::vector<std::pair<uint32_t, uint32_t>> half(size_t(first[V]));
+    {
+        std::vector<uint32_t> fill(first.begin(), first.end() - 1);
+        for (uint32_t t : regular)
+            for (int k = 0; k < 3; ++k) half[fill[idx[3 * t + k]]++] = {idx[3 * t + (k + 1) % 3], t};
+    }
+    std::vector<uint8_t> visited(T, 0);
+    auto find_across = [&](uint32_t from, uint32_t to) -> uint32_t {
+        for (uint32_t h = first[from]; h < first[from + 1]; ++h)
+            if (half[h].first == to && !visited[half[h].second]) return half[h].second;
+        return kNone;
+    };
+
+    EncoderState st;
+    st.V = V;
+    std::vector<uint32_t> new_id(V, kNone), old_of_new;
+    old_of_new.reserve(V);
+    st.pred.reserve(V);
+    st.indices.reserve(size_t(T) * 3);
+    Sink conn;
+    uint32_t seen = 0;
+    auto number = [&](uint32_t old, Pred p) {
+        new_id[old] = seen++;
+        old_of_new.push_back(old);
+        st.pred.push_back(p);
+    };
+    auto previous_pred = [&]() {
+        uint32_t p = seen == 0 ? V : seen - 1;
+        return Pred{p, p, p};
+    };
+    auto put_split = [&](uint32_t old) {
+        conn.sym(kStreamConn, kSplit);
+        conn.bits(new_id[old], bit_width_u32(seen - 1));
+    };
+
+    Front front;
+    front.reset(size_t(R) * 2 + 16);
+    size_t next_start = 0;
+    uint32_t done = 0;
+    while (done < R) {
+        uint32_t i;
+        front.reserve3();
+        if (!front.pop(i)) {
+            while (visited[regular[next_start]]) ++next_start;
+            uint32_t t = regular[next_start];
+            visited[t] = 1;
+            uint32_t c[3] = {idx[3 * t], idx[3 * t + 1], idx[3 * t + 2]};
+            for (uint32_t x : c) {
+                if (new_id[x] == kNone) {
+                    conn.sym(kStreamConn, kNew);
+                    number(x, previous_pred());
+                } else {
+                    put_split(x);
+                }
+            }
+            front.start(c[0], c[1], c[2]);
+            for (uint32_t x : c) st.indices.push_back(new_id[x]);
+            ++done;
+            continue;
+        }
+        const FrontEdge ei = front.e[i];
+        uint32_t t = find_across(ei.v1, ei.v0);
+        if (t == kNone) {
+            conn.sym(kStreamConn, kBoundary);
+            continue;
+        }
+        visited[t] = 1;
+        ++done;
+        uint32_t w = idx[3 * t] ^ idx[3 * t + 1] ^ idx[3 * t + 2] ^ ei.v0 ^ ei.v1;
+        if (new_id[w] == kNone) {
+            conn.sym(kStreamConn, kNew);
+            number(w, Pred{new_id[ei.v0], new_id[ei.v1], new_id[ei.opp]});
+            front.add_vertex(i, ei, w);
+        } else {
+            bool left = front.e[ei.next].v1 == w, right = front.e[ei.prev].v0 == w;
+            if (left && right) {
+                conn.sym(kStreamConn, kEnd);
+                front.end(i, ei);
+            } else if (left) {
+                conn.sym(kStreamConn, kLeft);
+                front.left(i, ei, w);
+            } else if (right) {
+                conn.sym(kStreamConn, kRight);
+                front.right(i, ei, w);
+            } else {
+                put_split(w);
+                front.add_vertex(i, ei, w);
+            }
+        }
+        st.indices.push_back(new_id[ei.v1]);
+        st.indices.push_back(new_id[ei.v0]);
+        st.indices.push_back(new_id[w]);
+    }
+    // Vertices outside regular triangles, in original order.
+    for (uint32_t v = 0; v < V; ++v)
+        if (new_id[v] == kNone) number(v, previous_pred());
+    // Degenerate triangles, explicit.
+    const int index_bits = V > 0 ? bit_width_u32(V - 1) : 0;
+    for (uint32_t t : degenerate)
+        for (int k = 0; k < 3; ++k) {
+            uint32_t n = new_id[idx[3 * t + k]];
+            conn.bits(n, index_bits);
+            st.indices.push_back(n);
+        }
+
+    st.verts.resize(size_t(V) + 1);
+    for (uint32_t v = 0; v < V; ++v) st.verts[v] = mesh.vertices[old_of_new[v]];
+    st.verts[V] = PackedVertex{};
+
+    // Positions.
+    bool all_valid = true;
+    std::vector<int32_t> sa(size_t(V) + 1, 0), sb(size_t(V) + 1, 0), sc(size_t(V) + 1, 0);
+    for (uint32_t v = 0; v < V && all_valid; ++v) {
+        BaryWeights w;
+        if (!bary_unpack(st.verts[v].position_index(), w)) {
+            all_valid = false;
+            break;
+        }
+        sa[v] = w[1] + w[2] + w[3];
+        sb[v] = w[2] + w[3];
+        sc[v] = w[3];
+    }
+    int pos_mode = kPosRaw;
+    Sink pos;
+    if (all_valid) {
+        double best = 1e300;
+        for (int mode : {kPosCumulative, kPosWeights}) {
+            Sink s;
+            emit_positions(st, mode, sa, sb, sc, s);
+            double c = s.cost(kStreamPos0, kStreamPos2);
+            if (c < best) {
+                best = c;
+                pos_mode = mode;
+                pos = std::move(s);
+            }
+        }
+    } else {
+        emit_positions(st, kPosRaw, sa, sb, sc, pos);
+    }
+
+    // Normals.
+    int normal_mode = kNormalAverage;
+    std::array<int8_t, 9> matrix{};
+    Sink nor;
+    {
+        double best = 1e300;
+        std::vector<Vec3l> acc;
+        bool geometric = false;
+        if (pos_mode != kPosRaw && V > 0) {
+            acc.assign(V, Vec3l{0, 0, 0});
+            accumulate_normals(st.indices.data(), st.indices.size() / 3, sa.data(), sb.data(), sc.data(), acc);
+            geometric = fit_normal_matrix(st, acc, matrix);
+        }
+        for (int mode : {kNormalAverage, kNormalParallelogram, kNormalGeometric}) {
+            if (mode == kNormalGeometric && !geometric) continue;
+            Sink s;
+            emit_normals(st, mode, &acc, matrix, s);
+            double c = s.cost(kStreamNormU, kStreamNormV) + (mode == kNormalGeometric ? 72 : 0);
+            if (c < best) {
+                best = c;
+                normal_mode = mode;
+                nor = std::move(s);
+            }
+        }
+    }
+
+    // Colours.
+    bool color_parallelogram = false, color_decorrelate = false;
+    Sink col;
+    {
+        double best = 1e300;
+        for (int k = 0; k < 4; ++k) {
+            Sink s;
+            emit_colors(st, k & 1, k & 2, s);
+            double c = s.cost(kStreamColR, kStreamColB);
+            if (c < best) {
+                best = c;
+                color_parallelogram = k & 1;
+                color_decorrelate = k & 2;
+                col = std::move(s);
+            }
+        }
+    }
+
+    // Tables, then everything in decode order. Sections (for the size report): tables of each
+    // part, then the symbols of each part.
+    rans::Encoder enc;
+    std::array<rans::FreqTable, kStreamCount> freqs;
+    const Sink* parts[4] = {&conn, &pos, &nor, &col};
+    const int stream_part[kStreamCount] = {0, 1, 1, 1, 2, 2, 3, 3, 3};
+    std::vector<int> section_part;
+    for (int s = 0; s < kStreamCount; ++s) {
+        if (stream_part[s] == 1 && pos_mode == kPosRaw) continue;
+        if (section_part.empty() || section_part.back() != stream_part[s]) {
+            enc.begin_section();
+            section_part.push_back(stream_part[s]);
+        }
+        const uint32_t* counts = parts[stream_part[s]]->counts[size_t(s)].data();
+        int alphabet = s == kStreamConn ? int(kConnSymbols) : rans::kMaxAlphabet;
+        rans::TableDesc d = rans::describe_counts(counts, alphabet);
+        bool ok = rans::build_freqs(d, freqs[size_t(s)]);
+        assert(ok);
+        (void)ok;
+        enc.put_table(d);
+    }
+    for (int p = 0; p < 4; ++p) {
+        enc.begin_section();
+        section_part.push_back(p);
+        for (const Sink::Item& it : parts[p]->items) {
+            if (it.stream == kStreamRaw) {
+                enc.put_bits(it.value, it.nbits);
+            } else {
+                enc.put(freqs[it.stream], it.value);
+                enc.put_bits(it.extra, it.nbits);
+            }
+        }
+    }
+
+    // Assemble.
+    const size_t base = out.size();
+    std::vector<uint8_t> header(kHeaderBytes, 0);
+    std::memcpy(header.data(), kMagicBytes, 4);
+    header[4] = kVersion;
+    for (int i = 0; i < 4; ++i) {
+        header[8 + i] = uint8_t(V >> (8 * i));
+        header[12 + i] = uint8_t(T >> (8 * i));
+    }
+    std::vector<uint8_t> payload;
+    put_u16(payload, header_fold(header.data()));
+    payload.push_back(kCodingCompressed);
+    payload.push_back(uint8_t(pos_mode | (normal_mode << 2) | (color_parallelogram << 4) | (color_decorrelate << 5)));
+    if (normal_mode == kNormalGeometric)
+        for (int8_t x : matrix) payload.push_back(uint8_t(x));
+    put_varint(payload, degenerate.size());
+    const size_t prefix_bytes = payload.size();
+    std::vector<size_t> section_bytes;
+    enc.finish(payload, &section_bytes);
+
+    FragmentEncodeStats s;
+    const size_t stored_payload = 3 + 8 * size_t(V) + 12 * size_t(T);
+    if (payload.size() >= stored_payload) {
+        payload.resize(2);
+        payload.push_back(kCodingStored);
+        for (const PackedVertex& v : mesh.vertices) {
+            put_u32(payload, v.word0);
+            put_u32(payload, v.word1);
+        }
+        for (uint32_t i : mesh.indices) put_u32(payload, i);
+        s.header_bytes = kHeaderBytes + 3;
+        s.connectivity_bytes = 12 * size_t(T);
+        s.position_bytes = 3 * size_t(V);
+        s.normal_bytes = 2 * size_t(V);
+        s.color_bytes = 3 * size_t(V);
+    } else {
+        s.header_bytes = kHeaderBytes + prefix_bytes - (normal_mode == kNormalGeometric ? 9 : 0);
+        s.normal_bytes = normal_mode == kNormalGeometric ? 9 : 0;
+        size_t* target[4] = {&s.connectivity_bytes, &s.position_bytes, &s.normal_bytes, &s.color_bytes};
+        for (size_t i = 0; i < section_bytes.size(); ++i) *target[section_part[i]] += section_bytes[i];
+    }
+    uint64_t sum = checksum64(payload.data(), payload.size());
+    for (int i = 0; i < 8; ++i) header[kChecksumOffset + size_t(i)] = uint8_t(sum >> (8 * i));
+    out.insert(out.end(), header.begin(), header.end());
+    out.insert(out.end(), payload.begin(), payload.end());
+    if (stats) *stats = s;
+    return out.size() - base;
+}
+
+FragmentStatus fragment_peek(const uint8_t* data, size_t size, uint32_t& vertex_count, uint32_t& triangle_count) {
+    if (size < kHeaderBytes) return FragmentStatus::Truncated;
+    if (std::memcmp(data, kMagicBytes, 4) != 0) return FragmentStatus::BadMagic;
+    if (data[4] != kVersion || data[5] != 0) return FragmentStatus::UnsupportedVersion;
+    if (read_u16(data + 6) != 0) return FragmentStatus::Corrupt;
+    vertex_count = read_u32(data + 8);
+    triangle_count = read_u32(data + 12);
+    if (vertex_count > kFragmentMaxVertices || triangle_count > kFragmentMaxTriangles) return FragmentStatus::TooLarge;
+    return FragmentStatus::Ok;
+}
+
+namespace {
+
+FragmentStatus decode_stored(const uint8_t* p, size_t size, uint32_t V, uint32_t T, FragmentMesh& out) {
+    if (size != 8 * size_t(V) + 12 * size_t(T)) return FragmentStatus::Corrupt;
+    out.vertices.resize(V);
+    out.indices.resize(size_t(T) * 3);
+    for (uint32_t v = 0; v < V; ++v) {
+        out.vertices[v].word0 = read_u32(p + 8 * size_t(v));
+        out.vertices[v].word1 = read_u32(p + 8 * size_t(v) + 4);
+    }
+    p += 8 * size_t(V);
+    for (size_t i = 0; i < size_t(T) * 3; ++i) {
+        out.indices[i] = read_u32(p + 4 * i);
+        if (out.indices[i] >= V) return FragmentStatus::Corrupt;
+    }
+    return FragmentStatus::Ok;
+}
+
+// Scratch memory of the decoder, kept per thread between calls (fragments are small and
+// decoded by the thousand); fragments above kWorkspaceKeepVertices use a temporary one.
+struct Workspace {
+    Front front;
+    std::vector<Pred> pred;
+    std::vector<int32_t> sa, sb, sc;
+    std::vector<int8_t> nu, nv;
+    std::vector<Vec3l> acc;
+    std::vector<std::array<uint8_t, 4>> rgb;
+    std::array<rans::DecodeTable, kStreamCount> tables;
+};
+constexpr uint32_t kWorkspaceKeepVertices = 1u << 16;
+
+template <class T>
+void grow(std::vector<T>& v, size_t n) {
+    if (v.size() < n) v.resize(n);
+}
+
+// Reads a residual value of the given table.
+CATPAQ_RANS_INLINE uint32_t get_value(rans::Decoder& dec, const rans::DecodeTable& t) {
+    return dec.get_value(t, kBucketDecode.base.data(), kBucketDecode.nbits.data());
+}
+
+inline uint32_t get_wide(rans::Decoder& dec, int nbits) { return dec.get_bits(nbits); }
+
+// The traversal: fills tri (3 R indices) and pred; returns the number of vertices seen.
+FragmentStatus decode_connectivity(rans::Decoder& dec, const rans::DecodeTable& conn, uint32_t V, uint32_t R,
+                                   Workspace& ws, uint32_t* tri, uint32_t& seen_out) {
+    Pred* pred = ws.pred.data();
+    Front& front = ws.front;
+    front.reset(std::min<size_t>(size_t(R) * 2 + 16, size_t(1) << 20));
+    uint32_t seen = 0;
+    for (uint32_t done = 0; done < R;) {
+        front.reserve3();
+        uint32_t i;
+        if (!front.pop(i)) {
+            // A new component: three vertices, each NEW or SPLIT.
+            if (!dec.ok()) return FragmentStatus::Corrupt;
+            uint32_t c[3];
+            for (int k = 0; k < 3; ++k) {
+                uint32_t s = dec.get(conn);
+                if (s == kNew) {
+                    if (seen == V) return FragmentStatus::Corrupt;
+                    uint32_t q = seen == 0 ? V : seen - 1;
+                    pred[seen] = Pred{q, q, q};
+                    c[k] = seen++;
+                } else if (s == kSplit) {
+                    if (seen == 0) return FragmentStatus::Corrupt;
+                    c[k] = get_wide(dec, bit_width_u32(seen - 1));
+                    if (c[k] >= seen) return FragmentStatus::Corrupt;
+                } else {
+                    return FragmentStatus::Corrupt;
+                }
+            }
+            if (c[0] == c[1] || c[1] == c[2] || c[2] == c[0]) return FragmentStatus::Corrupt;
+            front.start(c[0], c[1], c[2]);
+            tri[0] = c[0], tri[1] = c[1], tri[2] = c[2];
+            tri += 3;
+            ++done;
+            continue;
+        }
+        const FrontEdge ei = front.e[i];
+        uint32_t v;
+        switch (dec.get(conn)) {
+            case kNew:
+                if (seen == V) [[unlikely]]
+                    return FragmentStatus::Corrupt;
+                v = seen++;
+                pred[v] = Pred{ei.v0, ei.v1, ei.opp};
+                front.add_vertex(i, ei, v);
+                break;
+            case kLeft:
+                v = front.e[ei.next].v1;
+                if (v == ei.v0 || v == ei.v1) [[unlikely]]
+                    return FragmentStatus::Corrupt;
+                front.left(i, ei, v);
+                break;
+            case kRight:
+                v = front.e[ei.prev].v0;
+                if (v == ei.v0 || v == ei.v1) [[unlikely]]
+                    return FragmentStatus::Corrupt;
+                front.right(i, ei, v);
+                break;
+            case kBoundary:
+                continue;
+            case kEnd:
+                v = front.e[ei.next].v1;
+                if (v == ei.v0 || v == ei.v1 || front.e[ei.prev].v0 != v) return FragmentStatus::Corrupt;
+                front.end(i, ei);
+                break;
+            case kSplit:
+                if (seen == 0) return FragmentStatus::Corrupt;
+                v = get_wide(dec, bit_width_u32(seen - 1));
+                if (v >= seen || v == ei.v0 || v == ei.v1) return FragmentStatus::Corrupt;
+                front.add_vertex(i, ei, v);
+                break;
+            default:
+                return FragmentStatus::Corrupt;
+        }
+        tri[0] = ei.v1, tri[1] = ei.v0, tri[2] = v;
+        tri += 3;
+        ++done;
+    }
+    seen_out = seen;
+    return FragmentStatus::Ok;
+}
+
+FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint32_t T, FragmentMesh& out,
+                                 Workspace& ws) {
+    if (size < 1) return FragmentStatus::Corrupt;
+    const uint8_t modes = *p++;
+    --size;
+    const int pos_mode = modes & 3, normal_mode = (modes >> 2) & 3;
+    const bool color_parallelogram = (modes >> 4) & 1, color_decorrelate = (modes >> 5) & 1;
+    if (pos_mode > kPosRaw || normal_mode > kNormalGeometric || (modes >> 6) != 0) return FragmentStatus::Corrupt;
+    if (normal_mode == kNormalGeometric && pos_mode == kPosRaw) return FragmentStatus::Corrupt;
+    std::array<int8_t, 9> matrix{};
+    if (normal_mode == kNormalGeometric) {
+        if (size < 9) return FragmentStatus::Corrupt;
+        for (int i = 0; i < 9; ++i) matrix[size_t(i)] = int8_t(p[i]);
+        p += 9;
+        size -= 9;
+    }
+    uint64_t E = 0;
+    for (int shift = 0;; shift += 7) {
+        if (size == 0 || shift > 28) return FragmentStatus::Corrupt;
+        uint8_t b = *p++;
+        --size;
+        E |= uint64_t(b & 0x7f) << shift;
+        if (!(b & 0x80)) break;
+    }
+    if (E > T) return FragmentStatus::Corrupt;
+    const uint32_t R = T - uint32_t(E);
+    if (R > 0 && V < 3) return FragmentStatus::Corrupt;
+
+    rans::Decoder dec;
+    if (!dec.init(p, size)) return FragmentStatus::Corrupt;
+    for (int s = 0; s < kStreamCount; ++s) {
+        if (pos_mode == kPosRaw && s >= kStreamPos0 && s <= kStreamPos2) continue;
+        rans::FreqTable f;
+        if (!dec.get_table(f, ws.tables[size_t(s)])) return FragmentStatus::Corrupt;
+        if (s == kStreamConn && f.nsym > int(kConnSymbols)) return FragmentStatus::Corrupt;
+    }
+
+    out.vertices.resize(V);
+    out.indices.resize(size_t(T) * 3);
+    grow(ws.pred, V);
+    Pred* pred = ws.pred.data();
+    uint32_t seen = 0;
+    FragmentStatus st = decode_connectivity(dec, ws.tables[kStreamConn], V, R, ws, out.indices.data(), seen);
+    if (st != FragmentStatus::Ok) return st;
+    for (; seen < V; ++seen) {
+        uint32_t q = seen == 0 ? V : seen - 1;
+        pred[seen] = Pred{q, q, q};
+    }
+    const int index_bits = V > 0 ? bit_width_u32(V - 1) : 0;
+    uint32_t* tri = out.indices.data() + 3 * size_t(R);
+    for (uint64_t k = 0; k < 3 * E; ++k) {
+        uint32_t v = get_wide(dec, index_bits);
+        if (v >= V) return FragmentStatus::Corrupt;
+        *tri++ = v;
+    }
+    if (!dec.ok()) return FragmentStatus::Corrupt;
+
+    // Positions (index V: the virtual zero vertex).
+    grow(ws.sa, size_t(V) + 1);
+    grow(ws.sb, size_t(V) + 1);
+    grow(ws.sc, size_t(V) + 1);
+    int32_t *sa = ws.sa.data(), *sb = ws.sb.data(), *sc = ws.sc.data();
+    sa[V] = sb[V] = sc[V] = 0;
+    PackedVertex* vert = out.vertices.data();
+    if (pos_mode == kPosRaw) {
+        for (uint32_t v = 0; v < V; ++v) vert[v].word0 = get_wide(dec, 24);
+    } else {
+        const rans::DecodeTable &t0 = ws.tables[kStreamPos0], &t1 = ws.tables[kStreamPos1], &t2 = ws.tables[kStreamPos2];
+        uint32_t bad = 0;  // accumulated range violations, checked once
+        if (pos_mode == kPosCumulative) {
+            for (uint32_t v = 0; v < V; ++v) {
+                const Pred q = pred[v];
+                int32_t p0 = std::clamp(sa[q.a] + sa[q.b] - sa[q.c], 0, kGrid);
+                int32_t a = p0 + unzigzag(get_value(dec, t0));
+                bad |= uint32_t(a) > uint32_t(kGrid);
+                a = std::clamp(a, 0, kGrid);
+                int32_t p1 = std::clamp(sb[q.a] + sb[q.b] - sb[q.c], 0, a);
+                int32_t b = p1 + unzigzag(get_value(dec, t1));
+                bad |= uint32_t(b) > uint32_t(a);
+                b = std::clamp(b, 0, a);
+                int32_t p2 = std::clamp(sc[q.a] + sc[q.b] - sc[q.c], 0, b);
+                int32_t c = p2 + unzigzag(get_value(dec, t2));
+                bad |= uint32_t(c) > uint32_t(b);
+                c = std::clamp(c, 0, b);
+                sa[v] = a, sb[v] = b, sc[v] = c;
+                vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(c);
+            }
+        } else {
+            // Weight space: (w1, w2, w3) kept in sa/sb/sc during the pass, converted after.
+            for (uint32_t v = 0; v < V; ++v) {
+                const Pred q = pred[v];
+                int32_t p0 = std::clamp(sa[q.a] + sa[q.b] - sa[q.c], 0, kGrid);
+                int32_t w1 = p0 + unzigzag(get_value(dec, t0));
+                bad |= uint32_t(w1) > uint32_t(kGrid);
+                w1 = std::clamp(w1, 0, kGrid);
+                int32_t p1 = std::clamp(sb[q.a] + sb[q.b] - sb[q.c], 0, kGrid - w1);
+                int32_t w2 = p1 + unzigzag(get_value(dec, t1));
+                bad |= uint32_t(w2) > uint32_t(kGrid - w1);
+                w2 = std::clamp(w2, 0, kGrid - w1);
+                int32_t p2 = std::clamp(sc[q.a] + sc[q.b] - sc[q.c], 0, kGrid - w1 - w2);
+                int32_t w3 = p2 + unzigzag(get_value(dec, t2));
+                bad |= uint32_t(w3) > uint32_t(kGrid - w1 - w2);
+                w3 = std::clamp(w3, 0, kGrid - w1 - w2);
+                sa[v] = w1, sb[v] = w2, sc[v] = w3;
+                int32_t a = w1 + w2 + w3, b = w2 + w3;
+                vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(w3);
+            }
+            for (uint32_t v = 0; v < V; ++v) {
+                sa[v] += sb[v] + sc[v];
+                sb[v] += sc[v];
+            }
+        }
+        if (bad) return FragmentStatus::Corrupt;
+    }
+    if (!dec.ok()) return FragmentStatus::Corrupt;
+
+    // Normals (signed bytes; index V is the virtual zero vertex).
+    {
+        grow(ws.nu, size_t(V) + 1);
+        grow(ws.nv, size_t(V) + 1);
+        int8_t *nu = ws.nu.data(), *nv = ws.nv.data();
+        nu[V] = nv[V] = 0;
+        const rans::DecodeTable &tu = ws.tables[kStreamNormU], &tv = ws.tables[kStreamNormV];
+        if (normal_mode == kNormalGeometric) {
+            ws.acc.assign(V, Vec3l{0, 0, 0});
+            accumulate_normals(out.indices.data(), T, sa, sb, sc, ws.acc);
+            int prev_u = 0, prev_v = 0;
+            for (uint32_t v = 0; v < V; ++v) {
+                int pu, pv;
+                geometric_prediction(ws.acc[v], matrix, prev_u, prev_v, pu, pv);
+                nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
+                nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
+                prev_u = nu[v], prev_v = nv[v];
+            }
+        } else if (normal_mode == kNormalAverage) {
+            for (uint32_t v = 0; v < V; ++v) {
+                const Pred q = pred[v];
+                int pu = (nu[q.a] + nu[q.b]) >> 1, pv = (nv[q.a] + nv[q.b]) >> 1;
+                nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
+                nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
+            }
+        } else {
+            for (uint32_t v = 0; v < V; ++v) {
+                const Pred q = pred[v];
+                int pu = std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127);
+                int pv = std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127);
+                nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
+                nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
+            }
+        }
+        for (uint32_t v = 0; v < V; ++v) {
+            vert[v].word0 |= uint32_t(uint8_t(nu[v])) << 24;
+            vert[v].word1 = uint8_t(nv[v]);
+        }
+    }
+
+    // Colours.
+    {
+        grow(ws.rgb, size_t(V) + 1);
+        std::array<uint8_t, 4>* rgb = ws.rgb.data();
+        rgb[V] = {0, 0, 0, 0};
+        const rans::DecodeTable &tr = ws.tables[kStreamColR], &tg = ws.tables[kStreamColG], &tb = ws.tables[kStreamColB];
+        for (uint32_t v = 0; v < V; ++v) {
+            const Pred q = pred[v];
+            int pc[3];
+            for (int c = 0; c < 3; ++c) {
+                int a = rgb[q.a][size_t(c)], b = rgb[q.b][size_t(c)];
+                pc[c] = color_parallelogram ? std::clamp(a + b - rgb[q.c][size_t(c)], 0, 255) : (a + b + 1) >> 1;
+            }
+            int rg = unzigzag(get_value(dec, tg));
+            int rr = unzigzag(get_value(dec, tr));
+            int rb = unzigzag(get_value(dec, tb));
+            if (color_decorrelate) {
+                rr += rg;
+                rb += rg;
+            }
+            rgb[v] = {uint8_t(pc[0] + rr), uint8_t(pc[1] + rg), uint8_t(pc[2] + rb), 0};
+            vert[v].word1 |= uint32_t(rgb[v][0]) << 8 | uint32_t(rgb[v][1]) << 16 | uint32_t(rgb[v][2]) << 24;
+        }
+    }
+    if (!dec.finished_cleanly()) return FragmentStatus::Corrupt;
+    return FragmentStatus::Ok;
+}
+
+}  // namespace
+
+FragmentStatus fragment_decode(const uint8_t* data, size_t size, FragmentMesh& out) {
+    out.vertices.clear();
+    out.indices.clear();
+    uint32_t V = 0, T = 0;
+    FragmentStatus st = fragment_peek(data, size, V, T);
+    if (st != FragmentStatus::Ok) return st;
+    const uint8_t* payload = data + kHeaderBytes;
+    const size_t payload_size = size - kHeaderBytes;
+    uint64_t expected = 0;
+    for (int i = 0; i < 8; ++i) expected |= uint64_t(data[kChecksumOffset + size_t(i)]) << (8 * i);
+    if (checksum64(payload, payload_size) != expected) return FragmentStatus::ChecksumMismatch;
+    if (payload_size < 3) return FragmentStatus::Corrupt;
+    if (read_u16(payload) != header_fold(data)) return FragmentStatus::Corrupt;
+    const uint8_t coding = payload[2];
+    if (coding == kCodingStored)
+        st = decode_stored(payload + 3, payload_size - 3, V, T, out);
+    else if (coding == kCodingCompressed) {
+        if (V <= kWorkspaceKeepVertices) {
+            thread_local Workspace ws;
+            st = decode_compressed(payload + 3, payload_size - 3, V, T, out, ws);
+        } else {
+            Workspace ws;
+            st = decode_compressed(payload + 3, payload_size - 3, V, T, out, ws);
+        }
+    }
+    else
+        st = FragmentStatus::Corrupt;
+    if (st != FragmentStatus::Ok) {
+        out.vertices.clear();
+        out.indices.clear();
+    }
+    return st;
+}
+
+}  // namespace catpaq

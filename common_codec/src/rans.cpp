@@ -1,0 +1,409 @@
+#include "rans.h"
+
+#include <algorithm>
+#include <cassert>
+#include <bit>
+#include <cmath>
+
+namespace catpaq::rans {
+
+namespace {
+
+uint32_t weight_value(int code) { return code <= 0 ? 0u : uint32_t(4 + (code - 1) % 4) << ((code - 1) / 4); }
+
+// Meta table for the table descriptions: symbol 0 = absent, 1..29 = delta (sym - 15) of the
+// weight code against the previous present one (starting at kMaxWeightCode), 30 = escape
+// followed by the code in 6 raw bits. Frequencies (sum 4096) fitted to the tables of real
+// fragments: weights mostly fall by 1-6 codes per symbol (residual magnitudes decay).
+constexpr int kMetaSymbols = 31;
+constexpr int kMetaEscape = 30;
+constexpr int kMetaBias = 15;
+constexpr std::array<uint16_t, kMetaSymbols> kMetaFreq = {
+    // absent, then delta -14 .. -1
+    180, 24, 28, 34, 42, 52, 64, 84, 112, 150, 200, 260, 330, 400, 460,
+    // delta 0
+    430,
+    // delta +1 .. +14
+    380, 280, 190, 120, 76, 48, 30, 20, 14, 10, 8, 6, 6, 6,
+    // escape
+    0 /* the remainder of 4096 */};
+
+struct Meta {
+    FreqTable freqs;
+    DecodeTable table;
+    Meta() {
+        uint32_t sum = 0;
+        for (int i = 0; i < kMetaSymbols - 1; ++i) sum += kMetaFreq[size_t(i)];
+        freqs.scale_bits = 12;
+        freqs.nsym = kMetaSymbols;
+        uint32_t start = 0;
+        for (int i = 0; i < kMetaSymbols; ++i) {
+            uint32_t f = i == kMetaEscape ? (1u << 12) - sum : kMetaFreq[size_t(i)];
+            freqs.freq[size_t(i)] = f;
+            freqs.start[size_t(i)] = start;
+            start += f;
+        }
+        table.build(freqs);
+    }
+};
+
+const Meta& meta() {
+    static const Meta m;
+    return m;
+}
+
+}  // namespace
+
+bool build_freqs(const TableDesc& desc, FreqTable& out) {
+    if (desc.nsym < 1 || desc.nsym > kMaxAlphabet) return false;
+    if (desc.scale_bits < kMinScaleBits || desc.scale_bits > kMaxScaleBits) return false;
+    const int n = desc.nsym;
+    const uint32_t total_freq = 1u << desc.scale_bits;
+    out.scale_bits = desc.scale_bits;
+    out.nsym = n;
+    out.freq.fill(0);
+    out.start.fill(0);
+    if (n == 1) {
+        out.freq[0] = total_freq;
+        return true;
+    }
+    if (desc.code[size_t(n - 1)] == 0) return false;  // the last symbol is present by construction
+    uint32_t total_weight = 0;
+    for (int i = 0; i < n; ++i) {
+        if (desc.code[size_t(i)] > kMaxWeightCode) return false;
+        total_weight += weight_value(desc.code[size_t(i)]);
+    }
+    uint32_t sum = 0;
+    for (int i = 0; i < n; ++i) {
+        uint32_t w = weight_value(desc.code[size_t(i)]);
+        if (w == 0) continue;
+        uint32_t f = uint32_t(uint64_t(w) * total_freq / total_weight);
+        out.freq[size_t(i)] = std::max(1u, f);
+        sum += out.freq[size_t(i)];
+    }
+    auto first_max = [&]() {
+        int best = 0;
+        for (int i = 1; i < n; ++i)
+            if (out.freq[size_t(i)] > out.freq[size_t(best)]) best = i;
+        return best;
+    };
+    if (sum < total_freq) {
+        out.freq[size_t(first_max())] += total_freq - sum;
+    } else {
+        // The excess comes only from symbols raised to 1, so it is at most n - 1 < total_freq;
+        // the largest frequency is then above 1 while the sum exceeds total_freq.
+        while (sum > total_freq) {
+            int best = first_max();
+            if (out.freq[size_t(best)] <= 1) return false;  // cannot happen (total_freq >= 32 >= n)
+            --out.freq[size_t(best)];
+            --sum;
+        }
+    }
+    uint32_t start = 0;
+    for (int i = 0; i < n; ++i) {
+        out.start[size_t(i)] = start;
+        start += out.freq[size_t(i)];
+    }
+    return true;
+}
+
+double data_cost_bits(const uint32_t* counts, const FreqTable& freqs) {
+    double bits = 0;
+    for (int i = 0; i < kMaxAlphabet; ++i) {
+        if (counts[i] == 0) continue;
+        if (i >= freqs.nsym || freqs.freq[size_t(i)] == 0) return 1e30;
+        bits += double(counts[i]) * (double(freqs.scale_bits) - std::log2(double(freqs.freq[size_t(i)])));
+    }
+    return bits;
+}
+
+TableDesc describe_counts(const uint32_t* counts, int nsym) {
+    assert(nsym >= 1 && nsym <= kMaxAlphabet);
+    TableDesc desc;
+    int last = -1, present = 0;
+    uint32_t max_count = 0;
+    for (int i = 0; i < nsym; ++i) {
+        if (counts[i] == 0) continue;
+        last = i;
+        ++present;
+        max_count = std::max(max_count, counts[i]);
+    }
+    if (present <= 1) {
+        // One symbol (or none): give it the whole range, so it costs nothing.
+        desc.nsym = last + 1 > 0 ? last + 1 : 1;
+        desc.scale_bits = kMinScaleBits;
+        if (desc.nsym > 1) desc.code[size_t(last)] = kMaxWeightCode;
+        return desc;
+    }
+    desc.nsym = last + 1;
+    const double top = std::log2(double(weight_value(kMaxWeightCode)));
+    for (int i = 0; i <= last; ++i) {
+        if (counts[i] == 0) continue;
+        double target = top + std::log2(double(counts[i]) / double(max_count));
+        int best = 1;
+        double best_err = 1e30;
+        for (int k = 1; k <= kMaxWeightCode; ++k) {
+            double err = std::fabs(std::log2(double(weight_value(k))) - target);
+            if (err < best_err) {
+                best_err = err;
+                best = k;
+            }
+        }
+        desc.code[size_t(i)] = uint8_t(best);
+    }
+    uint64_t total = 0;
+    for (int i = 0; i < nsym; ++i) total += counts[i];
+    // Smallest scale whose cost is within a hair of the best (smaller tables decode faster).
+    double costs[kMaxScaleBits + 1];
+    double best_cost = 1e30;
+    for (int s = kMinScaleBits; s <= kMaxScaleBits; ++s) {
+        TableDesc d = desc;
+        d.scale_bits = s;
+        FreqTable f;
+        costs[s] = build_freqs(d, f) ? data_cost_bits(counts, f) : 1e30;
+        best_cost = std::min(best_cost, costs[s]);
+    }
+    desc.scale_bits = kMaxScaleBits;
+    for (int s = kMinScaleBits; s <= kMaxScaleBits; ++s) {
+        if (costs[s] <= best_cost * 1.001 + 0.5) {
+            desc.scale_bits = s;
+            break;
+        }
+    }
+    (void)total;
+    return desc;
+}
+
+void DecodeTable::build(const FreqTable& f) {
+    scale_bits = f.scale_bits;
+    const uint32_t total = 1u << f.scale_bits;
+    mask = total - 1;
+    lut.resize(total);
+    for (int s = 0; s < f.nsym; ++s) {
+        uint32_t freq = f.freq[size_t(s)], start = f.start[size_t(s)];
+        uint32_t* out = lut.data() + start;
+        for (uint32_t j = 0; j < freq; ++j) out[j] = freq | (j << 13) | (uint32_t(s) << 25);
+    }
+}
+
+double table_cost_bits(const TableDesc& desc) {
+    if (desc.nsym == 1) return 8;
+    const FreqTable& m = meta().freqs;
+    double bits = 8;
+    int prev = kMaxWeightCode;
+    for (int i = 0; i < desc.nsym; ++i) {
+        int k = desc.code[size_t(i)];
+        uint32_t sym;
+        if (k == 0) {
+            sym = 0;
+        } else {
+            int d = k - prev;
+            sym = d >= 1 - kMetaBias && d <= kMetaEscape - 1 - kMetaBias ? uint32_t(d + kMetaBias) : kMetaEscape;
+            if (sym == kMetaEscape) bits += 6;
+            prev = k;
+        }
+        bits += 12.0 - std::log2(double(m.freq[sym]));
+    }
+    return bits;
+}
+
+void Encoder::put_bits(uint32_t value, int nbits) {
+    if (nbits <= 0) return;
+    uint64_t v = nbits < 32 ? value & ((1u << nbits) - 1) : value;
+    bit_acc_ |= v << bit_fill_;
+    bit_fill_ += nbits;
+    bit_count_ += uint64_t(nbits);
+    while (bit_fill_ >= 8) {
+        bits_.push_back(uint8_t(bit_acc_));
+        bit_acc_ >>= 8;
+        bit_fill_ -= 8;
+    }
+}
+
+void Encoder::put_table(const TableDesc& desc) {
+    put_bits(uint32_t(desc.nsym - 1), 5);
+    put_bits(uint32_t(desc.scale_bits - kMinScaleBits), 3);
+    if (desc.nsym == 1) return;
+    const FreqTable& m = meta().freqs;
+    int prev = kMaxWeightCode;
+    for (int i = 0; i < desc.nsym; ++i) {
+        int k = desc.code[size_t(i)];
+        if (k == 0) {
+            put(m, 0);
+            continue;
+        }
+        int d = k - prev;
+        if (d >= 1 - kMetaBias && d <= kMetaEscape - 1 - kMetaBias) {
+            put(m, uint32_t(d + kMetaBias));
+        } else {
+            put(m, kMetaEscape);
+            put_bits(uint32_t(k), 6);
+        }
+        prev = k;
+    }
+}
+
+namespace {
+void put_varint(std::vector<uint8_t>& out, uint64_t v) {
+    while (v >= 0x80) {
+        out.push_back(uint8_t(v | 0x80));
+        v >>= 7;
+    }
+    out.push_back(uint8_t(v));
+}
+}  // namespace
+
+void Encoder::finish(std::vector<uint8_t>& out, std::vector<size_t>* section_bytes) {
+    if (bit_fill_ > 0) {
+        bits_.push_back(uint8_t(bit_acc_));
+        bit_acc_ = 0;
+        bit_fill_ = 0;
+    }
+    std::vector<uint8_t> rev[2];
+    rev[0].reserve(ops_.size() / 4 + 16);
+    rev[1].reserve(ops_.size() / 4 + 16);
+    uint32_t state[2] = {kStateLower, kStateLower};
+    std::vector<size_t> rans_bytes(sections_.size(), 0);
+    size_t section = sections_.size();  // number of sections starting at or before op i
+    for (size_t i = ops_.size(); i-- > 0;) {
+        while (section > 0 && sections_[section - 1].first_op > i) --section;
+        const Op& op = ops_[i];
+        const int s = int(i & 1);
+        uint32_t& x = state[s];
+        const uint32_t x_max = ((kStateLower >> op.scale) << 8) * op.freq;
+        size_t before = rev[s].size();
+        while (x >= x_max) {
+            rev[s].push_back(uint8_t(x));
+            x >>= 8;
+        }
+        x = ((x / op.freq) << op.scale) + (x % op.freq) + op.start;
+        if (section > 0) rans_bytes[section - 1] += rev[s].size() - before;
+    }
+    const size_t at = out.size();
+    for (int s = 0; s < 2; ++s)
+        for (int k = 0; k < 4; ++k) out.push_back(uint8_t(state[s] >> (8 * k)));
+    put_varint(out, rev[0].size());
+    put_varint(out, bits_.size());
+    const size_t fixed = out.size() - at;
+    out.insert(out.end(), rev[0].rbegin(), rev[0].rend());
+    out.insert(out.end(), rev[1].rbegin(), rev[1].rend());
+    out.insert(out.end(), bits_.begin(), bits_.end());
+    if (section_bytes) {
+        // Raw bits per section, in eighths of bytes, rounded so the total is exact.
+        section_bytes->assign(sections_.size(), 0);
+        uint64_t assigned_bits = 0;
+        size_t assigned = 0;
+        for (size_t k = 0; k < sections_.size(); ++k) {
+            uint64_t end_bit = k + 1 < sections_.size() ? sections_[k + 1].first_bit : bit_count_;
+            uint64_t bits_here = end_bit - sections_[k].first_bit;
+            size_t bytes = size_t((assigned_bits + bits_here + 7) / 8) - size_t((assigned_bits + 7) / 8);
+            assigned_bits += bits_here;
+            (*section_bytes)[k] = rans_bytes[k] + bytes;
+            assigned += (*section_bytes)[k];
+        }
+        if (!section_bytes->empty()) (*section_bytes)[0] += (out.size() - at) - assigned;
+        (void)fixed;
+    }
+}
+
+bool Decoder::init(const uint8_t* data, size_t size) {
+    failed = true;
+    if (size < 8) return false;
+    auto rd = [&](size_t at) {
+        return uint32_t(data[at]) | uint32_t(data[at + 1]) << 8 | uint32_t(data[at + 2]) << 16 |
+               uint32_t(data[at + 3]) << 24;
+    };
+    x0 = rd(0);
+    x1 = rd(4);
+    if (x0 < kStateLower || x0 >= (kStateLower << 8) || x1 < kStateLower || x1 >= (kStateLower << 8)) return false;
+    const uint8_t* p = data + 8;
+    const uint8_t* end = data + size;
+    uint64_t len[2] = {0, 0};
+    for (uint64_t& v : len) {
+        for (int shift = 0;; shift += 7) {
+            if (p == end || shift > 35) return false;
+            uint8_t b = *p++;
+            v |= uint64_t(b & 0x7f) << shift;
+            if (!(b & 0x80)) break;
+        }
+    }
+    const size_t rest = size_t(end - p);
+    if (len[0] > rest || len[1] > rest - len[0]) return false;
+    p0 = p;
+    end0 = p0 + len[0];
+    p1 = end0;
+    end1 = end - len[1];
+    bit_p = end1;
+    bit_end = end;
+    stream0_end = end0;
+    stream1_end = end1;
+    bit_buf = 0;
+    bit_count = 0;
+    failed = false;
+    return true;
+}
+
+Decoder::Slow Decoder::renorm_slow(uint32_t x, const uint8_t* p, const uint8_t* end) {
+    for (int i = 0; i < 2 && x < kStateLower; ++i) {
+        if (p == end) return {x | kStateLower, p, true};  // keep the state in range; the stream is invalid
+        x = (x << 8) | *p++;
+    }
+    return {x, p, false};
+}
+
+void Decoder::refill_slow() {
+    while (bit_count <= 56 && bit_p < bit_end) {
+        bit_buf |= uint64_t(*bit_p++) << bit_count;
+        bit_count += 8;
+    }
+    if (bit_count < 32) {
+        // Past the end: supply zero bits so reads stay defined, and remember the failure.
+        // (Reads of up to 32 bits follow a refill.)
+        if (bit_p == bit_end && bit_count < 32) {
+            // A legitimately short tail is fine as long as the reads do not exceed it; the
+            // overrun is detected by finished_cleanly() through bit_count underflow below.
+        }
+    }
+}
+
+bool Decoder::finished_cleanly() const {
+    if (failed) return false;
+    if (x0 != kStateLower || x1 != kStateLower) return false;
+    // p0/p1 swap roles on every symbol; both must sit at the end of their streams.
+    bool at_end = (p0 == stream0_end && p1 == stream1_end) || (p0 == stream1_end && p1 == stream0_end);
+    if (!at_end) return false;
+    // Unconsumed bits: the buffered ones (only the low bit_count are valid) and unread bytes.
+    uint64_t valid = bit_count >= 64 ? bit_buf : bit_buf & ((uint64_t(1) << bit_count) - 1);
+    return bit_p == bit_end && bit_count < 8 && valid == 0;
+}
+
+bool Decoder::get_table(FreqTable& freqs, DecodeTable& table) {
+    TableDesc desc;
+    desc.nsym = int(get_bits(5)) + 1;
+    desc.scale_bits = int(get_bits(3)) + kMinScaleBits;
+    if (desc.scale_bits > kMaxScaleBits) return false;
+    if (desc.nsym > 1) {
+        const DecodeTable& m = meta().table;
+        int prev = kMaxWeightCode;
+        for (int i = 0; i < desc.nsym; ++i) {
+            uint32_t s = get(m);
+            int k;
+            if (s == 0) {
+                k = 0;
+            } else if (s == uint32_t(kMetaEscape)) {
+                k = int(get_bits(6));
+                if (k < 1 || k > kMaxWeightCode) return false;
+            } else {
+                k = prev + int(s) - kMetaBias;
+                if (k < 1 || k > kMaxWeightCode) return false;
+            }
+            desc.code[size_t(i)] = uint8_t(k);
+            if (k) prev = k;
+        }
+    }
+    if (!build_freqs(desc, freqs)) return false;
+    table.build(freqs);
+    return ok_;
+}
+
+}  // namespace catpaq::rans

@@ -1,0 +1,75 @@
+#pragma once
+// Shared by the CATP crack tests: decode a cut, weld by exact decoded position, count borders.
+#include <map>
+#include <random>
+#include <unordered_map>
+
+#include "catp/cut.h"
+#include "catp/dataset.h"
+
+namespace catpaq::test {
+
+struct CutTopology {
+    size_t triangles = 0;      // non-degenerate after welding
+    size_t border_edges = 0;   // edges used by exactly one triangle
+    size_t fragments = 0;
+    int max_level = 0, min_level = 1 << 30;
+};
+
+// Decodes the cut R of `file` and counts border edges after welding vertices by their exact
+// integer decoded position (identical integers <=> bit-identical positions on the GPU).
+inline CutTopology cut_topology(const CatpFile& file, const RefinedSet& refined,
+                                std::unordered_map<uint64_t, DiamondFragments>& cache) {
+    CutTopology out;
+    std::map<std::array<int64_t, 3>, uint32_t> weld;
+    std::map<std::pair<uint32_t, uint32_t>, int> edges;
+    std::vector<std::array<int64_t, 3>> positions;
+    for (const DrawnSlot& d : drawn_slots(file.index(), refined)) {
+        auto it = cache.find(d.entry->key);
+        if (it == cache.end()) it = cache.emplace(d.entry->key, file.decode(*d.entry)).first;
+        const FragmentMesh& frag = it->second.slots[d.slot];
+        DiamondInfo info = diamond_info(DiamondId{d.entry->key});
+        if (!decode_fragment_integer_positions(frag, info, d.slot, positions)) throw std::runtime_error("corrupt vertex");
+        std::vector<uint32_t> ids(positions.size());
+        for (size_t v = 0; v < positions.size(); ++v) ids[v] = weld.emplace(positions[v], uint32_t(weld.size())).first->second;
+        out.fragments++;
+        out.max_level = std::max(out.max_level, int(d.entry->level));
+        out.min_level = std::min(out.min_level, int(d.entry->level));
+        for (size_t t = 0; t + 2 < frag.indices.size(); t += 3) {
+            uint32_t a = ids[frag.indices[t]], b = ids[frag.indices[t + 1]], c = ids[frag.indices[t + 2]];
+            if (a == b || b == c || a == c) continue;
+            out.triangles++;
+            for (auto [u, v] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}}) edges[{std::min(u, v), std::max(u, v)}]++;
+        }
+    }
+    for (auto& [e, n] : edges) out.border_edges += n == 1;
+    return out;
+}
+
+// A random conforming cut: each non-leaf diamond is refined with probability `p`, or, in the
+// spatial variant, when its centre lies within `radius` (lattice units) of `focus` — mixing levels.
+inline RefinedSet random_cut(const CatpIndex& index, std::mt19937_64& rng, bool spatial) {
+    RefinedSet refined;
+    std::uniform_real_distribution<double> u(0, 1);
+    double p = 0.2 + 0.7 * u(rng);
+    const auto& entries = index.entries();
+    LatticePoint focus = DiamondId{entries[size_t(u(rng) * entries.size()) % entries.size()].key}.centre();
+    double radius = u(rng) * kLatticeSize * 0.5;
+    for (const ArchiveEntry& e : entries) {
+        if (e.flags & kCatpLeafFlag) continue;
+        DiamondId id{e.key};
+        bool want;
+        if (spatial) {
+            LatticePoint c = id.centre();
+            double d2 = 0;
+            for (int i = 0; i < 3; ++i) d2 += double(c[i] - focus[i]) * double(c[i] - focus[i]);
+            want = d2 < radius * radius;
+        } else {
+            want = u(rng) < p;
+        }
+        if (want) refined.refine(id);
+    }
+    return refined;
+}
+
+}  // namespace catpaq::test

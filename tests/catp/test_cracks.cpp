@@ -1,0 +1,104 @@
+// Crack-freeness, topologically: every conforming cut of a closed model, decoded exactly as the
+// vertex shader does and welded by exact position, is closed (no border edges).
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "base/error.h"
+#include "catp/builder.h"
+#include "crack_check.h"
+#include "mesh/generators.h"
+#include "mesh/io.h"
+
+using namespace catpaq;
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path scratch_dir() {
+    fs::path dir = fs::temp_directory_path() / ("catpaq_cracks_" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    return dir;
+}
+
+struct Built {
+    std::string path;
+    CatpBuildReport report;
+};
+
+Built build(const Mesh& mesh, const std::string& name, size_t leaf_triangles, int leaf_level = -1) {
+    Built b;
+    b.path = (scratch_dir() / (name + ".cpq")).string();
+    CatpBuildSettings settings;
+    settings.leaf_triangles = leaf_triangles;
+    settings.leaf_level = leaf_level;
+    settings.progress = false;
+    b.report = build_catp(mesh, b.path, settings);
+    return b;
+}
+
+// Checks the finest cut, the coarsest, and `trials` random cuts of both kinds; returns how many
+// cuts mixed at least two levels.
+int expect_every_cut_closed(const std::string& path, int trials, size_t expected_border = 0) {
+    CatpFile file(path);
+    std::unordered_map<uint64_t, DiamondFragments> cache;
+    std::mt19937_64 rng(42);
+    int mixed = 0;
+    RefinedSet none;
+    test::CutTopology coarsest = test::cut_topology(file, none, cache);
+    EXPECT_EQ(coarsest.border_edges, expected_border) << "coarsest cut";
+    EXPECT_GT(coarsest.triangles, 0u);
+    RefinedSet all;
+    for (const ArchiveEntry& e : file.index().entries())
+        if (!(e.flags & kCatpLeafFlag)) all.refine(DiamondId{e.key});
+    test::CutTopology finest = test::cut_topology(file, all, cache);
+    EXPECT_EQ(finest.border_edges, expected_border) << "finest cut";
+    for (int t = 0; t < trials; ++t) {
+        RefinedSet cut = test::random_cut(file.index(), rng, t % 2 == 1);
+        test::CutTopology topo = test::cut_topology(file, cut, cache);
+        EXPECT_EQ(topo.border_edges, expected_border) << "random cut " << t << " (" << topo.fragments << " fragments, levels "
+                                                      << topo.min_level << ".." << topo.max_level << ")";
+        mixed += topo.max_level > topo.min_level;
+    }
+    return mixed;
+}
+
+}  // namespace
+
+TEST(CatpCracks, EveryCutOfAClosedSphereIsClosed) {
+    Built b = build(make_sphere(40000, 3), "sphere", 200);
+    ASSERT_GE(b.report.leaf_level, 6);
+    int mixed = expect_every_cut_closed(b.path, 40);
+    EXPECT_GT(mixed, 10);  // the random cuts really mix levels
+}
+
+TEST(CatpCracks, EveryCutOfAClosedTorusIsClosed) {
+    Built b = build(make_torus(40000, 5), "torus", 200);
+    int mixed = expect_every_cut_closed(b.path, 40);
+    EXPECT_GT(mixed, 10);
+}
+
+TEST(CatpCracks, EveryCutOfTheBunnyIsClosed) {
+    Mesh bunny = read_mesh(std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply");
+    Built b = build(bunny, "bunny", 1000);
+    expect_every_cut_closed(b.path, 30);
+}
+
+TEST(CatpCracks, HardCasesAreCrackFreeOrRefused) {
+    for (HardCase c : kAllHardCases) {
+        Mesh mesh = make_hard_case(c, 1);
+        SCOPED_TRACE(hard_case_name(c));
+        size_t border = count_border_edges(mesh.indices);
+        Built b;
+        try {
+            // A deep leaf level, so many lattice planes, edges and corners cut the model.
+            b = build(mesh, hard_case_name(c), 200, 7);
+        } catch (const Error& e) {
+            ADD_FAILURE() << "refused: " << e.what();
+            continue;
+        }
+        if (border == 0 && c != HardCase::NonManifoldEdges && c != HardCase::DegenerateAndDuplicateTriangles) {
+            EXPECT_GT(expect_every_cut_closed(b.path, 30), 5);
+        }
+    }
+}

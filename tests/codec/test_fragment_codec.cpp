@@ -1,0 +1,488 @@
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <map>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "base/checksum.h"
+#include "common_codec/barycentric.h"
+#include "common_codec/fragment_codec.h"
+#include "common_codec/octahedral.h"
+
+using namespace catpaq;
+
+namespace {
+
+// Byte offsets of the format (fragment_codec.cpp): header, then u16 header fold, u8 coding,
+// u8 modes (compressed coding only).
+constexpr size_t kHeaderSize = 24;
+constexpr size_t kCodingOffset = 26;
+constexpr size_t kModesOffset = 27;
+
+uint64_t key(const PackedVertex& v) { return (uint64_t(v.word1) << 32) | v.word0; }
+
+// The mesh as what the codec promises to keep: the multiset of vertices and the multiset of
+// triangles as vertex-content triples, each rotated to start at its smallest rotation (so
+// orientation is kept but the starting corner is not).
+struct Canonical {
+    std::vector<uint64_t> vertices;
+    std::vector<std::array<uint64_t, 3>> triangles;
+    bool operator==(const Canonical& o) const { return vertices == o.vertices && triangles == o.triangles; }
+};
+
+Canonical canonical(const FragmentMesh& m) {
+    Canonical c;
+    for (const PackedVertex& v : m.vertices) c.vertices.push_back(key(v));
+    std::sort(c.vertices.begin(), c.vertices.end());
+    for (size_t t = 0; t < m.triangle_count(); ++t) {
+        std::array<uint64_t, 3> k = {key(m.vertices[m.indices[3 * t]]), key(m.vertices[m.indices[3 * t + 1]]),
+                                     key(m.vertices[m.indices[3 * t + 2]])};
+        std::array<uint64_t, 3> best = k;
+        for (int r = 1; r < 3; ++r) {
+            std::array<uint64_t, 3> rot = {k[size_t(r)], k[size_t((r + 1) % 3)], k[size_t((r + 2) % 3)]};
+            best = std::min(best, rot);
+        }
+        c.triangles.push_back(best);
+    }
+    std::sort(c.triangles.begin(), c.triangles.end());
+    return c;
+}
+
+std::vector<uint8_t> encode(const FragmentMesh& m, FragmentEncodeStats* stats = nullptr) {
+    std::vector<uint8_t> bytes;
+    size_t n = fragment_encode(m, bytes, stats);
+    EXPECT_EQ(n, bytes.size());
+    EXPECT_LE(n, fragment_encode_bound(m.vertices.size(), m.triangle_count()));
+    return bytes;
+}
+
+// Encodes, decodes and checks the round trip; returns the encoded bytes.
+std::vector<uint8_t> expect_round_trip(const FragmentMesh& m) {
+    FragmentEncodeStats stats;
+    std::vector<uint8_t> bytes = encode(m, &stats);
+    EXPECT_EQ(stats.header_bytes + stats.connectivity_bytes + stats.position_bytes + stats.normal_bytes +
+                  stats.color_bytes,
+              bytes.size());
+    uint32_t vc = 0, tc = 0;
+    EXPECT_EQ(fragment_peek(bytes.data(), bytes.size(), vc, tc), FragmentStatus::Ok);
+    EXPECT_EQ(vc, m.vertices.size());
+    EXPECT_EQ(tc, m.triangle_count());
+    FragmentMesh out;
+    out.vertices.resize(3);  // previous contents must be replaced
+    FragmentStatus st = fragment_decode(bytes.data(), bytes.size(), out);
+    EXPECT_EQ(st, FragmentStatus::Ok) << fragment_status_name(st);
+    EXPECT_EQ(out.vertices.size(), m.vertices.size());
+    EXPECT_EQ(out.indices.size(), m.indices.size());
+    for (uint32_t i : out.indices) EXPECT_LT(i, out.vertices.size());
+    EXPECT_TRUE(canonical(out) == canonical(m)) << "decoded fragment differs";
+    return bytes;
+}
+
+// Test-only: recomputes the header fold and the checksum after a mutation, so the payload
+// parser itself (not the checksum) sees the mutated bytes.
+void refresh_integrity(std::vector<uint8_t>& b) {
+    if (b.size() < kHeaderSize) return;
+    if (b.size() >= kHeaderSize + 2) {
+        uint16_t fold = 0;
+        for (size_t at = 4; at < 16; at += 2) fold ^= uint16_t(b[at] | (b[at + 1] << 8));
+        b[kHeaderSize] = uint8_t(fold);
+        b[kHeaderSize + 1] = uint8_t(fold >> 8);
+    }
+    uint64_t sum = checksum64(b.data() + kHeaderSize, b.size() - kHeaderSize);
+    for (int i = 0; i < 8; ++i) b[16 + size_t(i)] = uint8_t(sum >> (8 * i));
+}
+
+// ---- realistic vertex content ---------------------------------------------------------------
+
+// A Kuhn tetrahedron with canonical corners (lattice cell of side 1024).
+std::array<LatticePoint, 4> kuhn_tet() {
+    std::array<LatticePoint, 4> c = {LatticePoint{0, 0, 0}, LatticePoint{1024, 0, 0}, LatticePoint{1024, 1024, 0},
+                                     LatticePoint{1024, 1024, 1024}};
+    canonical_order(c);
+    return c;
+}
+
+uint32_t quantize_point(const double p[3]) { return bary_pack(bary_quantize(p, kuhn_tet(), 0xf)); }
+
+PackedVertex smooth_vertex(const double p[3], const double n[3]) {
+    uint16_t normal = oct_encode_precise(float(n[0]), float(n[1]), float(n[2]));
+    auto chan = [](double x) { return uint8_t(std::clamp(128.0 + 100.0 * std::sin(x), 0.0, 255.0)); };
+    return PackedVertex::make(quantize_point(p), normal, chan(p[0] * 0.01), chan(p[1] * 0.013 + 1.0),
+                              chan(p[2] * 0.017 + 2.0));
+}
+
+// A regular grid patch of n x n vertices (2 (n-1)^2 triangles) on a gently curved surface inside
+// the Kuhn tetrahedron (1024 >= x >= y >= z >= 0), appended to `m`. Grid coordinates
+// (x0 + i step, y0 + j step) must stay within [0, 610].
+void add_grid(FragmentMesh& m, int n, double x0, double y0, double step) {
+    uint32_t base = uint32_t(m.vertices.size());
+    for (int j = 0; j < n; ++j)
+        for (int i = 0; i < n; ++i) {
+            double gx = x0 + i * step, gy = y0 + j * step;
+            double p[3] = {400.0 + 0.95 * gx, 20.0 + 0.6 * gy, 12.0 + 6.0 * std::sin(gx * 0.02) * std::cos(gy * 0.03)};
+            double nn[3] = {-0.1 * std::cos(gx * 0.02), 0.2 * std::sin(gy * 0.03), 1.0};
+            m.vertices.push_back(smooth_vertex(p, nn));
+        }
+    for (int j = 0; j + 1 < n; ++j)
+        for (int i = 0; i + 1 < n; ++i) {
+            uint32_t a = base + uint32_t(j * n + i), b = a + 1, c = a + uint32_t(n), d = c + 1;
+            m.indices.insert(m.indices.end(), {a, b, d, a, d, c});
+        }
+}
+
+FragmentMesh grid_patch(int n) {
+    FragmentMesh m;
+    add_grid(m, n, 0.0, 0.0, 600.0 / (n - 1));
+    return m;
+}
+
+// Subdivided icosahedron inside the Kuhn tetrahedron, with exact sphere normals.
+FragmentMesh icosphere(int subdivisions) {
+    const double t = (1.0 + std::sqrt(5.0)) / 2.0;
+    std::vector<std::array<double, 3>> p = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
+                                            {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
+    std::vector<uint32_t> f = {0, 11, 5, 0, 5,  1,  0, 1, 7, 0, 7,  10, 0, 10, 11, 1, 5, 9, 5, 11,
+                               4, 11, 10, 2, 10, 7, 6, 7, 1, 8, 3,  9,  4, 3,  4,  2, 3, 2, 6, 3,
+                               6, 8,  3,  8, 9,  4, 9, 5, 2, 4, 11, 6,  2, 10, 8,  6, 7, 9, 8, 1};
+    for (auto& v : p) {
+        double l = std::sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
+        for (double& x : v) x /= l;
+    }
+    for (int s = 0; s < subdivisions; ++s) {
+        std::map<std::pair<uint32_t, uint32_t>, uint32_t> mid;
+        auto midpoint = [&](uint32_t a, uint32_t b) {
+            auto k = std::minmax(a, b);
+            auto it = mid.find(k);
+            if (it != mid.end()) return it->second;
+            std::array<double, 3> m3;
+            for (int i = 0; i < 3; ++i) m3[size_t(i)] = p[a][size_t(i)] + p[b][size_t(i)];
+            double l = std::sqrt(m3[0] * m3[0] + m3[1] * m3[1] + m3[2] * m3[2]);
+            for (double& x : m3) x /= l;
+            p.push_back(m3);
+            return mid[k] = uint32_t(p.size() - 1);
+        };
+        std::vector<uint32_t> g;
+        for (size_t i = 0; i < f.size(); i += 3) {
+            uint32_t a = f[i], b = f[i + 1], c = f[i + 2];
+            uint32_t ab = midpoint(a, b), bc = midpoint(b, c), ca = midpoint(c, a);
+            g.insert(g.end(), {a, ab, ca, b, bc, ab, c, ca, bc, ab, bc, ca});
+        }
+        f = g;
+    }
+    FragmentMesh m;
+    const double center[3] = {700, 450, 200}, radius = 150;
+    for (const auto& v : p) {
+        double q[3] = {center[0] + radius * v[0], center[1] + radius * v[1], center[2] + radius * v[2]};
+        m.vertices.push_back(smooth_vertex(q, v.data()));
+    }
+    m.indices = f;
+    return m;
+}
+
+// Random 64-bit vertices: any bit pattern, including invalid position indices.
+std::vector<PackedVertex> random_vertices(std::mt19937_64& rng, size_t n) {
+    std::vector<PackedVertex> v(n);
+    for (auto& x : v) {
+        uint64_t r = rng();
+        x.word0 = uint32_t(r);
+        x.word1 = uint32_t(r >> 32);
+    }
+    return v;
+}
+
+// A small realistic fragment used by the corruption and fuzz tests.
+FragmentMesh small_fragment() {
+    FragmentMesh m = grid_patch(9);
+    add_grid(m, 4, 100.0, 300.0, 20.0);           // second component
+    m.vertices.push_back(m.vertices[0]);           // isolated duplicate vertex
+    m.indices.insert(m.indices.end(), {0, 1, 1});  // degenerate triangle
+    return m;
+}
+
+}  // namespace
+
+// ---- round trips ----------------------------------------------------------------------------
+
+TEST(FragmentCodec, RoundTripIsLosslessOnARegularGridPatch) {
+    FragmentMesh m = grid_patch(40);
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    EXPECT_EQ(bytes[kCodingOffset], 0) << "a smooth grid must use the compressed coding";
+    // A regular patch compresses well below the 64-bit vertex + 3 x 32-bit indices.
+    EXPECT_LT(bytes.size() * 8.0 / m.vertices.size(), 40.0);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessOnAClosedIcosphere) {
+    FragmentMesh m = icosphere(4);  // 2562 vertices, 5120 triangles, no border
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    EXPECT_EQ(bytes[kCodingOffset], 0);
+}
+
+TEST(FragmentCodec, GeometricNormalPredictorIsChosenForSurfaceNormals) {
+    FragmentMesh m = icosphere(4);
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    ASSERT_EQ(bytes[kCodingOffset], 0);
+    EXPECT_EQ((bytes[kModesOffset] >> 2) & 3, 2) << "normal predictor";
+}
+
+TEST(FragmentCodec, WeightSpacePositionCodingIsChosenWhenCheaperAndRoundTrips) {
+    // Noise on w2 alone: one coordinate in weight space, two in cumulative space.
+    FragmentMesh m = grid_patch(30);
+    std::mt19937_64 rng(7);
+    for (PackedVertex& v : m.vertices) {
+        BaryWeights w;
+        ASSERT_TRUE(bary_unpack(v.position_index(), w));
+        int d = int(rng() % 9) - 4;
+        if (w[2] + d >= 0 && w[0] - d >= 0) {
+            w[2] += d;
+            w[0] -= d;
+        }
+        v.word0 = (v.word0 & 0xff000000u) | bary_pack(w);
+    }
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    ASSERT_EQ(bytes[kCodingOffset], 0);
+    EXPECT_EQ(bytes[kModesOffset] & 3, 1) << "position coding";
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessWithBordersAndSeveralComponents) {
+    FragmentMesh m = grid_patch(20);
+    add_grid(m, 7, 50.0, 400.0, 10.0);
+    add_grid(m, 5, 300.0, 200.0, 10.0);
+    // A hole: drop the triangles of a few quads in the middle of the first patch.
+    std::vector<uint32_t> kept;
+    for (size_t t = 0; t < m.triangle_count(); ++t)
+        if (t < 300 || t > 320) kept.insert(kept.end(), m.indices.begin() + 3 * t, m.indices.begin() + 3 * t + 3);
+    m.indices = kept;
+    expect_round_trip(m);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessWithNonManifoldEdges) {
+    FragmentMesh m = grid_patch(10);
+    // A fin: a third and fourth triangle on existing edges of the grid.
+    uint32_t apex = uint32_t(m.vertices.size());
+    m.vertices.push_back(m.vertices[55]);
+    m.vertices.back().word1 ^= 0x100;
+    m.indices.insert(m.indices.end(), {44, 45, apex, 45, 44, apex, 12, 13, apex});
+    // Bow-tie vertex: two fans touching at one vertex.
+    add_grid(m, 3, 0, 0, 5);
+    uint32_t b = uint32_t(m.vertices.size()) - 9;
+    m.indices.insert(m.indices.end(), {b + 4, 60, 61});
+    expect_round_trip(m);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessWithFlippedOrientationNeighbours) {
+    FragmentMesh m = grid_patch(12);
+    std::mt19937_64 rng(3);
+    for (size_t t = 0; t < m.triangle_count(); ++t)
+        if (rng() % 4 == 0) std::swap(m.indices[3 * t + 1], m.indices[3 * t + 2]);
+    expect_round_trip(m);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessWithDegenerateTriangles) {
+    FragmentMesh m = grid_patch(8);
+    m.indices.insert(m.indices.end(), {3, 3, 4, 5, 6, 5, 7, 7, 7, 9, 10, 9});
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    EXPECT_EQ(bytes[kCodingOffset], 0);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessWithDuplicateTriangles) {
+    FragmentMesh m = grid_patch(8);
+    std::vector<uint32_t> extra(m.indices.begin(), m.indices.begin() + 30);  // same orientation
+    m.indices.insert(m.indices.end(), extra.begin(), extra.end());
+    m.indices.insert(m.indices.end(), {20, 22, 21, 20, 21, 22, 20, 21, 22});  // both orientations
+    expect_round_trip(m);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessWithIsolatedVertices) {
+    FragmentMesh m = grid_patch(8);
+    std::mt19937_64 rng(11);
+    std::vector<PackedVertex> extra = random_vertices(rng, 5);
+    m.vertices.insert(m.vertices.begin() + 10, extra.begin(), extra.end());
+    for (uint32_t& i : m.indices)
+        if (i >= 10) i += 5;
+    m.vertices.push_back(m.vertices[0]);  // a duplicate vertex nobody uses
+    expect_round_trip(m);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessOnAnEmptyMesh) {
+    FragmentMesh m;
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    EXPECT_LE(bytes.size(), 32u);
+    FragmentMesh onlyVertices;
+    std::mt19937_64 rng(5);
+    onlyVertices.vertices = random_vertices(rng, 3);
+    expect_round_trip(onlyVertices);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessOnASingleTriangle) {
+    FragmentMesh m = grid_patch(2);
+    m.vertices.erase(m.vertices.begin() + 2);
+    m.indices = {0, 1, 2};
+    expect_round_trip(m);
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessOnRandomWordsAndInvalidPositions) {
+    std::mt19937_64 rng(99);
+    for (int round = 0; round < 20; ++round) {
+        FragmentMesh m = grid_patch(6 + round);
+        // Replace the vertex content by arbitrary words (position indices beyond the grid,
+        // normal bytes -128): the stored or raw-position paths must still be lossless.
+        std::vector<PackedVertex> v = random_vertices(rng, m.vertices.size());
+        if (round % 2) {
+            // Keep valid positions but random normals and colours.
+            for (size_t i = 0; i < v.size(); ++i) v[i].word0 = (v[i].word0 & 0xff000000u) | m.vertices[i].position_index();
+        }
+        m.vertices = v;
+        expect_round_trip(m);
+    }
+}
+
+TEST(FragmentCodec, RoundTripIsLosslessOnA200kTriangleMesh) {
+    FragmentMesh m = grid_patch(318);  // 200,978 triangles
+    ASSERT_GE(m.triangle_count(), 200000u);
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    EXPECT_EQ(bytes[kCodingOffset], 0);
+}
+
+// ---- damaged input --------------------------------------------------------------------------
+
+TEST(FragmentCodec, EveryTruncationIsRejected) {
+    std::vector<uint8_t> bytes = encode(small_fragment());
+    FragmentMesh out;
+    for (size_t n = 0; n < bytes.size(); ++n) {
+        std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(n));  // own allocation: ASan sees overreads
+        FragmentStatus st = fragment_decode(cut.data(), cut.size(), out);
+        EXPECT_NE(st, FragmentStatus::Ok) << "length " << n;
+        if (n < kHeaderSize) {
+            EXPECT_EQ(st, FragmentStatus::Truncated);
+        }
+    }
+}
+
+TEST(FragmentCodec, EverySingleBitFlipIsDetected) {
+    std::vector<uint8_t> bytes = encode(small_fragment());
+    FragmentMesh out;
+    ASSERT_EQ(fragment_decode(bytes.data(), bytes.size(), out), FragmentStatus::Ok);
+    for (size_t at = 0; at < bytes.size(); ++at)
+        for (int bit = 0; bit < 8; ++bit) {
+            std::vector<uint8_t> b = bytes;
+            b[at] ^= uint8_t(1u << bit);
+            FragmentStatus st = fragment_decode(b.data(), b.size(), out);
+            ASSERT_NE(st, FragmentStatus::Ok) << "byte " << at << " bit " << bit;
+            if (at >= 16) {
+                EXPECT_EQ(st, FragmentStatus::ChecksumMismatch);
+            }
+        }
+}
+
+TEST(FragmentCodec, ExtraTrailingBytesAreRejected) {
+    std::vector<uint8_t> bytes = encode(small_fragment());
+    bytes.push_back(0);
+    FragmentMesh out;
+    EXPECT_EQ(fragment_decode(bytes.data(), bytes.size(), out), FragmentStatus::ChecksumMismatch);
+    refresh_integrity(bytes);  // even with a matching checksum the parser finds the extra byte
+    EXPECT_EQ(fragment_decode(bytes.data(), bytes.size(), out), FragmentStatus::Corrupt);
+}
+
+TEST(FragmentCodec, HeaderFieldsAreValidated) {
+    std::vector<uint8_t> bytes = encode(small_fragment());
+    FragmentMesh out;
+    uint32_t vc, tc;
+    std::vector<uint8_t> b = bytes;
+    b[0] = 'X';
+    EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::BadMagic);
+    b = bytes;
+    b[4] = 2;
+    EXPECT_EQ(fragment_peek(b.data(), b.size(), vc, tc), FragmentStatus::UnsupportedVersion);
+    b = bytes;
+    b[11] = 0x40;  // vertex count 2^30
+    EXPECT_EQ(fragment_peek(b.data(), b.size(), vc, tc), FragmentStatus::TooLarge);
+    // A count changed consistently with the checksum is still caught by the header fold...
+    b = bytes;
+    b[8] ^= 1;
+    uint64_t sum = checksum64(b.data() + kHeaderSize, b.size() - kHeaderSize);
+    for (int i = 0; i < 8; ++i) b[16 + size_t(i)] = uint8_t(sum >> (8 * i));
+    EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::Corrupt);
+    // ... and, with the fold refreshed too, by the payload parser.
+    refresh_integrity(b);
+    EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::Corrupt);
+    EXPECT_TRUE(out.vertices.empty() && out.indices.empty());
+}
+
+TEST(FragmentCodec, FuzzedInputNeverCrashesTheDecoder) {
+    std::mt19937_64 rng(2024);
+    FragmentMesh out;
+    auto check = [&](const std::vector<uint8_t>& b) {
+        FragmentStatus st = fragment_decode(b.data(), b.size(), out);
+        if (st == FragmentStatus::Ok) {
+            for (uint32_t i : out.indices) ASSERT_LT(i, out.vertices.size());
+        } else {
+            ASSERT_TRUE(out.vertices.empty() && out.indices.empty());
+        }
+    };
+    // Random buffers, with and without a plausible header.
+    for (int i = 0; i < 3000; ++i) {
+        std::vector<uint8_t> b(rng() % 200);
+        for (auto& x : b) x = uint8_t(rng());
+        check(b);
+        if (b.size() >= kHeaderSize) {
+            const uint8_t head[8] = {'C', 'F', 'R', 'G', 1, 0, 0, 0};
+            std::copy(head, head + 8, b.begin());
+            for (int k = 8; k < 16; ++k) b[size_t(k)] = (k % 4 == 0) ? uint8_t(rng() % 64) : 0;
+            refresh_integrity(b);
+            check(b);
+        }
+    }
+    // Mutations of valid fragments (every coding path), checksum recomputed so the parser runs.
+    std::vector<std::vector<uint8_t>> seeds = {encode(small_fragment()), encode(icosphere(1)), encode(grid_patch(3))};
+    {
+        FragmentMesh r = grid_patch(7);
+        r.vertices = random_vertices(rng, r.vertices.size());
+        seeds.push_back(encode(r));
+    }
+    int parsed_ok = 0;
+    for (const auto& seed : seeds)
+        for (int i = 0; i < 4000; ++i) {
+            std::vector<uint8_t> b = seed;
+            int edits = 1 + int(rng() % 4);
+            for (int e = 0; e < edits; ++e) {
+                size_t at = kHeaderSize + 2 + rng() % (b.size() - kHeaderSize - 2);
+                switch (rng() % 4) {
+                    case 0: b[at] ^= uint8_t(1u << (rng() % 8)); break;
+                    case 1: b[at] = uint8_t(rng()); break;
+                    case 2: b.erase(b.begin() + long(at)); break;
+                    default: b.insert(b.begin() + long(at), uint8_t(rng())); break;
+                }
+                if (b.size() <= kHeaderSize + 3) break;
+            }
+            if (rng() % 8 == 0) b[8 + rng() % 8] ^= uint8_t(1u << (rng() % 8));  // counts too
+            refresh_integrity(b);
+            check(b);
+            parsed_ok += fragment_decode(b.data(), b.size(), out) == FragmentStatus::Ok;
+        }
+    // Most mutations must be caught by the parser's own consistency checks.
+    EXPECT_LT(parsed_ok, 4000);
+}
+
+// ---- format stability -----------------------------------------------------------------------
+
+TEST(FragmentCodec, GoldenBytesOfATinyFragmentAreStable) {
+    FragmentMesh m;
+    // Two triangles sharing an edge, plus a third on the border; fixed vertex words.
+    BaryWeights w[5] = {{400, 21, 21, 21}, {380, 41, 21, 21}, {380, 21, 41, 21}, {360, 41, 41, 21}, {390, 30, 20, 23}};
+    for (int i = 0; i < 5; ++i)
+        m.vertices.push_back(PackedVertex::make(bary_pack(w[i]), uint16_t(0x7f00 + i), uint8_t(10 * i), 20, 30));
+    m.indices = {0, 1, 2, 2, 1, 3, 1, 0, 4};
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    std::string hex;
+    char buf[4];
+    for (uint8_t b : bytes) {
+        std::snprintf(buf, sizeof buf, "%02x", b);
+        hex += buf;
+    }
+    EXPECT_EQ(hex, "GOLDEN");
+}
