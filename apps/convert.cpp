@@ -64,6 +64,8 @@ int cmd_convert(int argc, char** argv) {
     std::printf("build:      %.2f s, %.0f input triangles/s (with reading: %.0f/s), peak memory %.1f MiB\n", r.seconds,
                 double(r.input_triangles) / r.seconds, double(r.input_triangles) / total,
                 double(r.peak_rss) / (1 << 20));
+    std::printf("phases:     prepare %.2f s, leaves %.2f s, coarsen %.2f s, write %.2f s\n", r.seconds_prepare,
+                r.seconds_leaves, r.seconds_coarsen, r.seconds_write);
     std::printf("size:       %.2f bits per stored vertex over all levels (%zu vertices, %zu triangles)\n",
                 vertices ? 8.0 * double(r.file_bytes) / double(vertices) : 0.0, vertices, triangles);
     std::printf("%6s %9s %10s %10s %12s %14s %12s\n", "level", "diamonds", "fragments", "triangles", "bytes",

@@ -84,6 +84,16 @@ void bisect(const Tetrahedron& t, Tetrahedron& c0, Tetrahedron& c1) {
 // Conservative rejection: true if all points are strictly outside one face (with a margin, so
 // floating-point error can only make it keep a tetrahedron that the exact clipper then rejects).
 bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
+    // Axis-aligned boxes first: cheap and rejects most candidates.
+    for (int i = 0; i < 3; ++i) {
+        double tmin = std::min({t[0][i], t[1][i], t[2][i], t[3][i]}), tmax = std::max({t[0][i], t[1][i], t[2][i], t[3][i]});
+        bool below = true, above = true;
+        for (int k = 0; k < count; ++k) {
+            below &= pts[k][i] < tmin - 1e-6;
+            above &= pts[k][i] > tmax + 1e-6;
+        }
+        if (below || above) return true;
+    }
     for (int f = 0; f < 4; ++f) {
         const LatticePoint &a = t[(f + 1) % 4], &b = t[(f + 2) % 4], &c = t[(f + 3) % 4], &o = t[f];
         double u[3], v[3], n[3];
@@ -152,34 +162,46 @@ void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&
 // ----------------------------------------------------------------------------------------------
 // Choosing the leaf level from the density.
 
+// Tracks sample points down the hierarchy one bisection at a time (a point in a tetrahedron is
+// in the child on its side of the splitting plane), counting the distinct tetrahedra hit.
 int choose_leaf_level(const std::vector<Vec3d>& lattice, const std::vector<uint32_t>& indices, size_t target) {
     size_t triangles = indices.size() / 3;
-    size_t sample = std::min<size_t>(triangles, 100000);
+    size_t sample = std::min<size_t>(triangles, 50000);
     size_t stride = std::max<size_t>(1, triangles / sample);
-    std::vector<Vec3d> centroids;
+    struct Tracked { Vec3d p; Tetrahedron t; };
+    std::vector<Tracked> points;
+    DiamondInfo root = diamond_info(root_diamond());
     for (size_t t = 0; t < triangles; t += stride) {
         Vec3d c{0, 0, 0};
         for (int k = 0; k < 3; ++k)
             for (int i = 0; i < 3; ++i) c[i] += lattice[indices[3 * t + k]][i] / 3.0;
-        centroids.push_back(c);
-    }
-    double scale = double(triangles) / double(centroids.size());
-    for (int level = 0; level <= kMaxLevel - 3; ++level) {
-        std::unordered_map<uint64_t, size_t> counts;
-        for (const Vec3d& c : centroids) {
-            bool done = false;
-            for_each_overlapping_tetrahedron(&c, 1, level, [&](const Tetrahedron& t) {
-                if (done) return;
-                done = true;
-                Tetrahedron k = canonical_tetrahedron(t);
-                uint64_t h = 1469598103934665603ull;
-                for (auto& p : k)
-                    for (int v : p) h = (h ^ uint64_t(uint32_t(v))) * 1099511628211ull;
-                counts[h]++;
-            });
+        for (int s = 0; s < 6; ++s) {
+            Tetrahedron tet = diamond_tetrahedron(root, s);
+            if (!separated(tet, &c, 1)) {
+                points.push_back({c, tet});
+                break;
+            }
         }
-        double per_tet = scale * double(centroids.size()) / double(std::max<size_t>(1, counts.size()));
-        if (per_tet <= double(target) * 1.4142) return std::max(level, 0);
+    }
+    double scale = double(triangles) / double(std::max<size_t>(1, points.size()));
+    std::vector<uint64_t> keys(points.size());
+    for (int level = 0; level <= kMaxLevel - 3; ++level) {
+        for (size_t i = 0; i < points.size(); ++i) {
+            Tetrahedron k = canonical_tetrahedron(points[i].t);
+            uint64_t h = 1469598103934665603ull;
+            for (auto& p : k)
+                for (int v : p) h = (h ^ uint64_t(uint32_t(v))) * 1099511628211ull;
+            keys[i] = h;
+        }
+        std::sort(keys.begin(), keys.end());
+        size_t distinct = size_t(std::unique(keys.begin(), keys.end()) - keys.begin());
+        double per_tet = scale * double(points.size()) / double(std::max<size_t>(1, distinct));
+        if (per_tet <= double(target) * 1.4142) return level;
+        for (Tracked& tp : points) {
+            Tetrahedron a, b;
+            bisect(tp.t, a, b);
+            tp.t = separated(a, &tp.p, 1) ? b : a;
+        }
     }
     return kMaxLevel - 3;
 }
@@ -249,6 +271,8 @@ CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, co
     if (leaf_level > kMaxLevel - 3) fail("leaf level %d is deeper than the lattice allows (%d)", leaf_level, kMaxLevel - 3);
     report.leaf_level = leaf_level;
 
+    report.seconds_prepare = now_seconds() - start;
+    double phase_start = now_seconds();
     ArchiveWriter archive(output_path, ArchiveKind::Catp);
     std::vector<CatpLevelStats> stats(leaf_level + 1);
     for (int l = 0; l <= leaf_level; ++l) stats[l].level = l;
@@ -384,6 +408,8 @@ CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, co
         write_level_nodes(current, true);
     }
 
+    report.seconds_leaves = now_seconds() - phase_start;
+    phase_start = now_seconds();
     // ---- Coarser levels, bottom-up.
     for (int level = leaf_level - 1; level >= 0; --level) {
         // Group the finer fragments by the diamond whose refinement created their tetrahedron.
@@ -435,6 +461,8 @@ CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, co
         current = std::move(next);
     }
     progress.finish();
+    report.seconds_coarsen = now_seconds() - phase_start;
+    phase_start = now_seconds();
 
     CatpMeta meta;
     for (int i = 0; i < 3; ++i) {
@@ -449,6 +477,7 @@ CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, co
     meta.input_triangles = input.triangle_count();
     meta.default_rgb = uint32_t(default_color[0]) | (uint32_t(default_color[1]) << 8) | (uint32_t(default_color[2]) << 16);
     report.file_bytes = archive.finish(encode_catp_meta(meta));
+    report.seconds_write = now_seconds() - phase_start;
     for (auto& s : stats) {
         if (s.diamonds) report.nodes += s.diamonds;
         report.levels.push_back(s);

@@ -23,13 +23,49 @@ size_t PositionHash::operator()(const Vec3d& p) const {
 }
 
 FragmentWelder::FragmentWelder(WorkFragment& fragment) : f_(fragment) {
-    index_.reserve(fragment.positions.size() * 2 + 16);
-    for (uint32_t i = 0; i < fragment.positions.size(); ++i) index_.emplace(fragment.positions[i], i);
+    size_t capacity = 64;
+    while (capacity < fragment.positions.size() * 2 + 16) capacity *= 2;
+    table_.assign(capacity, 0);
+    mask_ = capacity - 1;
+    for (uint32_t i = 0; i < fragment.positions.size(); ++i) {
+        size_t h = PositionHash()(fragment.positions[i]) & mask_;
+        while (table_[h] != 0) h = (h + 1) & mask_;
+        table_[h] = i + 1;
+    }
+}
+
+void FragmentWelder::grow() {
+    size_t capacity = table_.size() * 2;
+    table_.assign(capacity, 0);
+    mask_ = capacity - 1;
+    for (uint32_t i = 0; i < f_.positions.size(); ++i) {
+        size_t h = PositionHash()(f_.positions[i]) & mask_;
+        while (table_[h] != 0) h = (h + 1) & mask_;
+        table_[h] = i + 1;
+    }
+}
+
+uint32_t FragmentWelder::find_or_insert(const Vec3d& p, bool& inserted) {
+    if ((f_.positions.size() + 1) * 2 > table_.size()) grow();
+    size_t h = PositionHash()(p) & mask_;
+    while (table_[h] != 0) {
+        const Vec3d& q = f_.positions[table_[h] - 1];
+        if (q[0] == p[0] && q[1] == p[1] && q[2] == p[2]) {
+            inserted = false;
+            return table_[h] - 1;
+        }
+        h = (h + 1) & mask_;
+    }
+    uint32_t index = uint32_t(f_.positions.size());
+    table_[h] = index + 1;
+    inserted = true;
+    return index;
 }
 
 uint32_t FragmentWelder::add(const Vec3d& position, const float normal[3], const float color[3]) {
-    auto [it, inserted] = index_.emplace(position, uint32_t(f_.positions.size()));
-    if (!inserted) return it->second;
+    bool inserted;
+    uint32_t index = find_or_insert(position, inserted);
+    if (!inserted) return index;
     float len = std::sqrt(normal[0] * normal[0] + normal[1] * normal[1] + normal[2] * normal[2]);
     Vec3f n = len > 0 ? Vec3f{normal[0] / len, normal[1] / len, normal[2] / len} : Vec3f{0, 0, 1};
     Rgb8 c;
@@ -37,16 +73,17 @@ uint32_t FragmentWelder::add(const Vec3d& position, const float normal[3], const
     f_.positions.push_back(position);
     f_.normals.push_back(n);
     f_.colors.push_back(c);
-    return it->second;
+    return index;
 }
 
 uint32_t FragmentWelder::add(const Vec3d& position, const Vec3f& normal, const Rgb8& color) {
-    auto [it, inserted] = index_.emplace(position, uint32_t(f_.positions.size()));
-    if (!inserted) return it->second;
+    bool inserted;
+    uint32_t index = find_or_insert(position, inserted);
+    if (!inserted) return index;
     f_.positions.push_back(position);
     f_.normals.push_back(normal);
     f_.colors.push_back(color);
-    return it->second;
+    return index;
 }
 
 void FragmentWelder::triangle(uint32_t a, uint32_t b, uint32_t c) {
@@ -116,7 +153,7 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, Fragm
 double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
     for (auto& f : out) f = WorkFragment{};
     uint8_t slots = existing_slots(d);
-    int n = int(d.ring.size());
+    int n = d.ring_size;
     // Outer faces: those not containing the spine; plus interior faces on the root boundary of a
     // partial diamond (their neighbour slot does not exist).
     std::vector<LatticePlane> outer;

@@ -39,8 +39,14 @@ public:
     void append(const WorkFragment& other);
 
 private:
+    // Open addressing on vertex indices (a std::unordered_map allocated per insert and was a
+    // measured hot spot of the converter).
+    uint32_t find_or_insert(const Vec3d& position, bool& inserted);
+    void grow();
+
     WorkFragment& f_;
-    std::unordered_map<Vec3d, uint32_t, PositionHash> index_;
+    std::vector<uint32_t> table_;  // vertex index + 1, 0 = empty
+    size_t mask_ = 0;
 };
 
 // Half-spaces of the faces of tetrahedron t selected by face_mask (bit f: the face opposite

@@ -78,6 +78,7 @@ DiamondInfo diamond_info(DiamondId id) {
         auto P = [&](int i) { LatticePoint p = A; p[i] = B[i]; return p; };
         auto Q = [&](int i) { LatticePoint q = B; q[i] = A[i]; return q; };
         d.ring = {P(0), Q(2), P(1), Q(0), P(2), Q(1)};
+        d.ring_size = 6;
     } else if (d.cls == DiamondClass::Face) {
         int i = -1, j = -1, e = -1;
         for (int a = 0; a < 3; ++a) {
@@ -90,6 +91,7 @@ DiamondInfo diamond_info(DiamondId id) {
         up[e] += t;
         down[e] -= t;
         d.ring = {s1, up, s2, down};  // the parents (cube centres) are at odd positions
+        d.ring_size = 4;
     } else {
         int i = odd[0] ? 0 : (odd[1] ? 1 : 2);
         int j = (i + 1) % 3, l = (i + 2) % 3;
@@ -99,14 +101,14 @@ DiamondInfo diamond_info(DiamondId id) {
             LatticePoint r = c;
             r[j] += s[0] * t;
             r[l] += s[1] * t;
-            d.ring.push_back(r);  // the parents (face centres) are at even positions
+            d.ring[d.ring_size++] = r;  // the parents (face centres) are at even positions
         }
     }
     return d;
 }
 
 Tetrahedron diamond_tetrahedron(const DiamondInfo& d, int slot) {
-    int n = int(d.ring.size());
+    int n = d.ring_size;
     return {d.spine_a, d.spine_b, d.ring[slot], d.ring[(slot + 1) % n]};
 }
 
@@ -118,7 +120,7 @@ bool tetrahedron_exists(const Tetrahedron& t) {
 
 uint8_t existing_slots(const DiamondInfo& d) {
     uint8_t mask = 0;
-    for (int s = 0; s < int(d.ring.size()); ++s)
+    for (int s = 0; s < d.ring_size; ++s)
         if (tetrahedron_exists(diamond_tetrahedron(d, s))) mask |= uint8_t(1 << s);
     return mask;
 }
@@ -136,7 +138,7 @@ std::vector<DiamondId> diamond_parents(DiamondId id) {
             out.push_back(DiamondId::from_centre(p));
         }
     } else {
-        for (size_t r = d.cls == DiamondClass::Face ? 1 : 0; r < d.ring.size(); r += 2)
+        for (size_t r = d.cls == DiamondClass::Face ? 1 : 0; r < size_t(d.ring_size); r += 2)
             if (inside_root_cube(d.ring[r])) out.push_back(DiamondId::from_centre(d.ring[r]));
     }
     return out;
@@ -167,7 +169,7 @@ std::vector<DiamondId> diamond_children(DiamondId id) {
 }
 
 DiamondId slot_parent(const DiamondInfo& d, int slot) {
-    int n = int(d.ring.size());
+    int n = d.ring_size;
     int first_parent_parity = d.cls == DiamondClass::Edge ? 0 : 1;
     int r = (slot % 2 == first_parent_parity) ? slot : (slot + 1) % n;
     return DiamondId::from_centre(d.ring[r]);
@@ -211,7 +213,7 @@ bool tetrahedron_diamond(const Tetrahedron& t, DiamondId& id, int& slot) {
     int k = 0;
     for (int a = 0; a < 4; ++a)
         if (a != best_a && a != best_b) others[k++] = t[a];
-    int n = int(d.ring.size());
+    int n = d.ring_size;
     for (int s = 0; s < n; ++s) {
         const LatticePoint& r0 = d.ring[s];
         const LatticePoint& r1 = d.ring[(s + 1) % n];

@@ -21,6 +21,7 @@
 //     i8 x 9            only for the geometric normal predictor: row-major 3x3 matrix M that
 //                       maps a normal computed in (a, b, c) space to the frame of the normals
 //     varint E          number of degenerate triangles (a repeated index), coded explicitly
+//     varint N          number of connectivity symbols
 //     rANS stream       (rans.h): u32 state0 | u32 state1 | bytes. Symbols in decode order:
 //       tables          connectivity (6 symbols), then 3 position tables (unless raw), 2 normal
 //                       tables (u, v), 3 colour tables (R, G, B)
@@ -774,6 +775,9 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     if (normal_mode == kNormalGeometric)
         for (int8_t x : matrix) payload.push_back(uint8_t(x));
     put_varint(payload, degenerate.size());
+    uint32_t conn_symbols = 0;
+    for (uint32_t c : conn.counts[kStreamConn]) conn_symbols += c;
+    put_varint(payload, conn_symbols);
     const size_t prefix_bytes = payload.size();
     std::vector<size_t> section_bytes;
     enc.finish(payload, &section_bytes);
@@ -841,6 +845,7 @@ FragmentStatus decode_stored(const uint8_t* p, size_t size, uint32_t V, uint32_t
 struct Workspace {
     Front front;
     std::vector<Pred> pred;
+    std::vector<uint8_t> symbols;
     std::vector<int32_t> sa, sb, sc;
     std::vector<int8_t> nu, nv;
     std::vector<Vec3l> acc;
@@ -855,28 +860,43 @@ void grow(std::vector<T>& v, size_t n) {
 }
 
 // Reads a residual value of the given table.
-CATPAQ_RANS_INLINE uint32_t get_value(rans::Decoder& dec, const rans::DecodeTable& t) {
+CATPAQ_RANS_INLINE uint32_t get_value(rans::Decoder& dec, const rans::TableView& t) {
     return dec.get_value(t, kBucketDecode.base.data(), kBucketDecode.nbits.data());
 }
 
-inline uint32_t get_wide(rans::Decoder& dec, int nbits) { return dec.get_bits(nbits); }
+inline uint32_t get_wide(rans::Decoder& dec, int nbits) { return dec.get_bits(uint32_t(nbits)); }
 
 // The traversal: fills tri (3 R indices) and pred; returns the number of vertices seen.
-FragmentStatus decode_connectivity(rans::Decoder& dec, const rans::DecodeTable& conn, uint32_t V, uint32_t R,
-                                   Workspace& ws, uint32_t* tri, uint32_t& seen_out) {
+// Each decoding pass copies the decoder into a local (kept in registers) and copies it back.
+//
+// Connectivity: the `nsym` traversal symbols are decoded first in a tight loop, then the
+// traversal consumes them (reading SPLIT indices from the bit stream). Fills tri (3 R indices)
+// and pred; returns the number of vertices seen.
+FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& conn_table, uint32_t V, uint32_t R,
+                                   uint32_t nsym, Workspace& ws, uint32_t* tri, uint32_t& seen_out) {
+    grow(ws.symbols, size_t(nsym) + 1);
+    uint8_t* sym = ws.symbols.data();
+    {
+        rans::Decoder dec = io;
+        const rans::TableView conn(conn_table);
+        for (uint32_t k = 0; k < nsym; ++k) sym[k] = uint8_t(dec.get(conn));
+        io = dec;
+    }
+    sym[nsym] = 0xff;  // sentinel: running out of symbols reads an invalid one
+    rans::Decoder dec = io;
     Pred* pred = ws.pred.data();
     Front& front = ws.front;
     front.reset(std::min<size_t>(size_t(R) * 2 + 16, size_t(1) << 20));
     uint32_t seen = 0;
+    const uint8_t* next = sym;
     for (uint32_t done = 0; done < R;) {
         front.reserve3();
         uint32_t i;
         if (!front.pop(i)) {
             // A new component: three vertices, each NEW or SPLIT.
-            if (!dec.ok()) return FragmentStatus::Corrupt;
             uint32_t c[3];
             for (int k = 0; k < 3; ++k) {
-                uint32_t s = dec.get(conn);
+                uint32_t s = *next++;
                 if (s == kNew) {
                     if (seen == V) return FragmentStatus::Corrupt;
                     uint32_t q = seen == 0 ? V : seen - 1;
@@ -884,7 +904,7 @@ FragmentStatus decode_connectivity(rans::Decoder& dec, const rans::DecodeTable& 
                     c[k] = seen++;
                 } else if (s == kSplit) {
                     if (seen == 0) return FragmentStatus::Corrupt;
-                    c[k] = get_wide(dec, bit_width_u32(seen - 1));
+                    c[k] = dec.get_bits(uint32_t(bit_width_u32(seen - 1)));
                     if (c[k] >= seen) return FragmentStatus::Corrupt;
                 } else {
                     return FragmentStatus::Corrupt;
@@ -899,7 +919,7 @@ FragmentStatus decode_connectivity(rans::Decoder& dec, const rans::DecodeTable& 
         }
         const FrontEdge ei = front.e[i];
         uint32_t v;
-        switch (dec.get(conn)) {
+        switch (*next++) {
             case kNew:
                 if (seen == V) [[unlikely]]
                     return FragmentStatus::Corrupt;
@@ -928,7 +948,7 @@ FragmentStatus decode_connectivity(rans::Decoder& dec, const rans::DecodeTable& 
                 break;
             case kSplit:
                 if (seen == 0) return FragmentStatus::Corrupt;
-                v = get_wide(dec, bit_width_u32(seen - 1));
+                v = dec.get_bits(uint32_t(bit_width_u32(seen - 1)));
                 if (v >= seen || v == ei.v0 || v == ei.v1) return FragmentStatus::Corrupt;
                 front.add_vertex(i, ei, v);
                 break;
@@ -939,8 +959,141 @@ FragmentStatus decode_connectivity(rans::Decoder& dec, const rans::DecodeTable& 
         tri += 3;
         ++done;
     }
+    if (next != sym + nsym) return FragmentStatus::Corrupt;  // symbols left over
     seen_out = seen;
+    io = dec;
     return FragmentStatus::Ok;
+}
+
+// Positions: fills word0's position bits and ws.sa/sb/sc (cumulative coordinates, index V = 0).
+// False on a coordinate out of range.
+bool decode_positions(rans::Decoder& io, Workspace& ws, int pos_mode, uint32_t V, const Pred* pred,
+                      PackedVertex* vert) {
+    rans::Decoder dec = io;
+    int32_t *sa = ws.sa.data(), *sb = ws.sb.data(), *sc = ws.sc.data();
+    sa[V] = sb[V] = sc[V] = 0;
+    uint32_t bad = 0;  // accumulated range violations, checked once
+    if (pos_mode == kPosRaw) {
+        for (uint32_t v = 0; v < V; ++v) vert[v].word0 = dec.get_bits(24);
+    } else if (pos_mode == kPosCumulative) {
+        const rans::TableView t0(ws.tables[kStreamPos0]), t1(ws.tables[kStreamPos1]), t2(ws.tables[kStreamPos2]);
+        for (uint32_t v = 0; v < V; ++v) {
+            const Pred q = pred[v];
+            int32_t p0 = std::clamp(sa[q.a] + sa[q.b] - sa[q.c], 0, kGrid);
+            int32_t a = p0 + unzigzag(get_value(dec, t0));
+            bad |= uint32_t(a) > uint32_t(kGrid);
+            a = std::clamp(a, 0, kGrid);
+            int32_t p1 = std::clamp(sb[q.a] + sb[q.b] - sb[q.c], 0, a);
+            int32_t b = p1 + unzigzag(get_value(dec, t1));
+            bad |= uint32_t(b) > uint32_t(a);
+            b = std::clamp(b, 0, a);
+            int32_t p2 = std::clamp(sc[q.a] + sc[q.b] - sc[q.c], 0, b);
+            int32_t c = p2 + unzigzag(get_value(dec, t2));
+            bad |= uint32_t(c) > uint32_t(b);
+            c = std::clamp(c, 0, b);
+            sa[v] = a, sb[v] = b, sc[v] = c;
+            vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(c);
+        }
+    } else {
+        // Weight space: (w1, w2, w3) kept in sa/sb/sc during the pass, converted after.
+        const rans::TableView t0(ws.tables[kStreamPos0]), t1(ws.tables[kStreamPos1]), t2(ws.tables[kStreamPos2]);
+        for (uint32_t v = 0; v < V; ++v) {
+            const Pred q = pred[v];
+            int32_t p0 = std::clamp(sa[q.a] + sa[q.b] - sa[q.c], 0, kGrid);
+            int32_t w1 = p0 + unzigzag(get_value(dec, t0));
+            bad |= uint32_t(w1) > uint32_t(kGrid);
+            w1 = std::clamp(w1, 0, kGrid);
+            int32_t p1 = std::clamp(sb[q.a] + sb[q.b] - sb[q.c], 0, kGrid - w1);
+            int32_t w2 = p1 + unzigzag(get_value(dec, t1));
+            bad |= uint32_t(w2) > uint32_t(kGrid - w1);
+            w2 = std::clamp(w2, 0, kGrid - w1);
+            int32_t p2 = std::clamp(sc[q.a] + sc[q.b] - sc[q.c], 0, kGrid - w1 - w2);
+            int32_t w3 = p2 + unzigzag(get_value(dec, t2));
+            bad |= uint32_t(w3) > uint32_t(kGrid - w1 - w2);
+            w3 = std::clamp(w3, 0, kGrid - w1 - w2);
+            sa[v] = w1, sb[v] = w2, sc[v] = w3;
+            int32_t a = w1 + w2 + w3, b = w2 + w3;
+            vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(w3);
+        }
+        for (uint32_t v = 0; v < V; ++v) {
+            sa[v] += sb[v] + sc[v];
+            sb[v] += sc[v];
+        }
+    }
+    io = dec;
+    return bad == 0;
+}
+
+// Normals: ORs u into word0 and sets word1 to v (signed bytes; index V is the virtual zero vertex).
+void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std::array<int8_t, 9>& matrix, uint32_t V,
+                    uint32_t T, const Pred* pred, const uint32_t* indices, PackedVertex* vert) {
+    grow(ws.nu, size_t(V) + 1);
+    grow(ws.nv, size_t(V) + 1);
+    int8_t *nu = ws.nu.data(), *nv = ws.nv.data();
+    nu[V] = nv[V] = 0;
+    rans::Decoder dec = io;
+    const rans::TableView tu(ws.tables[kStreamNormU]), tv(ws.tables[kStreamNormV]);
+    if (normal_mode == kNormalGeometric) {
+        ws.acc.assign(V, Vec3l{0, 0, 0});
+        accumulate_normals(indices, T, ws.sa.data(), ws.sb.data(), ws.sc.data(), ws.acc);
+        const Vec3l* acc = ws.acc.data();
+        int prev_u = 0, prev_v = 0;
+        for (uint32_t v = 0; v < V; ++v) {
+            int pu, pv;
+            geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
+            prev_u = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
+            prev_v = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
+            nu[v] = int8_t(prev_u), nv[v] = int8_t(prev_v);
+        }
+    } else if (normal_mode == kNormalAverage) {
+        for (uint32_t v = 0; v < V; ++v) {
+            const Pred q = pred[v];
+            int pu = (nu[q.a] + nu[q.b]) >> 1, pv = (nv[q.a] + nv[q.b]) >> 1;
+            nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
+            nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
+        }
+    } else {
+        for (uint32_t v = 0; v < V; ++v) {
+            const Pred q = pred[v];
+            int pu = std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127);
+            int pv = std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127);
+            nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
+            nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
+        }
+    }
+    io = dec;
+    for (uint32_t v = 0; v < V; ++v) {
+        vert[v].word0 |= uint32_t(uint8_t(nu[v])) << 24;
+        vert[v].word1 = uint8_t(nv[v]);
+    }
+}
+
+// Colours: ORs R, G, B into word1.
+void decode_colors(rans::Decoder& io, Workspace& ws, bool parallelogram, bool decorrelate, uint32_t V,
+                   const Pred* pred, PackedVertex* vert) {
+    grow(ws.rgb, size_t(V) + 1);
+    std::array<uint8_t, 4>* rgb = ws.rgb.data();
+    rgb[V] = {0, 0, 0, 0};
+    rans::Decoder dec = io;
+    const rans::TableView tr(ws.tables[kStreamColR]), tg(ws.tables[kStreamColG]), tb(ws.tables[kStreamColB]);
+    for (uint32_t v = 0; v < V; ++v) {
+        const Pred q = pred[v];
+        int pc[3];
+        for (int c = 0; c < 3; ++c) {
+            int a = rgb[q.a][size_t(c)], b = rgb[q.b][size_t(c)];
+            pc[c] = parallelogram ? std::clamp(a + b - rgb[q.c][size_t(c)], 0, 255) : (a + b + 1) >> 1;
+        }
+        int rg = unzigzag(get_value(dec, tg));
+        int rr = unzigzag(get_value(dec, tr));
+        int rb = unzigzag(get_value(dec, tb));
+        if (decorrelate) {
+            rr += rg;
+            rb += rg;
+        }
+        rgb[v] = {uint8_t(pc[0] + rr), uint8_t(pc[1] + rg), uint8_t(pc[2] + rb), 0};
+        vert[v].word1 |= uint32_t(rgb[v][0]) << 8 | uint32_t(rgb[v][1]) << 16 | uint32_t(rgb[v][2]) << 24;
+    }
+    io = dec;
 }
 
 FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint32_t T, FragmentMesh& out,
@@ -969,6 +1122,17 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
     }
     if (E > T) return FragmentStatus::Corrupt;
     const uint32_t R = T - uint32_t(E);
+    uint64_t conn_symbols = 0;
+    for (int shift = 0;; shift += 7) {
+        if (size == 0 || shift > 28) return FragmentStatus::Corrupt;
+        uint8_t b = *p++;
+        --size;
+        conn_symbols |= uint64_t(b & 0x7f) << shift;
+        if (!(b & 0x80)) break;
+    }
+    // Every triangle takes one symbol (three to start a component), every BOUNDARY one of the
+    // at most 3 R front edges.
+    if (conn_symbols > 6 * uint64_t(R)) return FragmentStatus::Corrupt;
     if (R > 0 && V < 3) return FragmentStatus::Corrupt;
 
     rans::Decoder dec;
@@ -985,7 +1149,8 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
     grow(ws.pred, V);
     Pred* pred = ws.pred.data();
     uint32_t seen = 0;
-    FragmentStatus st = decode_connectivity(dec, ws.tables[kStreamConn], V, R, ws, out.indices.data(), seen);
+    FragmentStatus st = decode_connectivity(dec, ws.tables[kStreamConn], V, R, uint32_t(conn_symbols), ws,
+                                            out.indices.data(), seen);
     if (st != FragmentStatus::Ok) return st;
     for (; seen < V; ++seen) {
         uint32_t q = seen == 0 ? V : seen - 1;
@@ -1004,125 +1169,9 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
     grow(ws.sa, size_t(V) + 1);
     grow(ws.sb, size_t(V) + 1);
     grow(ws.sc, size_t(V) + 1);
-    int32_t *sa = ws.sa.data(), *sb = ws.sb.data(), *sc = ws.sc.data();
-    sa[V] = sb[V] = sc[V] = 0;
-    PackedVertex* vert = out.vertices.data();
-    if (pos_mode == kPosRaw) {
-        for (uint32_t v = 0; v < V; ++v) vert[v].word0 = get_wide(dec, 24);
-    } else {
-        const rans::DecodeTable &t0 = ws.tables[kStreamPos0], &t1 = ws.tables[kStreamPos1], &t2 = ws.tables[kStreamPos2];
-        uint32_t bad = 0;  // accumulated range violations, checked once
-        if (pos_mode == kPosCumulative) {
-            for (uint32_t v = 0; v < V; ++v) {
-                const Pred q = pred[v];
-                int32_t p0 = std::clamp(sa[q.a] + sa[q.b] - sa[q.c], 0, kGrid);
-                int32_t a = p0 + unzigzag(get_value(dec, t0));
-                bad |= uint32_t(a) > uint32_t(kGrid);
-                a = std::clamp(a, 0, kGrid);
-                int32_t p1 = std::clamp(sb[q.a] + sb[q.b] - sb[q.c], 0, a);
-                int32_t b = p1 + unzigzag(get_value(dec, t1));
-                bad |= uint32_t(b) > uint32_t(a);
-                b = std::clamp(b, 0, a);
-                int32_t p2 = std::clamp(sc[q.a] + sc[q.b] - sc[q.c], 0, b);
-                int32_t c = p2 + unzigzag(get_value(dec, t2));
-                bad |= uint32_t(c) > uint32_t(b);
-                c = std::clamp(c, 0, b);
-                sa[v] = a, sb[v] = b, sc[v] = c;
-                vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(c);
-            }
-        } else {
-            // Weight space: (w1, w2, w3) kept in sa/sb/sc during the pass, converted after.
-            for (uint32_t v = 0; v < V; ++v) {
-                const Pred q = pred[v];
-                int32_t p0 = std::clamp(sa[q.a] + sa[q.b] - sa[q.c], 0, kGrid);
-                int32_t w1 = p0 + unzigzag(get_value(dec, t0));
-                bad |= uint32_t(w1) > uint32_t(kGrid);
-                w1 = std::clamp(w1, 0, kGrid);
-                int32_t p1 = std::clamp(sb[q.a] + sb[q.b] - sb[q.c], 0, kGrid - w1);
-                int32_t w2 = p1 + unzigzag(get_value(dec, t1));
-                bad |= uint32_t(w2) > uint32_t(kGrid - w1);
-                w2 = std::clamp(w2, 0, kGrid - w1);
-                int32_t p2 = std::clamp(sc[q.a] + sc[q.b] - sc[q.c], 0, kGrid - w1 - w2);
-                int32_t w3 = p2 + unzigzag(get_value(dec, t2));
-                bad |= uint32_t(w3) > uint32_t(kGrid - w1 - w2);
-                w3 = std::clamp(w3, 0, kGrid - w1 - w2);
-                sa[v] = w1, sb[v] = w2, sc[v] = w3;
-                int32_t a = w1 + w2 + w3, b = w2 + w3;
-                vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(w3);
-            }
-            for (uint32_t v = 0; v < V; ++v) {
-                sa[v] += sb[v] + sc[v];
-                sb[v] += sc[v];
-            }
-        }
-        if (bad) return FragmentStatus::Corrupt;
-    }
-    if (!dec.ok()) return FragmentStatus::Corrupt;
-
-    // Normals (signed bytes; index V is the virtual zero vertex).
-    {
-        grow(ws.nu, size_t(V) + 1);
-        grow(ws.nv, size_t(V) + 1);
-        int8_t *nu = ws.nu.data(), *nv = ws.nv.data();
-        nu[V] = nv[V] = 0;
-        const rans::DecodeTable &tu = ws.tables[kStreamNormU], &tv = ws.tables[kStreamNormV];
-        if (normal_mode == kNormalGeometric) {
-            ws.acc.assign(V, Vec3l{0, 0, 0});
-            accumulate_normals(out.indices.data(), T, sa, sb, sc, ws.acc);
-            int prev_u = 0, prev_v = 0;
-            for (uint32_t v = 0; v < V; ++v) {
-                int pu, pv;
-                geometric_prediction(ws.acc[v], matrix, prev_u, prev_v, pu, pv);
-                nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
-                nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
-                prev_u = nu[v], prev_v = nv[v];
-            }
-        } else if (normal_mode == kNormalAverage) {
-            for (uint32_t v = 0; v < V; ++v) {
-                const Pred q = pred[v];
-                int pu = (nu[q.a] + nu[q.b]) >> 1, pv = (nv[q.a] + nv[q.b]) >> 1;
-                nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
-                nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
-            }
-        } else {
-            for (uint32_t v = 0; v < V; ++v) {
-                const Pred q = pred[v];
-                int pu = std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127);
-                int pv = std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127);
-                nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
-                nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
-            }
-        }
-        for (uint32_t v = 0; v < V; ++v) {
-            vert[v].word0 |= uint32_t(uint8_t(nu[v])) << 24;
-            vert[v].word1 = uint8_t(nv[v]);
-        }
-    }
-
-    // Colours.
-    {
-        grow(ws.rgb, size_t(V) + 1);
-        std::array<uint8_t, 4>* rgb = ws.rgb.data();
-        rgb[V] = {0, 0, 0, 0};
-        const rans::DecodeTable &tr = ws.tables[kStreamColR], &tg = ws.tables[kStreamColG], &tb = ws.tables[kStreamColB];
-        for (uint32_t v = 0; v < V; ++v) {
-            const Pred q = pred[v];
-            int pc[3];
-            for (int c = 0; c < 3; ++c) {
-                int a = rgb[q.a][size_t(c)], b = rgb[q.b][size_t(c)];
-                pc[c] = color_parallelogram ? std::clamp(a + b - rgb[q.c][size_t(c)], 0, 255) : (a + b + 1) >> 1;
-            }
-            int rg = unzigzag(get_value(dec, tg));
-            int rr = unzigzag(get_value(dec, tr));
-            int rb = unzigzag(get_value(dec, tb));
-            if (color_decorrelate) {
-                rr += rg;
-                rb += rg;
-            }
-            rgb[v] = {uint8_t(pc[0] + rr), uint8_t(pc[1] + rg), uint8_t(pc[2] + rb), 0};
-            vert[v].word1 |= uint32_t(rgb[v][0]) << 8 | uint32_t(rgb[v][1]) << 16 | uint32_t(rgb[v][2]) << 24;
-        }
-    }
+    if (!decode_positions(dec, ws, pos_mode, V, pred, out.vertices.data())) return FragmentStatus::Corrupt;
+    decode_normals(dec, ws, normal_mode, matrix, V, T, pred, out.indices.data(), out.vertices.data());
+    decode_colors(dec, ws, color_parallelogram, color_decorrelate, V, pred, out.vertices.data());
     if (!dec.finished_cleanly()) return FragmentStatus::Corrupt;
     return FragmentStatus::Ok;
 }

@@ -259,37 +259,32 @@ void Encoder::finish(std::vector<uint8_t>& out, std::vector<size_t>* section_byt
         bit_acc_ = 0;
         bit_fill_ = 0;
     }
-    std::vector<uint8_t> rev[2];
-    rev[0].reserve(ops_.size() / 4 + 16);
-    rev[1].reserve(ops_.size() / 4 + 16);
-    uint32_t state[2] = {kStateLower, kStateLower};
+    std::vector<uint8_t> rev;
+    rev.reserve(ops_.size() / 2 + 16);
+    uint32_t state[4] = {kStateLower, kStateLower, kStateLower, kStateLower};
     std::vector<size_t> rans_bytes(sections_.size(), 0);
     size_t section = sections_.size();  // number of sections starting at or before op i
     for (size_t i = ops_.size(); i-- > 0;) {
         while (section > 0 && sections_[section - 1].first_op > i) --section;
         const Op& op = ops_[i];
-        const int s = int(i & 1);
-        uint32_t& x = state[s];
+        uint32_t& x = state[i & 3];
         const uint32_t x_max = ((kStateLower >> op.scale) << 8) * op.freq;
-        size_t before = rev[s].size();
+        size_t before = rev.size();
         while (x >= x_max) {
-            rev[s].push_back(uint8_t(x));
+            rev.push_back(uint8_t(x));
             x >>= 8;
         }
         x = ((x / op.freq) << op.scale) + (x % op.freq) + op.start;
-        if (section > 0) rans_bytes[section - 1] += rev[s].size() - before;
+        if (section > 0) rans_bytes[section - 1] += rev.size() - before;
     }
     const size_t at = out.size();
-    for (int s = 0; s < 2; ++s)
-        for (int k = 0; k < 4; ++k) out.push_back(uint8_t(state[s] >> (8 * k)));
-    put_varint(out, rev[0].size());
+    for (uint32_t x : state)
+        for (int k = 0; k < 4; ++k) out.push_back(uint8_t(x >> (8 * k)));
     put_varint(out, bits_.size());
-    const size_t fixed = out.size() - at;
-    out.insert(out.end(), rev[0].rbegin(), rev[0].rend());
-    out.insert(out.end(), rev[1].rbegin(), rev[1].rend());
+    out.insert(out.end(), rev.rbegin(), rev.rend());
     out.insert(out.end(), bits_.begin(), bits_.end());
     if (section_bytes) {
-        // Raw bits per section, in eighths of bytes, rounded so the total is exact.
+        // Raw bits per section, rounded so that the total is exact; fixed fields to section 0.
         section_bytes->assign(sections_.size(), 0);
         uint64_t assigned_bits = 0;
         size_t assigned = 0;
@@ -302,41 +297,33 @@ void Encoder::finish(std::vector<uint8_t>& out, std::vector<size_t>* section_byt
             assigned += (*section_bytes)[k];
         }
         if (!section_bytes->empty()) (*section_bytes)[0] += (out.size() - at) - assigned;
-        (void)fixed;
     }
 }
 
 bool Decoder::init(const uint8_t* data, size_t size) {
     failed = true;
-    if (size < 8) return false;
-    auto rd = [&](size_t at) {
-        return uint32_t(data[at]) | uint32_t(data[at + 1]) << 8 | uint32_t(data[at + 2]) << 16 |
-               uint32_t(data[at + 3]) << 24;
-    };
-    x0 = rd(0);
-    x1 = rd(4);
-    if (x0 < kStateLower || x0 >= (kStateLower << 8) || x1 < kStateLower || x1 >= (kStateLower << 8)) return false;
-    const uint8_t* p = data + 8;
-    const uint8_t* end = data + size;
-    uint64_t len[2] = {0, 0};
-    for (uint64_t& v : len) {
-        for (int shift = 0;; shift += 7) {
-            if (p == end || shift > 35) return false;
-            uint8_t b = *p++;
-            v |= uint64_t(b & 0x7f) << shift;
-            if (!(b & 0x80)) break;
-        }
+    if (size < 16) return false;
+    uint32_t x[4];
+    for (int s = 0; s < 4; ++s) {
+        const uint8_t* q = data + 4 * s;
+        x[s] = uint32_t(q[0]) | uint32_t(q[1]) << 8 | uint32_t(q[2]) << 16 | uint32_t(q[3]) << 24;
+        if (x[s] < kStateLower || x[s] >= (kStateLower << 8)) return false;
     }
-    const size_t rest = size_t(end - p);
-    if (len[0] > rest || len[1] > rest - len[0]) return false;
-    p0 = p;
-    end0 = p0 + len[0];
-    p1 = end0;
-    end1 = end - len[1];
-    bit_p = end1;
-    bit_end = end;
-    stream0_end = end0;
-    stream1_end = end1;
+    x0 = x[0], x1 = x[1], x2 = x[2], x3 = x[3];
+    const uint8_t* q = data + 16;
+    const uint8_t* stop = data + size;
+    uint64_t bit_bytes = 0;
+    for (int shift = 0;; shift += 7) {
+        if (q == stop || shift > 35) return false;
+        uint8_t b = *q++;
+        bit_bytes |= uint64_t(b & 0x7f) << shift;
+        if (!(b & 0x80)) break;
+    }
+    if (bit_bytes > size_t(stop - q)) return false;
+    p = q;
+    end = stop - bit_bytes;
+    bit_p = end;
+    bit_end = stop;
     bit_buf = 0;
     bit_count = 0;
     failed = false;
@@ -351,27 +338,22 @@ Decoder::Slow Decoder::renorm_slow(uint32_t x, const uint8_t* p, const uint8_t* 
     return {x, p, false};
 }
 
-void Decoder::refill_slow() {
+void Decoder::refill_slow(uint32_t need) {
     while (bit_count <= 56 && bit_p < bit_end) {
         bit_buf |= uint64_t(*bit_p++) << bit_count;
         bit_count += 8;
     }
-    if (bit_count < 32) {
-        // Past the end: supply zero bits so reads stay defined, and remember the failure.
-        // (Reads of up to 32 bits follow a refill.)
-        if (bit_p == bit_end && bit_count < 32) {
-            // A legitimately short tail is fine as long as the reads do not exceed it; the
-            // overrun is detected by finished_cleanly() through bit_count underflow below.
-        }
+    if (bit_count < need) {
+        // Past the end: supply zero bits (bit_buf holds zeros above bit_count) and fail.
+        failed = true;
+        bit_count = need;
     }
 }
 
 bool Decoder::finished_cleanly() const {
     if (failed) return false;
-    if (x0 != kStateLower || x1 != kStateLower) return false;
-    // p0/p1 swap roles on every symbol; both must sit at the end of their streams.
-    bool at_end = (p0 == stream0_end && p1 == stream1_end) || (p0 == stream1_end && p1 == stream0_end);
-    if (!at_end) return false;
+    if (x0 != kStateLower || x1 != kStateLower || x2 != kStateLower || x3 != kStateLower) return false;
+    if (p != end) return false;
     // Unconsumed bits: the buffered ones (only the low bit_count are valid) and unread bytes.
     uint64_t valid = bit_count >= 64 ? bit_buf : bit_buf & ((uint64_t(1) << bit_count) - 1);
     return bit_p == bit_end && bit_count < 8 && valid == 0;
@@ -383,7 +365,7 @@ bool Decoder::get_table(FreqTable& freqs, DecodeTable& table) {
     desc.scale_bits = int(get_bits(3)) + kMinScaleBits;
     if (desc.scale_bits > kMaxScaleBits) return false;
     if (desc.nsym > 1) {
-        const DecodeTable& m = meta().table;
+        const TableView m(meta().table);
         int prev = kMaxWeightCode;
         for (int i = 0; i < desc.nsym; ++i) {
             uint32_t s = get(m);
@@ -403,7 +385,7 @@ bool Decoder::get_table(FreqTable& freqs, DecodeTable& table) {
     }
     if (!build_freqs(desc, freqs)) return false;
     table.build(freqs);
-    return ok_;
+    return !failed;
 }
 
 }  // namespace catpaq::rans

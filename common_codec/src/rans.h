@@ -1,18 +1,17 @@
 #pragma once
 // Static rANS entropy coder plus a raw bit stream (private to common_codec).
 //
-// Symbols are coded with two interleaved 32-bit rANS states, symbol i (in decode order) on
-// state i & 1, each state with its *own* byte stream, so the decoder has two fully independent
-// dependency chains. States live in [kStateLower, 2^31); renormalisation is byte-wise, at most
-// two bytes per symbol, branch-free. Raw bits (the low bits of large residuals, explicit
-// indices, table fields) go to a separate little-endian bit stream read with a 64-bit buffer.
-// The encoder collects everything first and encodes the symbols backwards once the tables are
-// known; it starts both states at kStateLower, so the decoder checks that both states return to
-// exactly kStateLower after the last symbol, with every byte of every stream consumed (and the
-// bit stream's padding zero): a strong end-of-stream integrity check.
+// Symbols are coded with four interleaved 32-bit rANS states sharing one byte stream (symbol i
+// in decode order on state i & 3), so the decoder has four independent dependency chains.
+// States live in [kStateLower, 2^31); renormalisation is byte-wise, at most two bytes per
+// symbol, branch-free. Raw bits (the low bits of large residuals, explicit indices, table
+// fields) go to a separate little-endian bit stream read through a 64-bit buffer. The encoder
+// collects everything first and encodes the symbols backwards once the tables are known; it
+// starts every state at kStateLower, so the decoder checks that all states return to exactly
+// kStateLower after the last symbol, with every byte consumed and the bit stream's padding
+// zero: a strong end-of-stream integrity check.
 //
-// Layout: u32 state0 | u32 state1 | varint bytes0 | varint bit_bytes | bytes of state 0 |
-//         bytes of state 1 (the rest up to the bit stream) | bit stream (bit_bytes)
+// Layout: u32 state0..state3 | varint bit_bytes | rANS bytes | bit stream (bit_bytes)
 //
 // A symbol is coded with a frequency table whose frequencies sum to 2^scale_bits
 // (kMinScaleBits..kMaxScaleBits). Tables are transmitted in the streams themselves
@@ -122,8 +121,7 @@ struct Decoder {
         uint32_t x = x0;
         uint32_t e = t.lut[x & t.mask];
         x = (e & 0x1fffu) * (x >> t.shift) + ((e >> 13) & 0xfffu);
-        const uint8_t* p = p0;
-        if (end0 - p >= 2) [[likely]] {
+        if (end - p >= 2) [[likely]] {
             // At most two bytes are needed (every step leaves x >= kStateLower >> 12); both
             // reads are in bounds, the unneeded ones are masked off.
             uint32_t n1 = x < kStateLower;
@@ -132,24 +130,21 @@ struct Decoder {
             x = (x << (8 * n2)) | (uint32_t(p[1]) & (0u - n2));
             p += n1 + n2;
         } else {
-            Slow r = renorm_slow(x, p, end0);
+            Slow r = renorm_slow(x, p, end);
             x = r.x;
             p = r.p;
             failed |= r.failed;
         }
         x0 = x1;
-        x1 = x;
-        p0 = p1;
-        p1 = p;
-        const uint8_t* e0 = end0;
-        end0 = end1;
-        end1 = e0;
+        x1 = x2;
+        x2 = x3;
+        x3 = x;
         return e >> 25;
     }
     // Raw bits from the bit stream (0 <= nbits <= 32).
     CATPAQ_RANS_INLINE uint32_t get_bits(uint32_t nbits) {
         if (bit_count < nbits) [[unlikely]]
-            refill();
+            refill(nbits);
         uint32_t v = uint32_t(bit_buf & ((uint64_t(1) << nbits) - 1));
         bit_buf >>= nbits;
         bit_count -= nbits;
@@ -169,13 +164,12 @@ struct Decoder {
     // zero and both states are back at their initial value.
     bool finished_cleanly() const;
 
-    uint32_t x0 = 0, x1 = 0;
-    const uint8_t *p0 = nullptr, *end0 = nullptr, *p1 = nullptr, *end1 = nullptr;
+    uint32_t x0 = 0, x1 = 0, x2 = 0, x3 = 0;
+    const uint8_t *p = nullptr, *end = nullptr;
     const uint8_t *bit_p = nullptr, *bit_end = nullptr;
     uint64_t bit_buf = 0;
     uint32_t bit_count = 0;  // valid low bits in bit_buf
     bool failed = true;
-    const uint8_t *stream0_end = nullptr, *stream1_end = nullptr;  // as laid out
 
 private:
     struct Slow {
@@ -184,7 +178,7 @@ private:
         bool failed;
     };
     static Slow renorm_slow(uint32_t x, const uint8_t* p, const uint8_t* end);
-    CATPAQ_RANS_INLINE void refill() {
+    CATPAQ_RANS_INLINE void refill(uint32_t need) {
         if (bit_end - bit_p >= 8) [[likely]] {
             uint64_t w;
             std::memcpy(&w, bit_p, 8);
@@ -193,10 +187,10 @@ private:
             bit_p += (63 - bit_count) >> 3;
             bit_count |= 56;
         } else {
-            refill_slow();
+            refill_slow(need);
         }
     }
-    void refill_slow();
+    void refill_slow(uint32_t need);
 };
 
 }  // namespace catpaq::rans

@@ -27,11 +27,12 @@ struct SplitMix64 {
     uint64_t below(uint64_t n) { return next() % n; }  // the tiny modulo bias is irrelevant here
 };
 
-// A pseudo-random value in [-1, 1] attached to an integer lattice point.
-double lattice_value(int64_t x, int64_t y, int64_t z, uint64_t seed) {
-    uint64_t h = mix64(seed ^ mix64(uint64_t(x) ^ mix64(uint64_t(y) ^ mix64(uint64_t(z)))));
-    return double(h >> 11) * 0x1.0p-52 - 1.0;
-}
+// Pseudo-random values in [-1, 1] at integer lattice points: one finaliser over a linear mix of
+// the coordinates, so the 8 corners of a cell differ from the first only by added constants.
+constexpr uint64_t kLatticeX = 0x9e3779b97f4a7c15ull, kLatticeY = 0xc2b2ae3d27d4eb4full,
+                   kLatticeZ = 0x165667b19e3779f9ull;
+
+double lattice_value(uint64_t key) { return double(mix64(key) >> 11) * 0x1.0p-52 - 1.0; }
 
 double fade(double t) { return t * t * t * (t * (t * 6.0 - 15.0) + 10.0); }  // C2 smoothstep
 
@@ -40,10 +41,13 @@ double value_noise(double x, double y, double z, uint64_t seed) {
     double fx = std::floor(x), fy = std::floor(y), fz = std::floor(z);
     int64_t ix = int64_t(fx), iy = int64_t(fy), iz = int64_t(fz);
     double u = fade(x - fx), v = fade(y - fy), w = fade(z - fz);
+    // Neighbouring cells must agree on shared corners: the seed goes in after the coordinates.
+    uint64_t key = uint64_t(ix) * kLatticeX + uint64_t(iy) * kLatticeY + uint64_t(iz) * kLatticeZ, salt = mix64(seed);
     double corner[2][2][2];
     for (int dz = 0; dz < 2; ++dz)
         for (int dy = 0; dy < 2; ++dy)
-            for (int dx = 0; dx < 2; ++dx) corner[dz][dy][dx] = lattice_value(ix + dx, iy + dy, iz + dz, seed);
+            for (int dx = 0; dx < 2; ++dx)
+                corner[dz][dy][dx] = lattice_value((key + dx * kLatticeX + dy * kLatticeY + dz * kLatticeZ) ^ salt);
     auto lerp = [](double a, double b, double t) { return a + (b - a) * t; };
     double y0 = lerp(lerp(corner[0][0][0], corner[0][0][1], u), lerp(corner[0][1][0], corner[0][1][1], u), v);
     double y1 = lerp(lerp(corner[1][0][0], corner[1][0][1], u), lerp(corner[1][1][0], corner[1][1][1], u), v);
@@ -89,15 +93,13 @@ Vec3d normalized(const Vec3d& p) {
 }
 
 // Equal-angle cube map: spreads cube-sphere vertices evenly (tan(q * pi/4) per axis).
-Vec3d warp(const Vec3d& q) {
-    Vec3d out;
-    for (int k = 0; k < 3; ++k) {
-        double s, c;
-        sincos_turns(q[k] * 0.125, s, c);
-        out[k] = s / c;
-    }
-    return out;
+double warp1(double q) {
+    double s, c;
+    sincos_turns(q * 0.125, s, c);
+    return s / c;
 }
+
+Vec3d warp(const Vec3d& q) { return {warp1(q[0]), warp1(q[1]), warp1(q[2])}; }
 
 // A smooth colour field in the unit-scale coordinates `p`.
 Rgb8 smooth_color(const Vec3d& p, uint64_t seed) {
@@ -157,6 +159,29 @@ struct BoxGrid {
     Vec3d cube(double i, double j, double k) const {
         return {(2.0 * i - n[0]) / n[0], (2.0 * j - n[1]) / n[1], (2.0 * k - n[2]) / n[2]};
     }
+};
+
+// warp() for the cube coordinates of one BoxGrid, from tables: a component of q is always a
+// lattice or half-lattice coordinate (quad centres), so an axis needs only 2n+1 tangents. This
+// takes the polynomials out of the per-vertex loop of the 20M-triangle generators.
+class GridWarp {
+public:
+    explicit GridWarp(const BoxGrid& g) {
+        for (int k = 0; k < 3; ++k) {
+            n_[k] = g.n[k];
+            table_[k].resize(2 * size_t(g.n[k]) + 1);
+            for (size_t h = 0; h < table_[k].size(); ++h) table_[k][h] = warp1((double(h) - n_[k]) / n_[k]);
+        }
+    }
+    Vec3d operator()(const Vec3d& q) const {
+        Vec3d out;
+        for (int k = 0; k < 3; ++k) out[k] = table_[k][size_t(std::lround((q[k] + 1.0) * n_[k]))];
+        return out;
+    }
+
+private:
+    double n_[3];
+    std::vector<double> table_[3];
 };
 
 struct KeepAll {
@@ -270,7 +295,8 @@ Mesh make_sphere(size_t target_triangles, uint64_t seed) {
     BoxGrid grid;
     size_t splits;
     choose_box(target_triangles, grid, splits);
-    Mesh mesh = box_surface(grid, splits, [](const Vec3d& q) { return normalized(warp(q)); });
+    GridWarp warp(grid);
+    Mesh mesh = box_surface(grid, splits, [&](const Vec3d& q) { return normalized(warp(q)); });
     round_to_float(mesh);
     mesh.normals = to_float(mesh.positions);  // on the unit sphere the position is the normal
     for (Vec3f& n : mesh.normals) {
@@ -329,12 +355,13 @@ Mesh make_scan_like(size_t target_triangles, uint64_t seed) {
     BoxGrid grid;
     size_t splits;
     choose_box(target_triangles, grid, splits);
-    // Octaves down to a wavelength of about four triangle edges: detail at every scale, as in
+    // Octaves down to a wavelength of about eight triangle edges: detail at every scale, as in
     // a scan, without aliasing into noise.
     int octaves = 2;
-    for (double wavelength = 1.0 / 1.5; octaves < 14 && wavelength / 2 > 8.0 / grid.n[2]; wavelength /= 2) ++octaves;
+    for (double wavelength = 1.0 / 1.5; octaves < 14 && wavelength / 2 > 12.0 / grid.n[2]; wavelength /= 2) ++octaves;
     const uint64_t shape_seed = mix64(seed ^ 0x5ca1ab1e);
     const Vec3d scale{0.8, 1.3, 0.7};
+    GridWarp warp(grid);
     auto position = [&](const Vec3d& q) {
         Vec3d dir = normalized(warp(q));
         // Radial displacement keeps the surface star-shaped, hence closed and embedded.
@@ -348,7 +375,7 @@ Mesh make_scan_like(size_t target_triangles, uint64_t seed) {
     for (size_t v = 0; v < mesh.positions.size(); ++v) {
         const Vec3d& p = mesh.positions[v];
         // Stone: a warm grey, veined by a second noise field.
-        double vein = fbm(p, 3.0, 3, shape_seed + 100);
+        double vein = fbm(p, 3.0, 2, shape_seed + 100);
         double shade = 150.0 + 60.0 * vein;
         mesh.colors[v] = {uint8_t(std::clamp(shade + 12.0, 0.0, 255.0)), uint8_t(std::clamp(shade + 4.0, 0.0, 255.0)),
                           uint8_t(std::clamp(shade - 8.0, 0.0, 255.0))};

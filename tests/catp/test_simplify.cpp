@@ -208,6 +208,15 @@ TEST(Simplify, ReachesTargetOnClosedIcosphereAndKeepsItClosedAndManifold) {
         EXPECT_EQ(bad_triangles(m, r.indices), 0u);
         EXPECT_GT(r.error, 0);
     }
+    // As far as it goes: still a sphere, down to a few dozen triangles at most (the tetrahedron,
+    // 4 triangles, is the smallest closed surface).
+    const SimplifyResult r = run(m, 0);
+    bool ok = false;
+    EXPECT_EQ(euler_closed_manifold(r.indices, ok), 2);
+    EXPECT_TRUE(ok);
+    EXPECT_EQ(bad_triangles(m, r.indices), 0u);
+    EXPECT_GE(r.indices.size() / 3, 4u);
+    EXPECT_LE(r.indices.size() / 3, 64u);
 }
 
 TEST(Simplify, KeepsLockedVerticesAndOutputsOnlyInputVertices) {
@@ -337,6 +346,35 @@ TEST(Simplify, NoNormalFlipsOnBumpyHeightField) {
         EXPECT_EQ(flipped, 0u) << "target " << target;
         EXPECT_EQ(folded, 0u) << "target " << target;
         EXPECT_EQ(bad_triangles(m, r.indices), 0u);
+    }
+}
+
+TEST(Simplify, FlatPatchSimplifiesAtZeroErrorWithoutZeroAreaTriangles) {
+    // On a plane every collapse off the corners is free, and exactly collinear vertices abound:
+    // the patch must shrink to few triangles without slivers of zero area. Tilted, the
+    // coordinates are no longer exact, so "free" becomes "within rounding".
+    for (double tilt : {0.0, 0.5}) {
+        const TestMesh m = grid(32, [&](double x, double y) { return 0.5 + tilt * (x + y); });
+        const auto in_border = border_edges(m.indices);
+        const double eps = 1e-9;
+        // Border locked: 128 border vertices need at least 126 triangles; interior vertices whose
+        // every collapse would make a collinear triangle are stuck, but few.
+        const SimplifyResult locked = run(m, 0, nullptr, eps, true);
+        EXPECT_EQ(border_edges(locked.indices), in_border);
+        EXPECT_LE(locked.indices.size() / 3, in_border.size() * 3 / 2) << "tilt " << tilt;
+        EXPECT_LE(locked.error, eps);
+        EXPECT_EQ(bad_triangles(m, locked.indices), 0u);
+        // Border sliding: the straight sides slide into the corners, which cost something.
+        const SimplifyResult sliding = run(m, 0, nullptr, eps);
+        EXPECT_LE(sliding.indices.size() / 3, 16u) << "tilt " << tilt;
+        EXPECT_LE(sliding.error, eps);
+        EXPECT_EQ(bad_triangles(m, sliding.indices), 0u);
+        for (uint32_t c : {0u, 32u, 33u * 32, 33u * 33 - 1}) EXPECT_TRUE(referenced(sliding.indices).count(c)) << "corner " << c;
+        // Without an error limit the corners go too, down to a single triangle's worth.
+        const SimplifyResult all = run(m, 0);
+        EXPECT_GE(all.indices.size() / 3, 1u);
+        EXPECT_LE(all.indices.size() / 3, 2u);
+        EXPECT_EQ(bad_triangles(m, all.indices), 0u);
     }
 }
 

@@ -38,6 +38,9 @@ struct CatpBuildReport {
     size_t nodes = 0;
     uint64_t file_bytes = 0;
     double seconds = 0;
+    // Wall time of the phases: placement and level choice, leaf clipping, coarsening (with node
+    // encoding), and writing the final file.
+    double seconds_prepare = 0, seconds_leaves = 0, seconds_coarsen = 0, seconds_write = 0;
     uint64_t peak_rss = 0;
     double diagonal = 0;                 // world units
     std::vector<CatpLevelStats> levels;  // coarse to fine

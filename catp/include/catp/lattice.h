@@ -65,7 +65,10 @@ struct DiamondInfo {
     int level = 0;
     DiamondClass cls = DiamondClass::Cube;
     LatticePoint spine_a, spine_b;
-    std::vector<LatticePoint> ring;  // cyclic, 6 / 4 / 8 vertices (some may be outside the cube)
+    // Cyclic ring of 6 / 4 / 8 vertices (some may be outside the cube). A fixed array, so that
+    // diamond_info() never allocates: it is called on hot paths of the converter and the client.
+    std::array<LatticePoint, 8> ring{};
+    int ring_size = 0;
 };
 
 DiamondId root_diamond();

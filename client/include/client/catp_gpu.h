@@ -1,0 +1,191 @@
+#pragma once
+// CATP fragments on the GPU, and the renderer.
+//
+// FragmentStore keeps one VAO per (diamond, slot) fragment: the 64-bit vertices uploaded as they
+// are (8 bytes per vertex, one uvec2 attribute) plus 16-bit indices (32-bit when the fragment has
+// 65536 vertices or more). It counts GPU bytes and enforces a budget by evicting the least
+// recently used fragments, never a pinned one nor one used in the current frame.
+// The float comparison path (upload_float) stores the same fragments decoded on the CPU:
+// 3 floats position + 3 floats normal + 4 bytes colour = 28 bytes per vertex.
+//
+// CatpRenderer draws a list of (diamond, slot) items, one draw call per fragment, with the
+// fragment's canonical tetrahedron corners as uniforms; the vertex shader (shaders/catp.vert)
+// decodes positions relative to a per-frame integer anchor near the camera.
+//
+// Everything here needs a current GL context (client/gl_context.h).
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <list>
+#include <memory>
+#include <unordered_map>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "catp/format.h"
+#include "client/camera.h"
+#include "client/gl_program.h"
+#include "common_codec/fragment_codec.h"
+
+namespace catpaq {
+
+struct DrawItem {
+    uint64_t diamond_key = 0;  // DiamondId bits
+    int slot = 0;              // 0..7
+    bool operator==(const DrawItem& o) const { return diamond_key == o.diamond_key && slot == o.slot; }
+};
+
+enum class VertexFormat : uint8_t { Packed, Float };
+
+constexpr uint32_t kPackedVertexBytes = 8;
+constexpr uint32_t kFloatVertexBytes = 28;
+
+// A resident fragment.
+struct GpuFragment {
+    VertexFormat format = VertexFormat::Packed;
+    unsigned vao = 0, vbo = 0, ibo = 0;
+    bool index32 = false;      // 32-bit indices (else 16-bit)
+    uint32_t vertex_count = 0;
+    uint32_t index_count = 0;  // 3 per triangle
+    uint64_t bytes = 0;        // vertex + index buffer bytes
+    std::array<LatticePoint, 4> corners{};  // canonical corners of the slot's tetrahedron
+    int pins = 0;
+    uint64_t last_used = 0;    // frame number of the last upload or mark_used
+};
+
+class FragmentStore {
+public:
+    FragmentStore();
+    ~FragmentStore();  // deletes every GL object (the context must still be current)
+    FragmentStore(const FragmentStore&) = delete;
+    FragmentStore& operator=(const FragmentStore&) = delete;
+
+    // Uploads (replacing any previous upload of the same item) slot `slot` of diamond
+    // `diamond_key`. The fragment is validated first: the diamond and slot must exist, indices
+    // be in range and position indices below kBaryIndexCount; throws Error otherwise, leaving the
+    // store unchanged. The new fragment counts as used this frame. Then evicts down to the
+    // budget (see evict_to_budget).
+    void upload(uint64_t diamond_key, int slot, const FragmentMesh& fragment);
+    // The float comparison path: decodes on the CPU (decode_packed_vertex, positions relative to
+    // the dataset origin in world units) and uploads 28 bytes per vertex.
+    void upload_float(uint64_t diamond_key, int slot, const FragmentMesh& fragment, const CatpMeta& meta);
+
+    bool resident(uint64_t diamond_key, int slot) const;
+    const GpuFragment* find(uint64_t diamond_key, int slot) const;
+    bool release(uint64_t diamond_key, int slot);  // false if it was not resident
+    void clear();
+
+    uint64_t gpu_bytes() const { return bytes_; }
+    size_t size() const { return entries_.size(); }
+
+    // GPU memory budget in bytes (0: unlimited). Setting it evicts at once.
+    void set_budget(uint64_t bytes);
+    uint64_t budget() const { return budget_; }
+    bool over_budget() const { return budget_ != 0 && bytes_ > budget_; }
+
+    // Pinned fragments are never evicted (pins nest: pin twice, unpin twice).
+    void pin(uint64_t diamond_key, int slot);
+    void unpin(uint64_t diamond_key, int slot);
+    void unpin_all();
+
+    // Frames: fragments marked used in the current frame are never evicted; marks of earlier
+    // frames only order the eviction (least recently used first).
+    void begin_frame() { ++frame_; }
+    uint64_t frame() const { return frame_; }
+    void mark_used(uint64_t diamond_key, int slot);  // no-op if not resident
+
+    // Evicts least recently used fragments that are neither pinned nor used this frame until
+    // gpu_bytes() <= budget(); returns how many were evicted. May stay over budget.
+    size_t evict_to_budget();
+    // Called for every evicted fragment (not for release() or clear()).
+    void set_eviction_callback(std::function<void(uint64_t diamond_key, int slot)> callback) {
+        on_evict_ = std::move(callback);
+    }
+
+private:
+    struct Key {
+        uint64_t diamond;
+        int slot;
+        bool operator==(const Key& o) const { return diamond == o.diamond && slot == o.slot; }
+    };
+    struct KeyHash {
+        size_t operator()(const Key& k) const { return size_t((k.diamond * 8 + uint64_t(k.slot)) * 0x9E3779B97F4A7C15ull >> 7); }
+    };
+    struct Entry {
+        GpuFragment gpu;
+        std::list<Key>::iterator lru;  // position in lru_ (front = least recently used)
+    };
+    void insert(const Key& key, GpuFragment&& gpu);
+    void destroy(GpuFragment& gpu);
+    void touch(Entry& e);
+
+    std::unordered_map<Key, Entry, KeyHash> entries_;
+    std::list<Key> lru_;
+    uint64_t bytes_ = 0, budget_ = 0, frame_ = 1;
+    std::function<void(uint64_t, int)> on_evict_;
+};
+
+struct RenderSettings {
+    std::array<float, 4> background{1.0f, 1.0f, 1.0f, 1.0f};
+    // World-space direction towards the light; all zero: a headlight (from the eye).
+    std::array<float, 3> light_direction{0.0f, 0.0f, 0.0f};
+    float ambient = 0.25f;
+    bool flat = false;                                // one flat colour, no lighting
+    std::array<float, 3> flat_color{0.0f, 0.0f, 0.0f};
+    bool wireframe = false;                           // polygon mode lines (desktop GL only)
+    bool cull_back_faces = false;
+    bool clear = true;                                // clear colour and depth first
+};
+
+struct RenderStats {
+    size_t draws = 0;
+    size_t triangles = 0;
+    size_t vertices = 0;
+    size_t missing = 0;  // items that were not resident (skipped)
+};
+
+// The per-frame transform the renderer uses: the integer lattice anchor nearest the eye
+// (clamped to the lattice cube), the shader uniforms derived from it, and the matrices.
+struct FrameTransform {
+    LatticePoint anchor{};                    // A
+    std::array<int32_t, 3> anchor_times_grid{};  // kBaryGrid * A
+    glm::dvec3 anchor_world{};                // origin + A * cell
+    float scale = 0;                          // float(cell / kBaryGrid)
+    glm::mat4 mvp_packed{1.0f};               // projection * view_relative(anchor_world)
+    glm::mat4 mvp_float{1.0f};                // projection * view_relative(origin)
+};
+// The camera must have clip planes (Camera::fit_clip_planes).
+FrameTransform frame_transform(const Camera& camera, const CatpMeta& meta);
+
+class CatpRenderer {
+public:
+    explicit CatpRenderer(FragmentStore& store);  // compiles the programs; throws Error
+    ~CatpRenderer();
+    CatpRenderer(const CatpRenderer&) = delete;
+    CatpRenderer& operator=(const CatpRenderer&) = delete;
+
+    // Draws the resident items into the bound draw framebuffer, viewport camera.width x
+    // camera.height, one draw call per fragment; marks each drawn item used in the store's
+    // current frame. Items that are not resident are skipped and counted in `missing`. If the
+    // camera has no clip planes they are fitted to the dataset's bounds.
+    RenderStats render(const Camera& camera, const CatpMeta& meta, const std::vector<DrawItem>& items,
+                       const RenderSettings& settings);
+
+    const GlProgram& packed_program() const { return packed_; }
+    const GlProgram& float_program() const { return float_; }
+
+private:
+    struct Uniforms {
+        int corners = -1, anchor = -1, scale = -1, mvp = -1;
+        int flat_mode = -1, flat_color = -1, light = -1, ambient = -1;
+    };
+    void set_shading(const GlProgram& program, const Uniforms& u, const RenderSettings& settings,
+                     const glm::vec3& light) const;
+
+    FragmentStore& store_;
+    GlProgram packed_, float_;
+    Uniforms packed_u_, float_u_;
+};
+
+}  // namespace catpaq

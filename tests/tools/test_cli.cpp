@@ -1,0 +1,155 @@
+// The catpaq tool on bad input and bad options: a clear message, a non-zero exit, nothing
+// half-written; and the happy path convert -> verify.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <sys/wait.h>
+
+#include "base/atomic_file.h"
+#include "mesh/generators.h"
+#include "mesh/io.h"
+
+using namespace catpaq;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct ToolRun {
+    int status = -1;
+    std::string output;  // stdout and stderr
+};
+
+fs::path scratch() {
+    static fs::path dir = [] {
+        fs::path d = fs::temp_directory_path() / ("catpaq_cli_" + std::to_string(getpid()));
+        fs::create_directories(d);
+        return d;
+    }();
+    return dir;
+}
+
+ToolRun run(const std::string& args) {
+    std::string command = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq " + args + " 2>&1";
+    ToolRun r;
+    FILE* pipe = popen(command.c_str(), "r");
+    char buffer[4096];
+    size_t n;
+    while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
+    int status = pclose(pipe);
+    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return r;
+}
+
+void write_text(const fs::path& path, const std::string& text) { std::ofstream(path) << text; }
+
+// No output and no temporary left next to it.
+void expect_nothing_written(const fs::path& output) {
+    EXPECT_FALSE(fs::exists(output)) << output;
+    for (auto& e : fs::directory_iterator(output.parent_path()))
+        EXPECT_EQ(e.path().filename().string().find(output.filename().string() + "."), std::string::npos) << e.path();
+}
+
+void expect_failure(const std::string& args, const std::string& message_part) {
+    ToolRun r = run(args);
+    EXPECT_NE(r.status, 0) << args << "\n" << r.output;
+    EXPECT_NE(r.output.find(message_part), std::string::npos) << "expected '" << message_part << "' in:\n" << r.output;
+}
+
+}  // namespace
+
+TEST(Cli, ConvertThenVerifySucceedsOnAGeneratedSphere) {
+    fs::path in = scratch() / "sphere.ply", out = scratch() / "sphere.cpq";
+    write_ply(in.string(), make_sphere(5000, 2));
+    ToolRun c = run("convert " + in.string() + " -o " + out.string() + " --leaf-triangles 300");
+    ASSERT_EQ(c.status, 0) << c.output;
+    EXPECT_NE(c.output.find("input triangles/s"), std::string::npos);
+    ToolRun v = run("verify " + out.string() + " --mesh " + in.string() + " --samples 2000");
+    EXPECT_EQ(v.status, 0) << v.output;
+    EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
+}
+
+TEST(Cli, MissingInputIsAClearError) {
+    fs::path out = scratch() / "missing.cpq";
+    expect_failure("convert " + (scratch() / "nope.ply").string() + " -o " + out.string(), "nope.ply");
+    expect_nothing_written(out);
+}
+
+TEST(Cli, TruncatedPlyIsRefusedAndNothingIsWritten) {
+    fs::path in = scratch() / "trunc.ply", out = scratch() / "trunc.cpq";
+    write_ply(in.string(), make_sphere(2000, 1));
+    fs::resize_file(in, fs::file_size(in) / 2);
+    expect_failure("convert " + in.string() + " -o " + out.string(), "trunc.ply");
+    expect_nothing_written(out);
+}
+
+TEST(Cli, NanCoordinatesAreRefused) {
+    fs::path in = scratch() / "nan.obj", out = scratch() / "nan.cpq";
+    write_text(in, "v 0 0 0\nv 1 0 0\nv nan 1 0\nf 1 2 3\n");
+    ToolRun r = run("convert " + in.string() + " -o " + out.string());
+    EXPECT_NE(r.status, 0) << r.output;
+    EXPECT_NE(r.output.find("nan.obj"), std::string::npos) << r.output;
+    expect_nothing_written(out);
+}
+
+TEST(Cli, EmptyMeshIsRefused) {
+    fs::path in = scratch() / "empty.off", out = scratch() / "empty.cpq";
+    write_text(in, "OFF\n3 0 0\n0 0 0\n1 0 0\n0 1 0\n");
+    expect_failure("convert " + in.string() + " -o " + out.string(), "empty.off");
+    expect_nothing_written(out);
+}
+
+TEST(Cli, UnknownFormatIsRefused) {
+    fs::path in = scratch() / "mesh.xyz123", out = scratch() / "unknown.cpq";
+    write_text(in, "hello world\n");
+    expect_failure("convert " + in.string() + " -o " + out.string(), "unknown mesh format");
+    expect_nothing_written(out);
+}
+
+TEST(Cli, ZeroExtentModelIsRefusedWithAReason) {
+    fs::path in = scratch() / "point.obj", out = scratch() / "point.cpq";
+    write_text(in, "v 1 1 1\nv 1 1 1\nv 1 1 1\nf 1 2 3\n");
+    expect_failure("convert " + in.string() + " -o " + out.string(), "zero extent");
+    expect_nothing_written(out);
+}
+
+TEST(Cli, BadOptionsAreClearErrors) {
+    fs::path in = scratch() / "opt.ply", out = scratch() / "opt.cpq";
+    write_ply(in.string(), make_sphere(500, 1));
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --leaf-triangles abc", "--leaf-triangles");
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --leaf-triangles 3", "outside");
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --bogus 1", "unknown option --bogus");
+    expect_failure("convert " + in.string(), "--output is required");
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --format aqp", "unknown --format");
+    expect_failure("convert " + in.string() + " -o /nonexistent_dir_catpaq/x.cpq", "/nonexistent_dir_catpaq");
+    expect_nothing_written(out);
+    expect_failure("frobnicate", "unknown command");
+}
+
+TEST(Cli, VerifyRejectsCorruptTruncatedAndForeignFiles) {
+    fs::path in = scratch() / "v.ply", good = scratch() / "v.cpq";
+    write_ply(in.string(), make_sphere(3000, 4));
+    ASSERT_EQ(run("convert " + in.string() + " -o " + good.string() + " --leaf-triangles 300 --quiet").status, 0);
+    std::string bytes = read_file(good.string());
+
+    fs::path corrupt = scratch() / "corrupt.cpq";
+    std::string flipped = bytes;
+    flipped[flipped.size() - 100] ^= 0x40;  // inside the last node's payload
+    write_text(corrupt, flipped);
+    ToolRun r = run("verify " + corrupt.string());
+    EXPECT_EQ(r.status, 1) << r.output;
+    EXPECT_NE(r.output.find("checksum"), std::string::npos) << r.output;
+
+    fs::path truncated = scratch() / "truncated.cpq";
+    write_text(truncated, bytes.substr(0, bytes.size() - 10));
+    expect_failure("verify " + truncated.string(), "truncated");
+
+    fs::path header = scratch() / "header.cpq";
+    std::string bad_header = bytes;
+    bad_header[9] ^= 1;  // version field
+    write_text(header, bad_header);
+    expect_failure("verify " + header.string(), "header.cpq");
+
+    expect_failure("verify " + in.string(), "not a catpaq dataset");
+}
