@@ -277,7 +277,7 @@ FragmentSet build_fragments(const InputMesh& m, const std::vector<Vec3>& normals
 int choose_grid(const InputMesh& m, const std::vector<Vec3>& normals, double target) {
     int best = 1;
     double best_err = 1e300;
-    for (int g = 1; g <= 12; ++g) {
+    for (int g = 1; g <= 8; ++g) {
         FragmentSet s = build_fragments(m, normals, g);
         double avg = double(s.kept_triangles) / double(std::max<size_t>(1, s.fragments.size()));
         double err = std::fabs(std::log(avg / target));

@@ -3,11 +3,13 @@
 # random nodes of one dataset with wrk (keep-alive). Ours and the httplib baseline answer
 # GET /api/datasets/bench/nodes/KEY (checksum-verified); nginx answers Range requests for the same
 # nodes' bytes in the raw file (sendfile, open_file_cache, access_log off). Prints requests/s,
-# p99 latency and errors side by side and the ratio ours/nginx. Bounded: DURATION seconds per run.
+# p99 latency and errors side by side and the ratio ours/nginx (medians over ROUNDS rounds).
+# Bounded: DURATION seconds per run.
 #
 #   bench/server/run.sh                      (needs the targets catpaq, server_bench_dataset,
 #                                             server_bench_httplib built in $BUILD_DIR)
-#   DURATION=10 CONNECTIONS=100 THREADS=2 SERVER_THREADS=2 NODES=2000 HTTPLIB=1 bench/server/run.sh
+#   DURATION=10 ROUNDS=2 CONNECTIONS=100 THREADS=2 SERVER_THREADS=2 NODES=2000 HTTPLIB=1 bench/server/run.sh
+# Total time: about ROUNDS * (2 or 3) * (DURATION + 1) seconds.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/../.." && pwd)
 here="$root/bench/server"
@@ -18,6 +20,7 @@ THREADS=${THREADS:-2}
 SERVER_THREADS=${SERVER_THREADS:-2}
 NODES=${NODES:-2000}
 HTTPLIB=${HTTPLIB:-1}
+ROUNDS=${ROUNDS:-2}
 NGINX=${NGINX:-/usr/sbin/nginx}
 catpaq="${CATPAQ:-$build/apps/catpaq}"
 make_dataset="$build/bench/server/server_bench_dataset"
@@ -113,38 +116,52 @@ done < <(shuf -n 20 --random-source=<(yes) "$tmp/list.txt")
 if [ "$mismatch" != 0 ]; then echo "run.sh: servers disagree on node bytes" >&2; exit 1; fi
 echo "check: 20 random nodes byte-identical across servers"
 
-# Runs wrk against one server; prints "rps p99_ms p50_ms errors".
+# Runs wrk against one server and appends "name rps p50_ms p99_ms errors MiB/s" to results.txt.
 measure() {  # name port mode
   local out="$tmp/wrk-$1.txt"
   LIST="$tmp/list.txt" MODE="$3" DATASET=bench FILE=bench.cpq \
     wrk -t1 -c10 -d1s -s "$here/wrk_nodes.lua" "http://127.0.0.1:$2" >/dev/null  # warm-up
   LIST="$tmp/list.txt" MODE="$3" DATASET=bench FILE=bench.cpq \
     wrk -t"$THREADS" -c"$CONNECTIONS" -d"${DURATION}s" --timeout 5s -s "$here/wrk_nodes.lua" "http://127.0.0.1:$2" >"$out"
-  python3 - "$out" <<'PY'
+  python3 - "$out" "$1" >>"$tmp/results.txt" <<'PY'
 import re, sys
 text = open(sys.argv[1]).read()
 m = re.search(r"RESULT requests=(\d+) duration_us=(\d+) bytes=(\d+) p50_us=(\d+) p99_us=(\d+) errors=(\d+)", text)
 if not m: sys.exit("no RESULT line in wrk output:\n" + text)
 req, dur, byt, p50, p99, err = map(int, m.groups())
-print(f"{req / (dur / 1e6):.0f} {p99 / 1000:.2f} {p50 / 1000:.2f} {err} {byt / (dur / 1e6) / 2**20:.0f}")
+print(f"{sys.argv[2]} {req / (dur / 1e6):.0f} {p50 / 1000:.2f} {p99 / 1000:.2f} {err} {byt / (dur / 1e6) / 2**20:.0f}")
 PY
 }
 
-read -r ours_rps ours_p99 ours_p50 ours_err ours_mb < <(measure ours "$ours_port" node)
-read -r nginx_rps nginx_p99 nginx_p50 nginx_err nginx_mb < <(measure nginx "$nginx_port" range)
-if [ -n "$httplib_port" ]; then
-  read -r hl_rps hl_p99 hl_p50 hl_err hl_mb < <(measure httplib "$httplib_port" node)
-fi
+# Rounds alternate the order so neither server always runs first on a shared machine.
+for round in $(seq 1 "$ROUNDS"); do
+  if [ $((round % 2)) = 1 ]; then order="ours nginx"; else order="nginx ours"; fi
+  for who in $order; do
+    if [ "$who" = ours ]; then measure ours "$ours_port" node; else measure nginx "$nginx_port" range; fi
+  done
+  if [ -n "$httplib_port" ]; then measure httplib "$httplib_port" node; fi
+done
 
-printf '\n%-28s %12s %10s %10s %8s %8s\n' server requests/s p50_ms p99_ms MiB/s errors
-printf '%-28s %12s %10s %10s %8s %8s\n' "catpaq serve (nodes)" "$ours_rps" "$ours_p50" "$ours_p99" "$ours_mb" "$ours_err"
-printf '%-28s %12s %10s %10s %8s %8s\n' "nginx (Range on file)" "$nginx_rps" "$nginx_p50" "$nginx_p99" "$nginx_mb" "$nginx_err"
-if [ -n "$httplib_port" ]; then
-  printf '%-28s %12s %10s %10s %8s %8s\n' "cpp-httplib (nodes)" "$hl_rps" "$hl_p50" "$hl_p99" "$hl_mb" "$hl_err"
-fi
-python3 -c "import sys; o, n = float(sys.argv[1]), float(sys.argv[2]); print(f'\nratio ours/nginx: {o / n:.2f}x requests/s, p99 {float(sys.argv[3]) / float(sys.argv[4]):.2f}x')" \
-  "$ours_rps" "$nginx_rps" "$ours_p99" "$nginx_p99"
-if [ -n "$httplib_port" ]; then
-  python3 -c "import sys; print(f'ratio httplib/nginx: {float(sys.argv[1]) / float(sys.argv[2]):.2f}x requests/s')" "$hl_rps" "$nginx_rps"
-fi
-if [ "$ours_err" != 0 ]; then echo "run.sh: catpaq serve had $ours_err errors" >&2; exit 1; fi
+python3 - "$tmp/results.txt" <<'PY'
+import statistics, sys
+rows = [line.split() for line in open(sys.argv[1])]
+labels = {"ours": "catpaq serve (nodes)", "nginx": "nginx (Range on file)", "httplib": "cpp-httplib (nodes)"}
+print(f"\n{'run':<28} {'requests/s':>11} {'p50_ms':>8} {'p99_ms':>8} {'MiB/s':>7} {'errors':>7}")
+for name, rps, p50, p99, err, mib in rows:
+    print(f"{labels[name]:<28} {rps:>11} {p50:>8} {p99:>8} {mib:>7} {err:>7}")
+med = {}
+for name in labels:
+    runs = [r for r in rows if r[0] == name]
+    if runs:
+        med[name] = (statistics.median(float(r[1]) for r in runs), statistics.median(float(r[3]) for r in runs),
+                     sum(int(r[4]) for r in runs))
+print(f"\n{'median over rounds':<28} {'requests/s':>11} {'p99_ms':>8} {'errors':>7}")
+for name, (rps, p99, err) in med.items():
+    print(f"{labels[name]:<28} {rps:>11.0f} {p99:>8.2f} {err:>7}")
+o, n = med["ours"], med["nginx"]
+print(f"\nratio ours/nginx: {o[0] / n[0]:.2f}x requests/s, {o[1] / n[1]:.2f}x p99 latency (lower is better)")
+if "httplib" in med:
+    print(f"ratio httplib/nginx: {med['httplib'][0] / n[0]:.2f}x requests/s")
+if o[2]:
+    sys.exit(f"run.sh: catpaq serve had {o[2]} errors")
+PY

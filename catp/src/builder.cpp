@@ -129,7 +129,9 @@ void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&
             mn = std::min(mn, pts[k][i]);
             mx = std::max(mx, pts[k][i]);
         }
-        lo[i] = std::max(0, int32_t(std::floor(mn / side)));
+        // ceil - 1, not floor: geometry exactly on a cube boundary plane belongs to both cubes (a
+        // triangle lying in that plane is kept by exactly one of them, by the coplanar rule).
+        lo[i] = std::max(0, int32_t(std::ceil(mn / side)) - 1);
         hi[i] = std::min((kLatticeSize / side) - 1, int32_t(std::floor(mx / side)));
     }
     for (int32_t z = lo[2]; z <= hi[2]; ++z)
@@ -229,7 +231,11 @@ SlotKey slot_key(const Tetrahedron& t) {
 
 struct LevelFragments {
     std::unordered_map<SlotKey, WorkFragment, SlotKeyHash> fragments;
-    std::unordered_map<uint64_t, double> diamond_error;  // lattice units
+    // Error of each diamond's unquantized geometry from the original (lattice units): 0 at the
+    // leaves, the largest child's plus the diamond's own measured simplification error above.
+    // The stored bound adds the diamond's quantization step; both terms grow towards the root,
+    // so stored bounds are monotone.
+    std::unordered_map<uint64_t, double> diamond_error;
 };
 
 double tetrahedron_longest_edge(const Tetrahedron& t) {
@@ -397,9 +403,7 @@ CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, co
             for (int s = 0; s < 8; ++s)
                 if (list[i].second[s]) quant = std::max(quant, tetrahedron_longest_edge(diamond_tetrahedron(info, s)));
             quant /= kBaryGrid;
-            double error = std::max(quant, leaf ? 0.0 : level.diamond_error[id.bits]);
-            level.diamond_error[id.bits] = error;  // distinct keys per thread: safe after reserve
-            write_node(id, info, list[i].second, error, leaf);
+            write_node(id, info, list[i].second, level.diamond_error.at(id.bits) + quant, leaf);
         });
     };
     {
@@ -431,8 +435,13 @@ CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, co
             auto& children = by_parent[parents[i]];
             std::sort(children.begin(), children.end(),
                       [](const auto& a, const auto& b) { return a.first < b.first; });
+            // Every child with geometry counts, also those whose gathered slots came from other
+            // parents: that keeps the stored errors monotone along every parent-child edge.
             double child_error = 0;
-            for (auto& [key, frag] : children) child_error = std::max(child_error, current.diamond_error.at(key.diamond));
+            for (DiamondId child : diamond_children(id)) {
+                auto it = current.diamond_error.find(child.bits);
+                if (it != current.diamond_error.end()) child_error = std::max(child_error, it->second);
+            }
             WorkFragment gathered;
             {
                 FragmentWelder welder(gathered);
@@ -446,10 +455,10 @@ CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, co
                     quant = std::max(quant, tetrahedron_longest_edge(diamond_tetrahedron(info, s)));
             quant /= kBaryGrid;
             // Monotone: a diamond's error bounds its children's plus its own simplification.
-            produced_error[i] = std::max({child_error * 1.0, child_error + simplify_error, quant});
+            produced_error[i] = child_error + simplify_error;
             std::array<WorkFragment*, 8> slots;
             for (int s = 0; s < 8; ++s) slots[s] = &produced[i][s];
-            write_node(id, info, slots, produced_error[i], false);
+            write_node(id, info, slots, produced_error[i] + quant, false);
             progress.add(gathered_triangles / 2);
         });
         for (size_t i = 0; i < parents.size(); ++i) {

@@ -74,14 +74,14 @@ Vec3d snap_onto_line(const LatticePoint& a, const LatticePoint& b, const Vec3d& 
     int dir[3];
     for (int i = 0; i < 3; ++i) len = std::max(len, std::abs(b[i] - a[i]));
     for (int i = 0; i < 3; ++i) dir[i] = (b[i] - a[i]) / len;  // entries in {-1, 0, 1}
-    double uu = 0, up = 0;
-    for (int i = 0; i < 3; ++i) {
-        uu += dir[i] * dir[i];
-        up += dir[i] * (p[i] - a[i]);
-    }
-    double mu = snap_to_grid(up / uu);
-    mu = std::max(0.0, std::min(double(len), mu));
-    return {a[0] + dir[0] * mu, a[1] + dir[1] * mu, a[2] + dir[2] * mu};
+    // Parametrise by one coordinate k along which the line moves: snapping that coordinate and
+    // deriving the others from it gives the same grid point whichever lattice point of the line
+    // is used as `a` (they differ by integer steps).
+    int k = dir[0] != 0 ? 0 : (dir[1] != 0 ? 1 : 2);
+    double t = snap_to_grid(p[k]);
+    Vec3d q;
+    for (int i = 0; i < 3; ++i) q[i] = a[i] + dir[i] * dir[k] * (t - a[k]);
+    return q;
 }
 
 namespace {
@@ -99,6 +99,24 @@ bool same_position(const Vec3d& a, const Vec3d& b) { return a[0] == b[0] && a[1]
 bool is_collinear(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
     return orient2d(a.data(), b.data(), c.data(), 0, 1) == 0 && orient2d(a.data(), b.data(), c.data(), 1, 2) == 0 &&
            orient2d(a.data(), b.data(), c.data(), 0, 2) == 0;
+}
+
+// Closest point on the lattice line (a, b) to the line (lo, hi): their intersection when the two
+// are coplanar and cross. Canonical: endpoints are sorted first.
+Vec3d line_line_point(Vec3d lo, Vec3d hi, LatticePoint a, LatticePoint b) {
+    if (hi < lo) std::swap(lo, hi);
+    if (b < a) std::swap(a, b);
+    double u[3], v[3], w[3];
+    for (int i = 0; i < 3; ++i) {
+        u[i] = double(b[i] - a[i]);
+        v[i] = hi[i] - lo[i];
+        w[i] = double(a[i]) - lo[i];
+    }
+    auto dot = [](const double* x, const double* y) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; };
+    double uu = dot(u, u), uv = dot(u, v), vv = dot(v, v), uw = dot(u, w), vw = dot(v, w);
+    double denom = uu * vv - uv * uv;
+    double s = denom != 0 ? (uv * vw - vv * uw) / denom : 0.0;  // parameter along (a, b)
+    return {a[0] + s * u[0], a[1] + s * u[1], a[2] + s * u[2]};
 }
 
 double plane_value(const LatticePlane& plane, const Vec3d& p) {
@@ -132,7 +150,9 @@ ClipVertex edge_plane_point(const std::array<Vec3d, 3>& tri, int k, const ClipPl
         for (const auto& line : cp.lines) {
             Vec3d a = to_vec(line[0]), b = to_vec(line[1]);
             if (orient3d(a.data(), b.data(), lo.data(), hi.data()) == 0) {
-                snapped = snap_onto_line(line[0], line[1], x);
+                // The edge crosses the lattice line: intersect the two lines directly (a function of
+                // the edge and the line only, so every cell sharing the line gets the same bits).
+                snapped = snap_onto_line(line[0], line[1], line_line_point(lo, hi, line[0], line[1]));
                 break;
             }
         }
@@ -200,9 +220,14 @@ ClipVertex triangle_line_point(const std::array<Vec3d, 3>& tri, const ClipPlane&
             fa += n[i] * (a[i] - sorted[0][i]);
             fb += n[i] * (b[i] - sorted[0][i]);
         }
+        // Not clamped to the segment: intermediate polygons of the successive clips extend
+        // beyond the cell, so the crossing can lie anywhere on the line (later planes cut it off).
         double mu = fa / (fa - fb);
-        if (!(mu >= 0.0)) mu = 0.0;
-        if (mu > 1.0) mu = 1.0;
+        if (!std::isfinite(mu)) {  // the triangle's plane contains the line: keep the local point
+            out.position = snap_onto_line(ends[0], ends[1], approx);
+            out.weights = triangle_weights(tri, out.position);
+            return out;
+        }
         Vec3d x = {a[0] + mu * (b[0] - a[0]), a[1] + mu * (b[1] - a[1]), a[2] + mu * (b[2] - a[2])};
         out.position = snap_onto_line(ends[0], ends[1], x);
     }

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 
+#include "catp/distance.h"
 #include "catp/simplify.h"
 #include "common_codec/barycentric.h"
 #include "common_codec/octahedral.h"
@@ -150,6 +151,31 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, Fragm
     }
 }
 
+// Hausdorff-style distance between the gathered surface and its simplification, both ways:
+// removed vertices to the simplified surface, and the simplified triangles' centroids and edge
+// midpoints to the gathered surface. (The quadric cost of the simplifier is an estimate, not a
+// bound: measured here so the stored errors can be trusted by the cut engine.)
+double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified) {
+    if (simplified.size() == gathered.indices.size()) return 0.0;
+    std::vector<uint8_t> kept(gathered.positions.size(), 0);
+    for (uint32_t v : simplified) kept[v] = 1;
+    SurfaceDistance to_simplified(gathered.positions, simplified);
+    double error = 0;
+    for (size_t v = 0; v < gathered.positions.size(); ++v)
+        if (!kept[v]) error = std::max(error, to_simplified.distance(gathered.positions[v]));
+    SurfaceDistance to_gathered(gathered.positions, gathered.indices);
+    for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
+        const Vec3d &a = gathered.positions[simplified[i]], &b = gathered.positions[simplified[i + 1]],
+                    &c = gathered.positions[simplified[i + 2]];
+        Vec3d points[4] = {{(a[0] + b[0] + c[0]) / 3, (a[1] + b[1] + c[1]) / 3, (a[2] + b[2] + c[2]) / 3},
+                           {(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2},
+                           {(b[0] + c[0]) / 2, (b[1] + c[1]) / 2, (b[2] + c[2]) / 2},
+                           {(a[0] + c[0]) / 2, (a[1] + c[1]) / 2, (a[2] + c[2]) / 2}};
+        for (const Vec3d& p : points) error = std::max(error, to_gathered.distance(p));
+    }
+    return error;
+}
+
 double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
     for (auto& f : out) f = WorkFragment{};
     uint8_t slots = existing_slots(d);
@@ -181,6 +207,7 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
     settings.target_triangles = gathered.indices.size() / 3 / 2;
     SimplifyResult simplified = simplify_mesh(&gathered.positions[0][0], vertex_count, gathered.indices.data(),
                                               gathered.indices.size(), locked.data(), settings);
+    double error = measured_simplification_error(gathered, simplified.indices);
 
     // Clip by the interior faces into the slots.
     std::vector<std::vector<ClipPlane>> slot_planes(n);
@@ -226,7 +253,7 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
             for (auto& tr : tris) welders[s].triangle(ids[tr[0]], ids[tr[1]], ids[tr[2]]);
         }
     }
-    return simplified.error;
+    return error;
 }
 
 }  // namespace catpaq

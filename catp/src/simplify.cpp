@@ -3,7 +3,7 @@
 // Data layout: the live triangles are a flat index buffer. Every pass rebuilds a compact
 // vertex -> triangle adjacency (CSR) in which each incident triangle (x, a, b) of vertex x is
 // stored, rotated to start at x, as the pair (a, b): the pair list of x is x's fan. From it come
-// the candidates (the cheapest allowed target of each removable vertex), which are radix-sorted by
+// the candidates (the cheapest allowed target of each removable vertex), which are bucket-sorted by
 // cost; then the cheapest candidates are collapsed, each vertex taking part in at most one
 // collapse per pass. Collapses inside a pass are recorded in a remap table (removed vertex ->
 // kept vertex) that the checks of later collapses in the same pass resolve through, so the
@@ -43,6 +43,10 @@ constexpr uint8_t kFrozen = 0x80;  // flag: took part in a collapse in the curre
 constexpr double kBorderWeight = 1.0;
 // A collapse may not turn a triangle's normal by more than acos(kMinCosine) (~78 degrees).
 constexpr double kMinCosine = 0.2;
+// ... nor make a triangle face away from the input surface its corners stand for (the sum of
+// their merged area-weighted normals) by more than acos(kMinSurfaceCosine) (~73 degrees): this
+// catches folds that build up over several collapses, each within the first limit,
+constexpr double kMinSurfaceCosine = 0.3;
 // ... nor leave a triangle with sin^2(angle at the kept vertex) below this (zero area).
 constexpr double kMinSine2 = 1e-12;
 // Pass schedule: the error allowed in a pass is kPassSlack times the cost of the candidate at
@@ -111,35 +115,30 @@ struct Candidate {
 
 // Per-vertex data read when a vertex is a collapse target, packed for locality.
 struct VertexData {
-    Vec p;     // position, relative to the centre of the mesh
+    Vec p;     // position, relative to the first vertex of the first triangle
     double e;  // the vertex's quadric at its own position (0 until it absorbs a vertex)
     double w;  // the quadric's total weight (area, plus border-edge weights)
+    Vec n;     // sum of the area-weighted normals of the input triangles merged into the vertex
 };
 
-inline uint32_t sort_key(float cost) {
-    // Costs are >= 0, so the float's bits order like the values; 21 bits keep 12 of mantissa.
-    return std::bit_cast<uint32_t>(cost) >> 10;
-}
+// Sort key: the top 11 bits of the float cost (non-negative, so its bits order like its values):
+// the exponent and 3 bits of mantissa, i.e. buckets 12.5% wide. Within a bucket candidates stay
+// in vertex order, which keeps the collapses of a pass walking memory mostly forwards: on large
+// meshes that is worth more than ordering finer than the costs' own accuracy.
+inline uint32_t sort_key(float cost) { return std::bit_cast<uint32_t>(cost) >> 20; }
 
-// Stable LSD radix sort of the candidates by sort_key, in two 11-bit digits.
-void radix_sort(Candidate* items, Candidate* tmp, size_t n) {
-    constexpr uint32_t kBits = 11, kSize = 1u << kBits, kMask = kSize - 1;
-    uint32_t h0[kSize] = {}, h1[kSize] = {};
-    for (size_t i = 0; i < n; ++i) {
-        const uint32_t k = sort_key(items[i].cost);
-        ++h0[k & kMask];
-        ++h1[(k >> kBits) & kMask];
-    }
-    uint32_t s0 = 0, s1 = 0;
+// Stable counting sort of the candidates by sort_key.
+void bucket_sort(const Candidate* items, Candidate* out, size_t n) {
+    constexpr uint32_t kSize = 1u << 11;
+    uint32_t start[kSize] = {};
+    for (size_t i = 0; i < n; ++i) ++start[sort_key(items[i].cost)];
+    uint32_t sum = 0;
     for (uint32_t i = 0; i < kSize; ++i) {
-        const uint32_t c0 = h0[i], c1 = h1[i];
-        h0[i] = s0;
-        h1[i] = s1;
-        s0 += c0;
-        s1 += c1;
+        const uint32_t c = start[i];
+        start[i] = sum;
+        sum += c;
     }
-    for (size_t i = 0; i < n; ++i) tmp[h0[sort_key(items[i].cost) & kMask]++] = items[i];
-    for (size_t i = 0; i < n; ++i) items[h1[(sort_key(tmp[i].cost) >> kBits) & kMask]++] = tmp[i];
+    for (size_t i = 0; i < n; ++i) out[start[sort_key(items[i].cost)]++] = items[i];
 }
 
 // Queries on one fan (the pairs of one vertex): linear for small fans, binary search in sorted
@@ -279,8 +278,8 @@ public:
         arena_.reserve(kind_, v);
         arena_.reserve(vertex_, v);
         arena_.reserve(quadric_, v);
-        arena_.reserve(candidates_, v);
-        arena_.reserve(sort_tmp_, v);
+        arena_.reserve(candidates_, 2 * v);
+        arena_.reserve(sorted_, 2 * v);
         arena_.allocate();
     }
 
@@ -297,17 +296,9 @@ private:
     void init_quadrics();
     void collect_candidates();
     bool border_neighbours(uint32_t x, uint32_t& first, uint32_t& last);
-    bool try_collapse(uint32_t x, uint32_t y, double max_error2);
+    enum Outcome { kDone, kBusy, kRejected };
+    Outcome try_collapse(uint32_t x, uint32_t y, double max_error2);
     void compact();
-
-    // Quadric cost of collapsing a vertex with quadric q and weight w onto y, before division
-    // by the total weight.
-    double cost(const Quadric& q, double w, uint32_t y) const {
-        const VertexData& t = vertex_[y];
-        const double v = std::max(q.eval(t.p) + t.e, 0.0);
-        const double tw = w + t.w;
-        return tw > 0 ? v / tw : 0;
-    }
 
     const SimplifySettings settings_;
     const uint32_t vertex_count_;
@@ -324,7 +315,7 @@ private:
     VertexData* vertex_ = nullptr;
     Quadric* quadric_ = nullptr;
     Candidate* candidates_ = nullptr;
-    Candidate* sort_tmp_ = nullptr;
+    Candidate* sorted_ = nullptr;
     size_t candidate_count_ = 0;
     uint32_t check_ = 0;
     size_t live_ = 0;
@@ -357,21 +348,17 @@ void Simplifier::load(const double* positions, const uint32_t* indices, size_t i
 }
 
 void Simplifier::init_positions(const double* positions) {
-    // Work relative to the centre of the referenced vertices: quadrics of coordinates around 1e6
-    // would lose their precision to cancellation.
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (size_t i = 0; i < tri_count_ * 3; ++i) {
-        const double* p = positions + size_t(tris_[i]) * 3;
-        for (int k = 0; k < 3; ++k) {
-            lo[k] = std::min(lo[k], p[k]);
-            hi[k] = std::max(hi[k], p[k]);
-        }
+    // Work relative to a vertex of the mesh: quadrics of coordinates around 1e6 would lose their
+    // precision to cancellation. (Any point of the mesh does; a vertex makes the translation exact
+    // for inputs on a grid, so a translated mesh simplifies exactly alike.)
+    Vec origin{0, 0, 0};
+    if (tri_count_ > 0) {
+        const double* o = positions + size_t(tris_[0]) * 3;
+        origin = {o[0], o[1], o[2]};
     }
-    Vec centre{0, 0, 0};
-    if (tri_count_ > 0) centre = {(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, (lo[2] + hi[2]) / 2};
     for (uint32_t v = 0; v < vertex_count_; ++v) {
         const double* p = positions + size_t(v) * 3;
-        vertex_[v] = {Vec{p[0], p[1], p[2]} - centre, 0, 0};
+        vertex_[v] = {Vec{p[0], p[1], p[2]} - origin, 0, 0, Vec{0, 0, 0}};
     }
 }
 
@@ -497,17 +484,20 @@ void Simplifier::init_quadrics() {
         const uint32_t i0 = tris_[t], i1 = tris_[t + 1], i2 = tris_[t + 2];
         const Vec& p0 = vertex_[i0].p;
         const Vec nrm = cross(vertex_[i1].p - p0, vertex_[i2].p - p0);
-        const double len = std::sqrt(dot(nrm, nrm));
-        if (!(len > 0)) continue;
-        const Vec u{nrm.x / len, nrm.y / len, nrm.z / len};
+        const double len2 = dot(nrm, nrm);
+        if (!(len2 > 0)) continue;
+        // The unit normal's plane weighted by the area |nrm| / 2: nrm nrm^T / (2 |nrm|).
+        const double len = std::sqrt(len2);
         Quadric q{};
-        q.add_plane(u, -dot(u, p0), len / 2);
+        q.add_plane(nrm, -dot(nrm, p0), 0.5 / len);
         quadric_[i0].add(q);
         quadric_[i1].add(q);
         quadric_[i2].add(q);
-        vertex_[i0].w += len / 2;
-        vertex_[i1].w += len / 2;
-        vertex_[i2].w += len / 2;
+        for (uint32_t v : {i0, i1, i2}) {
+            VertexData& d = vertex_[v];
+            d.w += len / 2;
+            d.n = {d.n.x + nrm.x, d.n.y + nrm.y, d.n.z + nrm.z};
+        }
     }
     if (settings_.lock_topological_border) return;
     // Border edges: the directed edge x -> a of pair (a, b) of x with no twin (a is no pair's b).
@@ -565,6 +555,9 @@ bool Simplifier::border_neighbours(uint32_t x, uint32_t& first, uint32_t& last) 
     return nf == 1 && nl == 1;
 }
 
+// Each removable vertex contributes its two cheapest allowed collapses: if the cheaper one is
+// blocked by a check, the other still comes up in its turn (a vertex with only one candidate
+// whose target is blocked for good would otherwise stay forever).
 void Simplifier::collect_candidates() {
     size_t n = 0;
     for (uint32_t x = 0; x < vertex_count_; ++x) {
@@ -572,41 +565,57 @@ void Simplifier::collect_candidates() {
         if (b0 == b1 || kind_[x] == kLocked) continue;
         const Quadric q = quadric_[x];
         const double w = vertex_[x].w;
-        double best = INFINITY;
-        uint32_t best_y = UINT32_MAX;
-        if (kind_[x] == kInterior) {
-            for (uint32_t i = b0; i < b1; ++i) {
-                const uint32_t y = pairs_[i].a;
-                const double c = cost(q, w, y);
-                if (c < best) {
-                    best = c;
-                    best_y = y;
-                }
+        // Costs as fractions num / den (den > 0), compared by cross-multiplication: divisions on
+        // the path to every comparison cost more than the rest of the evaluation. 1 / 0 = none.
+        double n1 = 1, d1 = 0, n2 = 1, d2 = 0;
+        uint32_t y1 = UINT32_MAX, y2 = UINT32_MAX;
+        auto consider = [&](uint32_t y) {
+            const VertexData& t = vertex_[y];
+            double num = std::max(q.eval(t.p) + t.e, 0.0), den = w + t.w;
+            if (!(den > 0)) {
+                num = 0;
+                den = 1;
             }
-        } else {
-            uint32_t first = 0, last = 0;
-            if (!border_neighbours(x, first, last)) continue;
-            best = cost(q, w, first);
-            best_y = first;
-            const double c = cost(q, w, last);
-            if (c < best) {
-                best = c;
-                best_y = last;
+            if (num * d1 < n1 * den) {
+                n2 = n1;
+                d2 = d1;
+                y2 = y1;
+                n1 = num;
+                d1 = den;
+                y1 = y;
+            } else if (num * d2 < n2 * den) {
+                n2 = num;
+                d2 = den;
+                y2 = y;
             }
+        };
+        // Targets: every neighbour (the first elements of the fan's pairs) of an interior vertex,
+        // the two border neighbours of a border vertex. One loop, so the evaluation inlines.
+        const Pair* targets = pairs_ + b0;
+        uint32_t count = b1 - b0;
+        Pair border[2];
+        if (kind_[x] == kBorder) {
+            if (!border_neighbours(x, border[0].a, border[1].a)) continue;
+            targets = border;
+            count = border[0].a == border[1].a ? 1 : 2;
         }
-        candidates_[n++] = {x, best_y, float(best)};
+        for (uint32_t i = 0; i < count; ++i) consider(targets[i].a);
+        if (y1 != UINT32_MAX) candidates_[n++] = {x, y1, float(n1 / d1)};
+        if (y2 != UINT32_MAX) candidates_[n++] = {x, y2, float(n2 / d2)};
     }
     candidate_count_ = n;
 }
 
-bool Simplifier::try_collapse(uint32_t x, uint32_t y, double max_error2) {
-    if ((kind_[x] | kind_[y]) & kFrozen) return false;
+// Collapses x onto y unless a vertex is frozen (kBusy) or the collapse costs more than
+// max_error2 or fails a check (kRejected).
+Simplifier::Outcome Simplifier::try_collapse(uint32_t x, uint32_t y, double max_error2) {
+    if ((kind_[x] | kind_[y]) & kFrozen) return kBusy;
     // The exact cost (candidates hold it rounded to float, for sorting).
     VertexData& vy = vertex_[y];
     const double merged_e = std::max(quadric_[x].eval(vy.p) + vy.e, 0.0);
     const double merged_w = vertex_[x].w + vy.w;
     const double cost = merged_w > 0 ? merged_e / merged_w : 0;
-    if (cost > max_error2) return false;
+    if (cost > max_error2) return kRejected;
     const Pair* px = pairs_ + start_[x];
     const uint32_t kx = start_[x + 1] - start_[x];
     const Pair* py = pairs_ + start_[y];
@@ -618,15 +627,15 @@ bool Simplifier::try_collapse(uint32_t x, uint32_t y, double max_error2) {
         const uint32_t a = remap_[px[i].a], b = remap_[px[i].b];
         if (a == b) continue;  // removed earlier in this pass
         if (a == y || b == y) {
-            if (nopp == 2) return false;
+            if (nopp == 2) return kRejected;
             opp[nopp++] = a == y ? b : a;
         }
     }
-    if (nopp != (kind_[x] == kInterior ? 2u : 1u)) return false;
-    if (nopp == 2 && opp[0] == opp[1]) return false;
+    if (nopp != (kind_[x] == kInterior ? 2u : 1u)) return kRejected;
+    if (nopp == 2 && opp[0] == opp[1]) return kRejected;
     // An opposite whose only triangle is removed would vanish (and its border with it).
     for (uint32_t j = 0; j < nopp; ++j)
-        if (valence_[opp[j]] < 2) return false;
+        if (valence_[opp[j]] < 2) return kRejected;
 
     // Link condition: the only common neighbours of x and y may be the opposites.
     const uint32_t check = ++check_;
@@ -636,17 +645,19 @@ bool Simplifier::try_collapse(uint32_t x, uint32_t y, double max_error2) {
     }
     const Vec& p0 = vertex_[x].p;
     const Vec& p1 = vertex_[y].p;
+    const Vec& nx = vertex_[x].n;
+    const Vec nxy{nx.x + vy.n.x, nx.y + vy.n.y, nx.z + vy.n.z};
     for (uint32_t i = 0; i < kx; ++i) {
         const uint32_t a = remap_[px[i].a], b = remap_[px[i].b];
         if (a == b || a == y || b == y) continue;
         const bool a_opp = a == opp[0] || a == opp[1];
         const bool b_opp = b == opp[0] || b == opp[1];
-        if ((mark_[a] == check && !a_opp) || (mark_[b] == check && !b_opp)) return false;
+        if ((mark_[a] == check && !a_opp) || (mark_[b] == check && !b_opp)) return kRejected;
         if (a_opp && b_opp) {
             // (x, o0, o1) becomes (y, o0, o1): a duplicate if y already has that triangle.
             for (uint32_t j = 0; j < ky; ++j) {
                 const uint32_t c = remap_[py[j].a], d = remap_[py[j].b];
-                if ((c == a && d == b) || (c == b && d == a)) return false;
+                if ((c == a && d == b) || (c == b && d == a)) return kRejected;
             }
         }
         // Normal flips and zero areas.
@@ -656,15 +667,23 @@ bool Simplifier::try_collapse(uint32_t x, uint32_t y, double max_error2) {
         const Vec ea = pa - p1, eb = pb - p1;
         const Vec n1 = cross(ea, eb);
         const double d = dot(n0, n1);
-        if (!(d > 0)) return false;
+        if (!(d > 0)) return kRejected;
         const double l0 = dot(n0, n0), l1 = dot(n1, n1);
-        if (d * d < kMinCosine * kMinCosine * l0 * l1) return false;
-        if (l1 <= kMinSine2 * dot(ea, ea) * dot(eb, eb)) return false;
+        if (d * d < kMinCosine * kMinCosine * l0 * l1) return kRejected;
+        if (l1 <= kMinSine2 * dot(ea, ea) * dot(eb, eb)) return kRejected;
+        // Facing against the input surface that its corners stand for (the sum of their merged
+        // normals): catches folds that build up over several collapses, each within the limit.
+        const Vec& na = vertex_[a].n;
+        const Vec& nb = vertex_[b].n;
+        const Vec ns{nxy.x + na.x + nb.x, nxy.y + na.y + nb.y, nxy.z + na.z + nb.z};
+        const double ds = dot(n1, ns);
+        if (!(ds > 0) || ds * ds < kMinSurfaceCosine * kMinSurfaceCosine * l1 * dot(ns, ns)) return kRejected;
     }
 
     remap_[x] = y;
     vy.e = merged_e;
     vy.w = merged_w;
+    vy.n = nxy;
     quadric_[y].add(quadric_[x]);
     kind_[x] |= kFrozen;
     kind_[y] |= kFrozen;
@@ -673,7 +692,7 @@ bool Simplifier::try_collapse(uint32_t x, uint32_t y, double max_error2) {
     valence_[x] = 0;
     live_ -= nopp;
     error2_ = std::max(error2_, cost);
-    return true;
+    return kDone;
 }
 
 void Simplifier::compact() {
@@ -706,14 +725,14 @@ SimplifyResult Simplifier::run() {
             collect_candidates();
             const size_t n = candidate_count_;
             if (n == 0) break;
-            radix_sort(candidates_, sort_tmp_, n);
-            const double pass_limit = candidates_[std::min(n - 1, size_t(double(n) * kPassQuantile))].cost * kPassSlack;
+            bucket_sort(candidates_, sorted_, n);
+            const double pass_limit = sorted_[std::min(n - 1, size_t(double(n) * kPassQuantile))].cost * kPassSlack;
             size_t done = 0;
             for (size_t i = 0; i < n; ++i) {
-                const Candidate& c = candidates_[i];
+                const Candidate& c = sorted_[i];
                 if (live_ <= target || c.cost > max_error2) break;
                 if (c.cost > pass_limit && done > 0) break;
-                done += try_collapse(c.x, c.y, max_error2);
+                done += try_collapse(c.x, c.y, max_error2) == kDone;
             }
             if (done == 0) break;
             compact();
@@ -736,6 +755,34 @@ SimplifyResult simplify_mesh(const double* positions, size_t vertex_count, const
         throw std::invalid_argument("simplify_mesh: mesh too large (2^32 indices or vertices)");
     if (index_count == 0) return {};
     if (!indices || !positions) throw std::invalid_argument("simplify_mesh: null positions or indices");
+    if (vertex_count > index_count) {
+        // Most vertices are unreferenced (a shared vertex buffer, say): work on the referenced
+        // ones only, so memory follows the mesh. Numbered in input order, they give exactly the
+        // result the full buffer would.
+        std::vector<uint32_t> local(vertex_count, 0);
+        for (size_t i = 0; i < index_count; ++i) {
+            if (indices[i] >= vertex_count) throw std::invalid_argument("simplify_mesh: vertex index out of range");
+            local[indices[i]] = 1;
+        }
+        std::vector<uint32_t> global;
+        for (size_t v = 0; v < vertex_count; ++v)
+            if (local[v]) {
+                local[v] = uint32_t(global.size());
+                global.push_back(uint32_t(v));
+            }
+        std::vector<double> sub_positions(global.size() * 3);
+        std::vector<uint8_t> sub_locked(locked ? global.size() : 0);
+        for (size_t i = 0; i < global.size(); ++i) {
+            std::copy(positions + size_t(global[i]) * 3, positions + size_t(global[i]) * 3 + 3, &sub_positions[i * 3]);
+            if (locked) sub_locked[i] = locked[global[i]];
+        }
+        std::vector<uint32_t> sub_indices(index_count);
+        for (size_t i = 0; i < index_count; ++i) sub_indices[i] = local[indices[i]];
+        SimplifyResult r = simplify_mesh(sub_positions.data(), global.size(), sub_indices.data(), index_count,
+                                         locked ? sub_locked.data() : nullptr, settings);
+        for (uint32_t& v : r.indices) v = global[v];
+        return r;
+    }
     Simplifier simplifier(settings, vertex_count, index_count);
     simplifier.load(positions, indices, index_count, locked);
     return simplifier.run();

@@ -2,7 +2,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
 #include <map>
+#include <set>
 #include <random>
 #include <unordered_map>
 
@@ -19,6 +21,21 @@ namespace {
 
 using IntPoint = std::array<int64_t, 3>;
 using FaceKey = std::array<LatticePoint, 3>;
+using Edge = std::pair<IntPoint, IntPoint>;
+
+// One tetrahedron's view of a face: edges where its surface leaves the face, and borders of
+// its patches lying in the face. Crack-free means the symmetric differences of the two sides'
+// open borders and of their patch borders are equal (without patches: identical open borders).
+struct FaceSide {
+    std::set<Edge> open, patch;
+    std::set<Edge> nonmanifold;  // used by several triangles of this side: not compared
+};
+
+std::set<Edge> symmetric_difference(const std::set<Edge>& a, const std::set<Edge>& b) {
+    std::set<Edge> out;
+    std::set_symmetric_difference(a.begin(), a.end(), b.begin(), b.end(), std::inserter(out, out.begin()));
+    return out;
+}
 
 struct DecodedCut {
     std::vector<std::array<double, 3>> positions;  // world, welded by exact integer position
@@ -70,7 +87,7 @@ public:
     DecodedCut decode_cut(const RefinedSet& refined) {
         DecodedCut out;
         std::map<IntPoint, uint32_t> weld;
-        std::map<FaceKey, std::vector<std::vector<std::pair<IntPoint, IntPoint>>>> faces;
+        std::map<FaceKey, std::vector<FaceSide>> faces;
         const CatpMeta& meta = file_.index().meta();
         std::vector<std::array<int64_t, 3>> ints;
         for (const DrawnSlot& d : drawn_slots(file_.index(), refined)) {
@@ -96,60 +113,75 @@ public:
                 }
                 ids[v] = it->second;
             }
-            // Border edges of this fragment, keyed by the face they lie on.
-            std::map<std::pair<uint32_t, uint32_t>, std::pair<int, std::pair<uint32_t, uint32_t>>> edge_use;
+            // Where the fragment meets each face: edges on the face used once by triangles
+            // that leave the face ("open" borders), and borders of patches lying in the face.
+            struct Use { int open = 0, patch = 0; uint32_t u = 0, v = 0; };
+            std::map<std::pair<uint32_t, uint32_t>, Use> edge_use;
             for (size_t i = 0; i + 2 < frag.indices.size(); i += 3) {
                 uint32_t a = frag.indices[i], b = frag.indices[i + 1], c = frag.indices[i + 2];
                 if (ids[a] == ids[b] || ids[b] == ids[c] || ids[a] == ids[c]) continue;
                 out.indices.insert(out.indices.end(), {ids[a], ids[b], ids[c]});
+                bool in_face = false;
+                for (int k = 0; k < 4; ++k) in_face |= w[a][k] == 0 && w[b][k] == 0 && w[c][k] == 0;
                 for (auto [u, v] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}}) {
                     // Count by welded position (a fragment may repeat a position), keep a local id.
                     auto key = std::minmax(ids[u], ids[v]);
-                    auto& slot = edge_use[{key.first, key.second}];
-                    slot.first++;
-                    slot.second = {u, v};
+                    Use& use = edge_use[{key.first, key.second}];
+                    (in_face ? use.patch : use.open)++;
+                    use.u = u;
+                    use.v = v;
                 }
             }
-            std::map<FaceKey, std::vector<std::pair<IntPoint, IntPoint>>> local;
+            std::map<FaceKey, FaceSide> local;
             for (auto& [welded, use] : edge_use) {
-                if (use.first != 1) continue;
-                const auto& e = use.second;
-                const BaryWeights &wa = w[e.first], &wb = w[e.second];
-                int zero_face = -1, shared_nonzero = 0;
-                for (int k = 0; k < 4; ++k) {
-                    if (wa[k] == 0 && wb[k] == 0) zero_face = zero_face < 0 ? k : 4;  // 4: on an edge
-                    shared_nonzero += (wa[k] != 0 || wb[k] != 0);
-                }
-                if (zero_face < 0 || zero_face == 4 || shared_nonzero < 3) continue;
+                if (use.open == 0 && use.patch == 0) continue;
+                const BaryWeights &wa = w[use.u], &wb = w[use.v];
+                int zero_face = -1;
+                for (int k = 0; k < 4; ++k)
+                    if (wa[k] == 0 && wb[k] == 0) zero_face = zero_face < 0 ? k : 4;  // 4: on a tetrahedron edge
+                if (zero_face < 0 || zero_face == 4) continue;
                 FaceKey key;
                 int m = 0;
                 for (int k = 0; k < 4; ++k)
                     if (k != zero_face) key[m++] = t[k];
-                IntPoint pa = ints[e.first], pb = ints[e.second];
+                IntPoint pa = ints[use.u], pb = ints[use.v];
                 if (pb < pa) std::swap(pa, pb);
-                local[key].push_back({pa, pb});
+                if (use.open == 1) local[key].open.insert({pa, pb});
+                if (use.patch == 1) local[key].patch.insert({pa, pb});
+                if (use.open > 1 || use.patch > 1) local[key].nonmanifold.insert({pa, pb});
             }
-            for (auto& [key, edges] : local) {
-                std::sort(edges.begin(), edges.end());
-                faces[key].push_back(std::move(edges));
-            }
+            for (auto& [key, side] : local) faces[key].push_back(std::move(side));
         }
         for (auto& [key, sides] : faces) {
             if (sides.size() != 2) continue;
             report_.faces_checked++;
-            if (sides[0] != sides[1]) {
+            // Non-manifold edges (several sheets meeting on the face) are left to the topological
+            // crack tests: a local count cannot tell how the sheets pair up.
+            for (FaceSide& side : sides)
+                for (const Edge& e : sides[0].nonmanifold) {
+                    side.open.erase(e);
+                    side.patch.erase(e);
+                }
+            for (FaceSide& side : sides)
+                for (const Edge& e : sides[1].nonmanifold) {
+                    side.open.erase(e);
+                    side.patch.erase(e);
+                }
+            if (symmetric_difference(sides[0].open, sides[1].open) != symmetric_difference(sides[0].patch, sides[1].patch)) {
                 report_.face_mismatches++;
                 if (getenv("CATPAQ_DEBUG_FACES")) {
-                    for (int sd = 0; sd < 2; ++sd) {
-                        fprintf(stderr, "side %d:\n", sd);
-                        for (auto& e : sides[sd])
+                    auto dump = [](const char* what, const std::set<Edge>& edges) {
+                        fprintf(stderr, "%s:\n", what);
+                        for (auto& e : edges)
                             fprintf(stderr, "  (%ld %ld %ld)-(%ld %ld %ld)\n", (long)e.first[0], (long)e.first[1],
                                     (long)e.first[2], (long)e.second[0], (long)e.second[1], (long)e.second[2]);
-                    }
+                    };
+                    dump("open0 - open1", symmetric_difference(sides[0].open, sides[1].open));
+                    dump("patch0 ^ patch1", symmetric_difference(sides[0].patch, sides[1].patch));
                 }
                 problem(strprintf("face (%d,%d,%d)-(%d,%d,%d)-(%d,%d,%d): the two sides' borders differ (%zu vs %zu edges)",
                                   key[0][0], key[0][1], key[0][2], key[1][0], key[1][1], key[1][2], key[2][0], key[2][1],
-                                  key[2][2], sides[0].size(), sides[1].size()));
+                                  key[2][2], sides[0].open.size(), sides[1].open.size()));
             }
         }
         return out;
@@ -166,15 +198,39 @@ std::vector<std::array<double, 3>> sample_surface(const std::vector<std::array<d
                                                   const std::vector<uint32_t>& idx, size_t count) {
     std::vector<std::array<double, 3>> out;
     std::mt19937_64 rng(7);
-    size_t vertices = p.size();
-    size_t stride = std::max<size_t>(1, vertices / std::max<size_t>(1, count / 2));
-    for (size_t v = 0; v < vertices; v += stride) out.push_back(p[v]);
+    // Vertices of non-degenerate triangles (isolated vertices and zero-area triangles are not
+    // surface), then uniform samples on the triangles.
     size_t triangles = idx.size() / 3;
+    std::vector<uint32_t> surface_vertices;
+    for (size_t t = 0; t < triangles; ++t) {
+        uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
+        if (a == b || b == c || a == c) continue;
+        surface_vertices.insert(surface_vertices.end(), {a, b, c});
+    }
+    std::sort(surface_vertices.begin(), surface_vertices.end());
+    surface_vertices.erase(std::unique(surface_vertices.begin(), surface_vertices.end()), surface_vertices.end());
+    size_t stride = std::max<size_t>(1, surface_vertices.size() / std::max<size_t>(1, count / 2));
+    for (size_t i = 0; i < surface_vertices.size(); i += stride) out.push_back(p[surface_vertices[i]]);
     if (triangles == 0) return out;
-    std::uniform_int_distribution<size_t> pick(0, triangles - 1);
+    // Area-weighted, so zero-area triangles (not surface) are never sampled.
+    std::vector<double> cumulative(triangles);
+    double total = 0;
+    for (size_t t = 0; t < triangles; ++t) {
+        const auto &p0 = p[idx[3 * t]], &p1 = p[idx[3 * t + 1]], &p2 = p[idx[3 * t + 2]];
+        double u[3], v[3];
+        for (int i = 0; i < 3; ++i) {
+            u[i] = p1[i] - p0[i];
+            v[i] = p2[i] - p0[i];
+        }
+        double cx = u[1] * v[2] - u[2] * v[1], cy = u[2] * v[0] - u[0] * v[2], cz = u[0] * v[1] - u[1] * v[0];
+        total += std::sqrt(cx * cx + cy * cy + cz * cz);
+        cumulative[t] = total;
+    }
+    if (!(total > 0)) return out;
     std::uniform_real_distribution<double> u(0, 1);
     while (out.size() < count) {
-        size_t t = pick(rng);
+        size_t t = size_t(std::lower_bound(cumulative.begin(), cumulative.end(), u(rng) * total) - cumulative.begin());
+        if (t >= triangles) t = triangles - 1;
         double a = u(rng), b = u(rng);
         if (a + b > 1) {
             a = 1 - a;

@@ -267,7 +267,7 @@ CameraPath orbit_path(const glm::dvec3& bmin, const glm::dvec3& bmax, int frames
     double half_fov = fov_y_degrees * kPi / 360.0;
     double half_fov_x = std::atan(std::tan(half_fov) * double(width) / double(height));
     double distance = radius / std::sin(std::min(half_fov, half_fov_x)) * 1.1 * distance_factor;
-    double elevation = elevation_degrees * kPi / 180.0;
+    double elevation = std::clamp(elevation_degrees, -89.0, 89.0) * kPi / 180.0;  // up stays valid
     for (int i = 0; i < frames; ++i) {
         double azimuth = 2.0 * kPi * double(i) / double(frames) - kPi / 2;  // frame 0 looks along +y
         Camera c;

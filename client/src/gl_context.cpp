@@ -11,9 +11,7 @@
 #include <vector>
 
 #include "base/error.h"
-
-// After EGL: epoxy's GL header only.
-#include <epoxy/gl.h>
+#include "gl_query.h"
 
 namespace catpaq {
 
@@ -153,8 +151,9 @@ HeadlessGlContext::HeadlessGlContext(const GlContextOptions& options) : impl_(ne
             return false;
         }
         bool gles = false;
-        EGLContext ctx = create_context(dpy, false, options.debug, log);
-        if (ctx == EGL_NO_CONTEXT && options.allow_gles) {
+        EGLContext ctx = EGL_NO_CONTEXT;
+        if (options.api != GlApi::Gles) ctx = create_context(dpy, false, options.debug, log);
+        if (ctx == EGL_NO_CONTEXT && options.api != GlApi::Desktop) {
             ctx = create_context(dpy, true, options.debug, log);
             gles = ctx != EGL_NO_CONTEXT;
         }
@@ -170,9 +169,9 @@ HeadlessGlContext::HeadlessGlContext(const GlContextOptions& options) : impl_(ne
             return false;
         }
         // Check what we got through epoxy (which now resolves GL through this EGL context).
-        int version = epoxy_gl_version();
-        bool desktop = epoxy_is_desktop_gl();
-        if ((desktop && version < 33) || (!desktop && version < 30)) {
+        bool desktop = false;
+        int version = detail::current_gl_version(desktop);
+        if ((desktop && version < 33) || (!desktop && version < 30) || desktop == gles) {
             log += strprintf(" %s: context is %s %d.%d;", name.c_str(), desktop ? "OpenGL" : "OpenGL ES", version / 10,
                              version % 10);
             eglMakeCurrent(dpy, EGL_NO_SURFACE, EGL_NO_SURFACE, EGL_NO_CONTEXT);
@@ -240,15 +239,9 @@ void HeadlessGlContext::make_current() {
 bool HeadlessGlContext::is_gles() const { return impl_->gles; }
 const std::string& HeadlessGlContext::platform() const { return impl_->platform; }
 
-std::string HeadlessGlContext::renderer() const {
-    const GLubyte* s = glGetString(GL_RENDERER);
-    return s ? reinterpret_cast<const char*>(s) : "";
-}
+std::string HeadlessGlContext::renderer() const { return detail::current_gl_string(true); }
 
-std::string HeadlessGlContext::version() const {
-    const GLubyte* s = glGetString(GL_VERSION);
-    return s ? reinterpret_cast<const char*>(s) : "";
-}
+std::string HeadlessGlContext::version() const { return detail::current_gl_string(false); }
 
 bool HeadlessGlContext::available(std::string* why) {
     // Remember the answer: creating a context costs tens of milliseconds.

@@ -28,9 +28,9 @@ std::string shader_source(ShaderKind kind, bool gles) {
             "precision highp int;\n"
             "#define PRECISE\n";
     } else {
-        // `precise` (ARB_gpu_shader5, core in 4.0) forbids contracting or reassociating the
-        // decode arithmetic; without it the code is still exact where it matters (integer sums
-        // and a single multiply) but normals may round differently.
+        // `precise` (ARB_gpu_shader5, core in 4.0) keeps the decoded position's multiply from
+        // being fused or reassociated; without it the decode is still exact in practice (integer
+        // sums and one multiply feeding the invariant gl_Position).
         s = "#version 330 core\n"
             "#extension GL_ARB_gpu_shader5 : enable\n"
             "#ifdef GL_ARB_gpu_shader5\n"

@@ -6,63 +6,70 @@
 //                      u32 vertex_count V | u32 triangle_count T | u64 checksum = XXH3-64 of the
 //                      payload (every byte after this field)
 //   payload:
-//     u16 header_fold   XOR of the six u16 words at header bytes 4..15 (version .. T), so a
-//                       change to a header field is detected although the checksum does not
-//                       cover the header
+//     u16 header_fold   XOR of the six u16 words at header bytes 4..15 (version .. T): a change
+//                       to a header field is detected although the checksum does not cover it
 //     u8  coding        0 = compressed (below); 1 = stored: V x (u32 word0, u32 word1), then
-//                       T x 3 x u32 indices, nothing else (used when it is smaller)
+//                       T x 3 x u32 indices, nothing else (chosen when it is not larger)
 //   compressed:
 //     u8  modes         bits 0-1 position coding: 0 = cumulative weights (a, b, c) =
-//                       (w1+w2+w3, w2+w3, w3), 1 = weights (w1, w2, w3), 2 = raw 24-bit index;
+//                       (w1+w2+w3, w2+w3, w3) (the index enumeration of barycentric.h), 1 =
+//                       weights (w1, w2, w3), 2 = raw 24-bit index (any index >= the grid size);
 //                       bits 2-3 normal predictor: 0 = gate average, 1 = parallelogram,
 //                       2 = geometric; bit 4 colour predictor: 0 = gate average,
-//                       1 = parallelogram; bit 5: colour residuals of R and B are coded
-//                       relative to the residual of G; bits 6-7 zero
-//     i8 x 9            only for the geometric normal predictor: row-major 3x3 matrix M that
-//                       maps a normal computed in (a, b, c) space to the frame of the normals
+//                       1 = parallelogram; bit 5: R and B residuals are coded relative to the
+//                       G residual; bits 6-7 zero
+//     i8 x 9            geometric normal predictor only: row-major 3x3 matrix M mapping a normal
+//                       computed in (a, b, c) space to the frame of the normals (any scale)
 //     varint E          number of degenerate triangles (a repeated index), coded explicitly
 //     varint N          number of connectivity symbols
-//     rANS stream       (rans.h): u32 state0 | u32 state1 | bytes. Symbols in decode order:
-//       tables          connectivity (6 symbols), then 3 position tables (unless raw), 2 normal
-//                       tables (u, v), 3 colour tables (R, G, B)
-//       connectivity    traversal of the T - E regular triangles (below), then E x 3 indices
-//                       (bit_width(V - 1) raw bits each)
-//       positions       per vertex, in decoded order: 3 residual values (or 24 raw bits)
-//       normals         per vertex: 2 residual values (mod 256)
-//       colours         per vertex: 3 residual values (mod 256)
-//     The stream must end exactly at the end of the payload with both rANS states back at
-//     their initial value.
+//     entropy coded     rans.h: u32 state0..3 | varint bit_bytes | rANS bytes | raw bit stream.
+//                       Symbols go through rANS (lane per symbol below), the low bits of large
+//                       residuals and explicit indices through the raw bit stream; in decode
+//                       order:
+//       tables          connectivity (6 symbols), 3 position tables (absent for raw positions),
+//                       normal u, v, colour R, G, B: alphabet size, scale and log-domain weights
+//                       (rans.h), symbols on lane 0
+//       connectivity    N traversal symbols (symbol k on lane k & 3) and, in the bit stream,
+//                       SPLIT indices; then E x 3 indices of bit_width(V - 1) bits each
+//       positions       per vertex in decoded order: 3 residual values (lanes 0, 1, 2), or 24 bits
+//       normals         per vertex: u, v residual values (lanes 0, 1), modulo 256
+//       colours         per vertex: G, R, B residual values (lanes 0, 1, 2), modulo 256
+//     Every byte must be consumed and all rANS states must end at their initial value.
 //
-// Connectivity: a deterministic front traversal (in the spirit of the cut-border machine and
-// Corto's coder). The front is a set of directed edge loops, each edge (v0 -> v1) remembering
-// the third vertex `opp` of the triangle it came from; edges are kept in one array processed
-// in FIFO order. When the queue is exhausted and triangles remain, a new component starts with a
-// triangle whose three vertices are each coded NEW or SPLIT. Per popped edge one symbol:
-//   NEW       the triangle across the edge is (v1, v0, v) with a vertex v never seen before
-//   LEFT      ... with v = next edge's v1 (the next edge is consumed)
-//   RIGHT     ... with v = previous edge's v0 (the previous edge is consumed)
-//   END       both (closes a loop of three)
-//   SPLIT     ... with an already seen vertex v given explicitly: bit_width(seen - 1) raw bits
+// Connectivity: a deterministic front traversal in the spirit of the cut-border machine (and of
+// Corto's coder). The front is a set of directed edge loops (the border of the triangles decoded
+// so far), each edge (v0 -> v1) remembering the third vertex `opp` of the triangle it came from;
+// all edges live in one array processed in FIFO order, skipping consumed ones. When the queue is
+// exhausted and triangles remain, a new component starts with a triangle whose three vertices
+// are each coded NEW or SPLIT. Per popped edge one symbol:
+//   NEW       the triangle across the edge is (v1, v0, v) with a vertex v never seen before:
+//             the edge is replaced by (v0 -> v), (v -> v1)
+//   LEFT      ... with v = the next edge's v1: the edge and the next are replaced by (v0 -> v)
+//   RIGHT     ... with v = the previous edge's v0: it and the previous become (v -> v1)
+//   END       both (closes a loop: previous, edge and next are removed)
+//   SPLIT     as NEW with an already seen vertex, its index in bit_width(seen - 1) raw bits
 //   BOUNDARY  no further triangle across this edge
 // The traversal stops as soon as T - E triangles have been produced. Vertices are numbered in
-// order of first appearance; vertices not used by any regular triangle follow in their original
+// order of first appearance; vertices used by no regular triangle follow in their original
 // order. Any input is expressible: non-manifold edges, inconsistent orientation, duplicate
 // triangles and touching components simply cost restarts and SPLITs; only degenerate triangles
-// (which the front cannot express) are sent as explicit index triples.
+// (which the front cannot express) are sent as explicit index triples. The decoder rejects any
+// symbol that would make a degenerate triangle, so the front never holds a loop shorter than 2.
 //
-// Attribute prediction: each vertex created by NEW at gate (v0, v1, opp) is predicted from
-// v0 + v1 - opp (parallelogram) or (v0 + v1) / 2; other vertices from the previous vertex in
-// decoded order (the first from zero). Positions are predicted coordinate by coordinate, each
-// prediction clamped to the range the already decoded coordinates allow (a in [0, 463], b in
-// [0, a], c in [0, b]; in weight space w1 in [0, 463], w2 in [0, 463 - w1], w3 in
-// [0, 463 - w1 - w2]). The geometric normal predictor computes for every vertex the sum of the
-// cross products of its triangles in (a, b, c) space, maps it by M and projects it to the
-// octahedral code with exact-rounding double arithmetic (floor(x + 0.5)); vertices where that
-// vector is zero are predicted from the previous vertex. Normal and colour residuals wrap
-// modulo 256.
+// Attribute prediction: a vertex created by NEW at gate (v0, v1, opp) is predicted from
+// v0 + v1 - opp (parallelogram) or (v0 + v1) / 2 (gate average); other vertices from the
+// previous vertex in decoded order (the first one from zero). Positions are predicted coordinate
+// by coordinate, each prediction clamped to the range the already decoded coordinates allow
+// (a in [0, 463], b in [0, a], c in [0, b]; in weight space w1 in [0, 463], w2 in [0, 463 - w1],
+// w3 in [0, 463 - w1 - w2]). The geometric normal predictor sums, per vertex, the (integer)
+// cross products of its triangles in (a, b, c) space, maps the sum by M and projects it to the
+// octahedral code in double arithmetic, rounding half up (vertices with a zero sum take the
+// previous vertex's normal); where a gate vertex's parallelogram prediction agrees within 24 in
+// both coordinates, the average of the two (rounded down) is used. Normal and colour residuals
+// wrap modulo 256.
 //
-// Residual values: zig-zag mapped z; symbol z for z < 8, otherwise with k = floor(log2 z)
-// symbol 8 + 2 (k - 3) + (bit k-1 of z) followed by the k - 1 low bits of z raw.
+// Residual values: zig-zag mapped z; symbol z for z < 8, otherwise, with k = floor(log2 z),
+// symbol 8 + 2 (k - 3) + (bit k-1 of z) followed by the k - 1 low bits of z in the bit stream.
 #include "common_codec/fragment_codec.h"
 
 #include <algorithm>
@@ -103,6 +110,10 @@ enum Stream : int {
     kStreamRaw = 255,
 };
 
+// rANS lane of each stream (the coordinates of one vertex decode in parallel); connectivity
+// symbols use lane (symbol index & 3).
+constexpr int kStreamLane[kStreamCount] = {0, 0, 1, 2, 0, 1, 1, 0, 2};
+
 enum PositionMode { kPosCumulative = 0, kPosWeights = 1, kPosRaw = 2 };
 enum NormalMode { kNormalAverage = 0, kNormalParallelogram = 1, kNormalGeometric = 2 };
 
@@ -124,24 +135,22 @@ Bucket bucket_of(uint32_t z) {
     int k = bit_width_u32(z) - 1;
     return {uint32_t(8 + 2 * (k - 3)) + ((z >> (k - 1)) & 1u), uint32_t(k - 1), z & ((1u << (k - 1)) - 1)};
 }
+// Per bucket symbol: (base << 8) | number of extra bits.
 struct BucketDecode {
-    std::array<uint32_t, rans::kMaxAlphabet> base{};
-    std::array<uint8_t, rans::kMaxAlphabet> nbits{};
+    std::array<uint32_t, rans::kMaxAlphabet> packed{};
     constexpr BucketDecode() {
         for (uint32_t s = 0; s < uint32_t(rans::kMaxAlphabet); ++s) {
             if (s < 8) {
-                base[s] = s;
-                nbits[s] = 0;
+                packed[s] = s << 8;
             } else {
                 uint32_t k = 3 + (s - 8) / 2, hi = (s - 8) & 1;
-                base[s] = (1u << k) | (hi << (k - 1));
-                nbits[s] = uint8_t(k - 1);
+                packed[s] = (((1u << k) | (hi << (k - 1))) << 8) | (k - 1);
             }
         }
     }
 };
 constexpr BucketDecode kBucketDecode{};
-static_assert(kBucketDecode.nbits[rans::kMaxAlphabet - 1] <= rans::kMaxRawBits);
+static_assert((kBucketDecode.packed[rans::kMaxAlphabet - 1] & 0xff) <= 13);
 
 // Tetrahedral-number enumeration of barycentric.h: index = tet(a) + tri(b) + c.
 struct BaryTables {
@@ -180,11 +189,17 @@ struct Front {
             e = store.data();
         }
     }
-    // Next live edge in FIFO order, or false when the queue is exhausted.
+    // Next live edge in FIFO order, or false when the queue is exhausted. Skips one consumed
+    // edge without a branch (e[size] is readable: reserve3 keeps room); longer runs are rare.
     bool pop(uint32_t& i) {
-        while (head < size && e[head].prev == kDead) ++head;
-        if (head == size) return false;
-        i = head++;
+        uint32_t h = head;
+        h += uint32_t(h < size) & uint32_t(e[h].prev == kDead);
+        while (h < size && e[h].prev == kDead) [[unlikely]]
+            ++h;
+        head = h;
+        if (h == size) return false;
+        i = h;
+        head = h + 1;
         return true;
     }
     void start(uint32_t a, uint32_t b, uint32_t c) {
@@ -243,33 +258,30 @@ struct Front {
 struct Sink {
     struct Item {
         uint32_t value;  // symbol, or raw bits
-        uint32_t extra;  // raw bits following a symbol on the same rANS state
+        uint32_t extra;  // the symbol's extra bits (bit stream)
         uint8_t stream;  // kStreamRaw: raw bits
         uint8_t nbits;
+        uint8_t lane;
     };
     std::vector<Item> items;
     std::array<std::array<uint32_t, rans::kMaxAlphabet>, kStreamCount> counts{};
     size_t raw_bits = 0;
+    uint32_t conn_symbols = 0;
 
+    int lane_of(int stream) { return stream == kStreamConn ? int(conn_symbols++ & 3) : kStreamLane[stream]; }
     void sym(int stream, uint32_t s) {
-        items.push_back({s, 0, uint8_t(stream), 0});
+        items.push_back({s, 0, uint8_t(stream), 0, uint8_t(lane_of(stream))});
         ++counts[size_t(stream)][s];
     }
     void bits(uint32_t v, int n) {  // n <= 32
         raw_bits += size_t(n);
-        if (n > 0) items.push_back({v, 0, uint8_t(kStreamRaw), uint8_t(n)});
+        if (n > 0) items.push_back({v, 0, uint8_t(kStreamRaw), uint8_t(n), 0});
     }
     void value(int stream, uint32_t z) {
         Bucket b = bucket_of(z);
-        items.push_back({b.sym, b.extra, uint8_t(stream), uint8_t(b.nbits)});
+        items.push_back({b.sym, b.extra, uint8_t(stream), uint8_t(b.nbits), uint8_t(lane_of(stream))});
         ++counts[size_t(stream)][b.sym];
         raw_bits += b.nbits;
-    }
-    void append(const Sink& o) {
-        items.insert(items.end(), o.items.begin(), o.items.end());
-        for (size_t s = 0; s < counts.size(); ++s)
-            for (size_t i = 0; i < counts[s].size(); ++i) counts[s][i] += o.counts[s][i];
-        raw_bits += o.raw_bits;
     }
     // Estimated coded size of the given streams plus all raw bits, tables included.
     double cost(int first_stream, int last_stream) const {
@@ -279,7 +291,7 @@ struct Sink {
             rans::TableDesc d = rans::describe_counts(c, rans::kMaxAlphabet);
             rans::FreqTable f;
             rans::build_freqs(d, f);
-            bits_total += rans::data_cost_bits(c, f) + 8 + 3.5 * d.nsym;
+            bits_total += rans::data_cost_bits(c, f) + rans::table_cost_bits(d);
         }
         return bits_total;
     }
@@ -290,34 +302,48 @@ struct Pred {
     uint32_t a, b, c;  // gate v0, gate v1, opposite (all equal for "previous vertex")
 };
 
-// Geometric normal: projects a vector to the octahedral code (signed bytes, c / 127).
-bool project_oct(int64_t x, int64_t y, int64_t z, int& cu, int& cv) {
-    double ax = std::fabs(double(x)), ay = std::fabs(double(y)), az = std::fabs(double(z));
-    double l1 = ax + ay + az;
+// Bitwise select between two doubles (exact, and without a branch on unpredictable data).
+CATPAQ_RANS_INLINE double select(bool c, double a, double b) {
+    uint64_t ua, ub;
+    std::memcpy(&ua, &a, 8);
+    std::memcpy(&ub, &b, 8);
+    const uint64_t m = 0 - uint64_t(c);
+    uint64_t r = (ua & m) | (ub & ~m);
+    double out;
+    std::memcpy(&out, &r, 8);
+    return out;
+}
+
+// Geometric normal: projects a vector to the octahedral code (signed bytes, c / 127); the lower
+// hemisphere is folded as in octahedral.cpp (sign of zero taken as positive).
+CATPAQ_RANS_INLINE bool project_oct(double x, double y, double z, int& cu, int& cv) {
+    double l1 = std::fabs(x) + std::fabs(y) + std::fabs(z);
     if (!(l1 > 0.0)) return false;
     double s = 127.0 / l1;
-    double u = double(x) * s, v = double(y) * s;
-    if (z < 0) {
-        double fu = (127.0 - std::fabs(v)) * (u < 0.0 ? -1.0 : 1.0);
-        double fv = (127.0 - std::fabs(u)) * (v < 0.0 ? -1.0 : 1.0);
-        u = fu;
-        v = fv;
-    }
+    double u = x * s, v = y * s;
+    const double fu = select(u < 0.0, -1.0, 1.0) * (127.0 - std::fabs(v));
+    const double fv = select(v < 0.0, -1.0, 1.0) * (127.0 - std::fabs(u));
+    u = select(z < 0.0, fu, u);
+    v = select(z < 0.0, fv, v);
     // Round half up: |u|, |v| <= 127, so u + 128.5 > 0 and truncation is floor.
     cu = std::clamp(int(u + 128.5) - 128, -127, 127);
     cv = std::clamp(int(v + 128.5) - 128, -127, 127);
     return true;
 }
 
-using Vec3l = std::array<int64_t, 3>;
+// Cumulative barycentric coordinates (a, b, c) of a vertex (fourth entry unused, for alignment).
+using Coord = std::array<int32_t, 4>;
+// Sums of integer cross products (|sum| < 2^45 for any fragment: exact in doubles too).
+using NormalSum = std::array<int64_t, 4>;
 
 // Area-weighted normals in (a, b, c) space: sum of the cross products of each vertex's triangles.
-void accumulate_normals(const uint32_t* indices, size_t triangles, const int32_t* sa, const int32_t* sb,
-                        const int32_t* sc, std::vector<Vec3l>& acc) {
+// Each product component is an integer below 2^19 in magnitude (coordinates are <= 463).
+void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSum* acc) {
     for (size_t t = 0; t < triangles; ++t) {
         uint32_t i = indices[3 * t], j = indices[3 * t + 1], k = indices[3 * t + 2];
-        int64_t e1x = sa[j] - sa[i], e1y = sb[j] - sb[i], e1z = sc[j] - sc[i];
-        int64_t e2x = sa[k] - sa[i], e2y = sb[k] - sb[i], e2z = sc[k] - sc[i];
+        const Coord si = s[i], sj = s[j], sk = s[k];
+        int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
+        int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
         int64_t nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
         for (uint32_t v : {i, j, k}) {
             acc[v][0] += nx;
@@ -327,16 +353,28 @@ void accumulate_normals(const uint32_t* indices, size_t triangles, const int32_t
     }
 }
 
-// Predicted normal of vertex v under the geometric predictor; `prev_u/v` is the fallback.
-inline void geometric_prediction(const Vec3l& n, const std::array<int8_t, 9>& m, int prev_u, int prev_v, int& pu,
+// Predicted normal of a vertex under the geometric predictor; `prev_u/v` is the fallback. M n is
+// exact in doubles (|m| <= 128, |n| < 2^45 for the largest fragments).
+CATPAQ_RANS_INLINE void geometric_prediction(const NormalSum& n, const std::array<int8_t, 9>& m, int prev_u, int prev_v, int& pu,
                                  int& pv) {
-    int64_t x = m[0] * n[0] + m[1] * n[1] + m[2] * n[2];
-    int64_t y = m[3] * n[0] + m[4] * n[1] + m[5] * n[2];
-    int64_t z = m[6] * n[0] + m[7] * n[1] + m[8] * n[2];
+    const double n0 = double(n[0]), n1 = double(n[1]), n2 = double(n[2]);
+    double x = double(m[0]) * n0 + double(m[1]) * n1 + double(m[2]) * n2;
+    double y = double(m[3]) * n0 + double(m[4]) * n1 + double(m[5]) * n2;
+    double z = double(m[6]) * n0 + double(m[7]) * n1 + double(m[8]) * n2;
     if (!project_oct(x, y, z, pu, pv)) {
         pu = prev_u;
         pv = prev_v;
     }
+}
+
+// The geometric normal predictor refined by the parallelogram of the neighbours' normals: for a
+// vertex created at a gate, where both agree within kBlendRange (per oct coordinate), their
+// average (rounded down).
+constexpr int kBlendRange = 24;
+CATPAQ_RANS_INLINE void blend_normal(bool gate, int qu, int qv, int& pu, int& pv) {
+    bool blend = gate & (std::abs(pu - qu) < kBlendRange) & (std::abs(pv - qv) < kBlendRange);
+    pu = blend ? (pu + qu) >> 1 : pu;
+    pv = blend ? (pv + qv) >> 1 : pv;
 }
 
 uint16_t read_u16(const uint8_t* p) { return uint16_t(p[0] | (p[1] << 8)); }
@@ -377,8 +415,7 @@ struct EncoderState {
     std::vector<uint32_t> indices;    // all triangles, new numbering (regular then degenerate)
 };
 
-void emit_positions(const EncoderState& st, int mode, const std::vector<int32_t>& sa, const std::vector<int32_t>& sb,
-                    const std::vector<int32_t>& sc, Sink& sink) {
+void emit_positions(const EncoderState& st, int mode, const std::vector<Coord>& s, Sink& sink) {
     const uint32_t V = st.V;
     if (mode == kPosRaw) {
         for (uint32_t v = 0; v < V; ++v) sink.bits(st.verts[v].position_index(), 24);
@@ -388,9 +425,9 @@ void emit_positions(const EncoderState& st, int mode, const std::vector<int32_t>
     std::vector<int32_t> q0(V + 1), q1(V + 1), q2(V + 1);
     for (uint32_t v = 0; v <= V; ++v) {
         if (mode == kPosCumulative) {
-            q0[v] = sa[v], q1[v] = sb[v], q2[v] = sc[v];
+            q0[v] = s[v][0], q1[v] = s[v][1], q2[v] = s[v][2];
         } else {
-            q0[v] = sa[v] - sb[v], q1[v] = sb[v] - sc[v], q2[v] = sc[v];
+            q0[v] = s[v][0] - s[v][1], q1[v] = s[v][1] - s[v][2], q2[v] = s[v][2];
         }
     }
     for (uint32_t v = 0; v < V; ++v) {
@@ -412,7 +449,7 @@ inline int normal_u(const PackedVertex& v) { return int8_t(uint8_t(v.word0 >> 24
 inline int normal_v(const PackedVertex& v) { return int8_t(uint8_t(v.word1)); }
 inline uint32_t wrap_residual(int actual, int pred) { return zigzag(int32_t(int8_t(uint8_t(actual - pred)))); }
 
-void emit_normals(const EncoderState& st, int mode, const std::vector<Vec3l>* acc, const std::array<int8_t, 9>& m,
+void emit_normals(const EncoderState& st, int mode, const std::vector<NormalSum>* acc, const std::array<int8_t, 9>& m,
                   Sink& sink) {
     const uint32_t V = st.V;
     for (uint32_t v = 0; v < V; ++v) {
@@ -421,6 +458,9 @@ void emit_normals(const EncoderState& st, int mode, const std::vector<Vec3l>* ac
         if (mode == kNormalGeometric) {
             const PackedVertex& prev = st.verts[v == 0 ? V : v - 1];
             geometric_prediction((*acc)[v], m, normal_u(prev), normal_v(prev), pu, pv);
+            int qu = std::clamp(normal_u(st.verts[p.a]) + normal_u(st.verts[p.b]) - normal_u(st.verts[p.c]), -127, 127);
+            int qv = std::clamp(normal_v(st.verts[p.a]) + normal_v(st.verts[p.b]) - normal_v(st.verts[p.c]), -127, 127);
+            blend_normal(p.a != p.c, qu, qv, pu, pv);
         } else if (mode == kNormalAverage) {
             pu = (normal_u(st.verts[p.a]) + normal_u(st.verts[p.b])) >> 1;
             pv = (normal_v(st.verts[p.a]) + normal_v(st.verts[p.b])) >> 1;
@@ -455,7 +495,7 @@ void emit_colors(const EncoderState& st, bool parallelogram, bool decorrelate, S
 
 // Fits M (normals ~ M * geometric normal) by least squares over unit vectors; false if
 // degenerate.
-bool fit_normal_matrix(const EncoderState& st, const std::vector<Vec3l>& acc, std::array<int8_t, 9>& m) {
+bool fit_normal_matrix(const EncoderState& st, const std::vector<NormalSum>& acc, std::array<int8_t, 9>& m) {
     double g[3][3] = {}, h[3][3] = {};
     size_t used = 0;
     for (uint32_t v = 0; v < st.V; ++v) {
@@ -536,7 +576,10 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     }
     const uint32_t R = uint32_t(regular.size());
 
-    // Directed half-edges of regular triangles by origin vertex (CSR): (target, triangle).
+    // Directed half-edges of regular triangles by origin vertex (CSR), each vertex's entries
+    // sorted by target: (target, triangle). A lookup binary-searches the target and scans that
+    // group from a cursor that skips visited triangles, so even pathological fans and stacks of
+    // duplicate triangles cost O(log degree) amortised per lookup.
     std::vector<uint32_t> first(V + 1, 0);
     for (uint32_t t : regular)
         for (int k = 0; k < 3; ++k) ++first[idx[3 * t + k] + 1];
@@ -546,11 +589,21 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
         std::vector<uint32_t> fill(first.begin(), first.end() - 1);
         for (uint32_t t : regular)
             for (int k = 0; k < 3; ++k) half[fill[idx[3 * t + k]]++] = {idx[3 * t + (k + 1) % 3], t};
+        for (uint32_t v = 0; v < V; ++v)
+            if (first[v + 1] - first[v] > 1) std::sort(half.begin() + first[v], half.begin() + first[v + 1]);
     }
+    std::vector<uint32_t> cursor(half.size());  // at a group's first entry: where to resume
+    for (size_t h = 0; h < half.size(); ++h) cursor[h] = uint32_t(h);
     std::vector<uint8_t> visited(T, 0);
     auto find_across = [&](uint32_t from, uint32_t to) -> uint32_t {
-        for (uint32_t h = first[from]; h < first[from + 1]; ++h)
-            if (half[h].first == to && !visited[half[h].second]) return half[h].second;
+        auto lo = half.begin() + first[from], hi = half.begin() + first[from + 1];
+        auto g = std::lower_bound(lo, hi, std::pair<uint32_t, uint32_t>{to, 0});
+        if (g == hi || g->first != to) return kNone;
+        const uint32_t group = uint32_t(g - half.begin());
+        uint32_t h = cursor[group];
+        while (h < first[from + 1] && half[h].first == to && visited[half[h].second]) ++h;
+        cursor[group] = h;
+        if (h < first[from + 1] && half[h].first == to) return half[h].second;
         return kNone;
     };
 
@@ -652,16 +705,14 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
 
     // Positions.
     bool all_valid = true;
-    std::vector<int32_t> sa(size_t(V) + 1, 0), sb(size_t(V) + 1, 0), sc(size_t(V) + 1, 0);
+    std::vector<Coord> coords(size_t(V) + 1, Coord{0, 0, 0, 0});
     for (uint32_t v = 0; v < V && all_valid; ++v) {
         BaryWeights w;
         if (!bary_unpack(st.verts[v].position_index(), w)) {
             all_valid = false;
             break;
         }
-        sa[v] = w[1] + w[2] + w[3];
-        sb[v] = w[2] + w[3];
-        sc[v] = w[3];
+        coords[v] = {w[1] + w[2] + w[3], w[2] + w[3], w[3], 0};
     }
     int pos_mode = kPosRaw;
     Sink pos;
@@ -669,7 +720,7 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
         double best = 1e300;
         for (int mode : {kPosCumulative, kPosWeights}) {
             Sink s;
-            emit_positions(st, mode, sa, sb, sc, s);
+            emit_positions(st, mode, coords, s);
             double c = s.cost(kStreamPos0, kStreamPos2);
             if (c < best) {
                 best = c;
@@ -678,7 +729,7 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
             }
         }
     } else {
-        emit_positions(st, kPosRaw, sa, sb, sc, pos);
+        emit_positions(st, kPosRaw, coords, pos);
     }
 
     // Normals.
@@ -687,11 +738,11 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     Sink nor;
     {
         double best = 1e300;
-        std::vector<Vec3l> acc;
+        std::vector<NormalSum> acc;
         bool geometric = false;
         if (pos_mode != kPosRaw && V > 0) {
-            acc.assign(V, Vec3l{0, 0, 0});
-            accumulate_normals(st.indices.data(), st.indices.size() / 3, sa.data(), sb.data(), sc.data(), acc);
+            acc.assign(V, NormalSum{0, 0, 0, 0});
+            accumulate_normals(st.indices.data(), st.indices.size() / 3, coords.data(), acc.data());
             geometric = fit_normal_matrix(st, acc, matrix);
         }
         for (int mode : {kNormalAverage, kNormalParallelogram, kNormalGeometric}) {
@@ -753,7 +804,7 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
             if (it.stream == kStreamRaw) {
                 enc.put_bits(it.value, it.nbits);
             } else {
-                enc.put(freqs[it.stream], it.value);
+                enc.put(freqs[it.stream], it.value, it.lane);
                 enc.put_bits(it.extra, it.nbits);
             }
         }
@@ -775,9 +826,7 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     if (normal_mode == kNormalGeometric)
         for (int8_t x : matrix) payload.push_back(uint8_t(x));
     put_varint(payload, degenerate.size());
-    uint32_t conn_symbols = 0;
-    for (uint32_t c : conn.counts[kStreamConn]) conn_symbols += c;
-    put_varint(payload, conn_symbols);
+    put_varint(payload, conn.conn_symbols);
     const size_t prefix_bytes = payload.size();
     std::vector<size_t> section_bytes;
     enc.finish(payload, &section_bytes);
@@ -846,9 +895,9 @@ struct Workspace {
     Front front;
     std::vector<Pred> pred;
     std::vector<uint8_t> symbols;
-    std::vector<int32_t> sa, sb, sc;
+    std::vector<Coord> coords;
     std::vector<int8_t> nu, nv;
-    std::vector<Vec3l> acc;
+    std::vector<NormalSum> acc;
     std::vector<std::array<uint8_t, 4>> rgb;
     std::array<rans::DecodeTable, kStreamCount> tables;
 };
@@ -859,14 +908,45 @@ void grow(std::vector<T>& v, size_t n) {
     if (v.size() < n) v.resize(n);
 }
 
-// Reads a residual value of the given table.
-CATPAQ_RANS_INLINE uint32_t get_value(rans::Decoder& dec, const rans::TableView& t) {
-    return dec.get_value(t, kBucketDecode.base.data(), kBucketDecode.nbits.data());
+// Decoding helpers. kFast: the caller has checked that enough rANS bytes remain for every
+// symbol of the current item (2 per symbol) and called need_bits for its raw bits.
+template <bool kFast, int L>
+CATPAQ_RANS_INLINE uint32_t dsym(rans::Decoder& d, const rans::TableView& t) {
+    if constexpr (kFast)
+        return d.sym<L>(t);
+    else
+        return d.get<L>(t);
+}
+template <bool kFast, int L>
+CATPAQ_RANS_INLINE int32_t dresidual(rans::Decoder& d, const rans::TableView& t) {
+    uint32_t s = dsym<kFast, L>(d, t);
+    const uint32_t b = kBucketDecode.packed[s];
+    return unzigzag((b >> 8) | d.take_bits(b & 0xff));
+}
+constexpr uint32_t kMaxExtraBits = 13;  // bucket symbols < 32
+
+// Runs body.template operator()<kFast>(v) for v in [0, n): in fast mode while the remaining
+// rANS bytes cover `symbols` symbols per item, one checked item otherwise. need_bits is called
+// for `symbols` values per item.
+template <class Body>
+CATPAQ_RANS_INLINE void for_each_item(rans::Decoder& dec, uint32_t n, uint32_t symbols, Body&& body) {
+    const uint32_t bits = symbols * kMaxExtraBits;
+    const size_t bytes = size_t(symbols) * rans::Decoder::kMaxBytesPerSymbol;
+    uint32_t v = 0;
+    while (v < n) {
+        size_t fast = std::min<size_t>(n - v, dec.rans_bytes_left() / bytes);
+        for (uint32_t stop = v + uint32_t(fast); v < stop; ++v) {
+            dec.need_bits(bits);
+            body.template operator()<true>(v);
+        }
+        if (v < n) {
+            dec.need_bits(bits);
+            body.template operator()<false>(v);
+            ++v;
+        }
+    }
 }
 
-inline uint32_t get_wide(rans::Decoder& dec, int nbits) { return dec.get_bits(uint32_t(nbits)); }
-
-// The traversal: fills tri (3 R indices) and pred; returns the number of vertices seen.
 // Each decoding pass copies the decoder into a local (kept in registers) and copies it back.
 //
 // Connectivity: the `nsym` traversal symbols are decoded first in a tight loop, then the
@@ -879,7 +959,23 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
     {
         rans::Decoder dec = io;
         const rans::TableView conn(conn_table);
-        for (uint32_t k = 0; k < nsym; ++k) sym[k] = uint8_t(dec.get(conn));
+        uint32_t k = 0;
+        // Symbol k is on lane k & 3.
+        while (nsym - k >= 4 && dec.rans_bytes_left() >= 4 * rans::Decoder::kMaxBytesPerSymbol) {
+            sym[k] = uint8_t(dec.sym<0>(conn));
+            sym[k + 1] = uint8_t(dec.sym<1>(conn));
+            sym[k + 2] = uint8_t(dec.sym<2>(conn));
+            sym[k + 3] = uint8_t(dec.sym<3>(conn));
+            k += 4;
+        }
+        for (; k < nsym; ++k) {
+            switch (k & 3) {
+                case 0: sym[k] = uint8_t(dec.get<0>(conn)); break;
+                case 1: sym[k] = uint8_t(dec.get<1>(conn)); break;
+                case 2: sym[k] = uint8_t(dec.get<2>(conn)); break;
+                default: sym[k] = uint8_t(dec.get<3>(conn)); break;
+            }
+        }
         io = dec;
     }
     sym[nsym] = 0xff;  // sentinel: running out of symbols reads an invalid one
@@ -918,27 +1014,40 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
             continue;
         }
         const FrontEdge ei = front.e[i];
+        const uint32_t s = *next++;
         uint32_t v;
-        switch (*next++) {
-            case kNew:
-                if (seen == V) [[unlikely]]
-                    return FragmentStatus::Corrupt;
-                v = seen++;
-                pred[v] = Pred{ei.v0, ei.v1, ei.opp};
-                front.add_vertex(i, ei, v);
-                break;
-            case kLeft:
-                v = front.e[ei.next].v1;
-                if (v == ei.v0 || v == ei.v1) [[unlikely]]
-                    return FragmentStatus::Corrupt;
-                front.left(i, ei, v);
-                break;
-            case kRight:
-                v = front.e[ei.prev].v0;
-                if (v == ei.v0 || v == ei.v1) [[unlikely]]
-                    return FragmentStatus::Corrupt;
-                front.right(i, ei, v);
-                break;
+        if (s <= kRight) [[likely]] {
+            // NEW, LEFT and RIGHT without branches (they are the bulk and unpredictable); the
+            // same edits as Front::add_vertex / left / right.
+            FrontEdge* e = front.e;
+            const uint32_t is_new = s == kNew, is_left = s == kLeft, is_right = s == kRight;
+            const uint32_t p = ei.prev, n = ei.next;
+            const uint32_t vl = e[n].v1, vr = e[p].v0, pp = e[p].prev, nn = e[n].next;
+            v = is_new ? seen : (is_left ? vl : vr);
+            pred[is_new ? seen : V] = Pred{ei.v0, ei.v1, ei.opp};  // slot V: scratch
+            seen += is_new;
+            if ((seen > V) | (v == ei.v0) | (v == ei.v1)) [[unlikely]]
+                return FragmentStatus::Corrupt;
+            const uint32_t left_anchor = is_right ? pp : p, right_anchor = is_left ? nn : n;
+            const uint32_t f = front.size, last = f + is_new;
+            // First new edge: (v0 -> v), or (v -> v1) for RIGHT; second (NEW only): (v -> v1).
+            e[f].v0 = is_right ? v : ei.v0;
+            e[f].v1 = is_right ? ei.v1 : v;
+            e[f].opp = is_right ? ei.v0 : ei.v1;
+            e[f].prev = left_anchor;
+            e[f].next = is_new ? f + 1 : right_anchor;
+            e[f + 1] = FrontEdge{v, ei.v1, ei.v0, f, right_anchor};  // room reserved by reserve3
+            e[left_anchor].next = f;
+            e[right_anchor].prev = last;
+            e[is_left ? n : (is_right ? p : i)].prev = kDead;
+            e[i].prev = kDead;
+            front.size = last + 1;
+            tri[0] = ei.v1, tri[1] = ei.v0, tri[2] = v;
+            tri += 3;
+            ++done;
+            continue;
+        }
+        switch (s) {
             case kBoundary:
                 continue;
             case kEnd:
@@ -970,55 +1079,49 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
 bool decode_positions(rans::Decoder& io, Workspace& ws, int pos_mode, uint32_t V, const Pred* pred,
                       PackedVertex* vert) {
     rans::Decoder dec = io;
-    int32_t *sa = ws.sa.data(), *sb = ws.sb.data(), *sc = ws.sc.data();
-    sa[V] = sb[V] = sc[V] = 0;
+    Coord* s = ws.coords.data();
+    s[V] = {0, 0, 0, 0};
     uint32_t bad = 0;  // accumulated range violations, checked once
+    const rans::TableView t0(ws.tables[kStreamPos0]), t1(ws.tables[kStreamPos1]), t2(ws.tables[kStreamPos2]);
     if (pos_mode == kPosRaw) {
         for (uint32_t v = 0; v < V; ++v) vert[v].word0 = dec.get_bits(24);
     } else if (pos_mode == kPosCumulative) {
-        const rans::TableView t0(ws.tables[kStreamPos0]), t1(ws.tables[kStreamPos1]), t2(ws.tables[kStreamPos2]);
-        for (uint32_t v = 0; v < V; ++v) {
+        for_each_item(dec, V, 3, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
             const Pred q = pred[v];
-            int32_t p0 = std::clamp(sa[q.a] + sa[q.b] - sa[q.c], 0, kGrid);
-            int32_t a = p0 + unzigzag(get_value(dec, t0));
+            const Coord A = s[q.a], B = s[q.b], C = s[q.c];
+            int32_t a = std::clamp(A[0] + B[0] - C[0], 0, kGrid) + dresidual<kFast, 0>(dec, t0);
+            int32_t rb = dresidual<kFast, 1>(dec, t1), rc = dresidual<kFast, 2>(dec, t2);
             bad |= uint32_t(a) > uint32_t(kGrid);
             a = std::clamp(a, 0, kGrid);
-            int32_t p1 = std::clamp(sb[q.a] + sb[q.b] - sb[q.c], 0, a);
-            int32_t b = p1 + unzigzag(get_value(dec, t1));
+            int32_t b = std::clamp(A[1] + B[1] - C[1], 0, a) + rb;
             bad |= uint32_t(b) > uint32_t(a);
             b = std::clamp(b, 0, a);
-            int32_t p2 = std::clamp(sc[q.a] + sc[q.b] - sc[q.c], 0, b);
-            int32_t c = p2 + unzigzag(get_value(dec, t2));
+            int32_t c = std::clamp(A[2] + B[2] - C[2], 0, b) + rc;
             bad |= uint32_t(c) > uint32_t(b);
             c = std::clamp(c, 0, b);
-            sa[v] = a, sb[v] = b, sc[v] = c;
+            s[v] = {a, b, c, 0};
             vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(c);
-        }
+        });
     } else {
-        // Weight space: (w1, w2, w3) kept in sa/sb/sc during the pass, converted after.
-        const rans::TableView t0(ws.tables[kStreamPos0]), t1(ws.tables[kStreamPos1]), t2(ws.tables[kStreamPos2]);
-        for (uint32_t v = 0; v < V; ++v) {
+        // Weight space: (w1, w2, w3) kept in s during the pass, converted after.
+        for_each_item(dec, V, 3, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
             const Pred q = pred[v];
-            int32_t p0 = std::clamp(sa[q.a] + sa[q.b] - sa[q.c], 0, kGrid);
-            int32_t w1 = p0 + unzigzag(get_value(dec, t0));
+            const Coord A = s[q.a], B = s[q.b], C = s[q.c];
+            int32_t w1 = std::clamp(A[0] + B[0] - C[0], 0, kGrid) + dresidual<kFast, 0>(dec, t0);
+            int32_t r2 = dresidual<kFast, 1>(dec, t1), r3 = dresidual<kFast, 2>(dec, t2);
             bad |= uint32_t(w1) > uint32_t(kGrid);
             w1 = std::clamp(w1, 0, kGrid);
-            int32_t p1 = std::clamp(sb[q.a] + sb[q.b] - sb[q.c], 0, kGrid - w1);
-            int32_t w2 = p1 + unzigzag(get_value(dec, t1));
+            int32_t w2 = std::clamp(A[1] + B[1] - C[1], 0, kGrid - w1) + r2;
             bad |= uint32_t(w2) > uint32_t(kGrid - w1);
             w2 = std::clamp(w2, 0, kGrid - w1);
-            int32_t p2 = std::clamp(sc[q.a] + sc[q.b] - sc[q.c], 0, kGrid - w1 - w2);
-            int32_t w3 = p2 + unzigzag(get_value(dec, t2));
+            int32_t w3 = std::clamp(A[2] + B[2] - C[2], 0, kGrid - w1 - w2) + r3;
             bad |= uint32_t(w3) > uint32_t(kGrid - w1 - w2);
             w3 = std::clamp(w3, 0, kGrid - w1 - w2);
-            sa[v] = w1, sb[v] = w2, sc[v] = w3;
+            s[v] = {w1, w2, w3, 0};
             int32_t a = w1 + w2 + w3, b = w2 + w3;
             vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(w3);
-        }
-        for (uint32_t v = 0; v < V; ++v) {
-            sa[v] += sb[v] + sc[v];
-            sb[v] += sc[v];
-        }
+        });
+        for (uint32_t v = 0; v < V; ++v) s[v] = {s[v][0] + s[v][1] + s[v][2], s[v][1] + s[v][2], s[v][2], 0};
     }
     io = dec;
     return bad == 0;
@@ -1034,32 +1137,36 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
     rans::Decoder dec = io;
     const rans::TableView tu(ws.tables[kStreamNormU]), tv(ws.tables[kStreamNormV]);
     if (normal_mode == kNormalGeometric) {
-        ws.acc.assign(V, Vec3l{0, 0, 0});
-        accumulate_normals(indices, T, ws.sa.data(), ws.sb.data(), ws.sc.data(), ws.acc);
-        const Vec3l* acc = ws.acc.data();
+        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
+        accumulate_normals(indices, T, ws.coords.data(), ws.acc.data());
+        const NormalSum* acc = ws.acc.data();
         int prev_u = 0, prev_v = 0;
-        for (uint32_t v = 0; v < V; ++v) {
+        for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+            int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
+            const Pred q = pred[v];
             int pu, pv;
             geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
-            prev_u = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
-            prev_v = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
+            int qu = std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127);
+            int qv = std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127);
+            blend_normal(q.a != q.c, qu, qv, pu, pv);
+            prev_u = int8_t(uint8_t(pu + ru));
+            prev_v = int8_t(uint8_t(pv + rv));
             nu[v] = int8_t(prev_u), nv[v] = int8_t(prev_v);
-        }
+        });
     } else if (normal_mode == kNormalAverage) {
-        for (uint32_t v = 0; v < V; ++v) {
+        for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
             const Pred q = pred[v];
-            int pu = (nu[q.a] + nu[q.b]) >> 1, pv = (nv[q.a] + nv[q.b]) >> 1;
-            nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
-            nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
-        }
+            int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
+            nu[v] = int8_t(uint8_t(((nu[q.a] + nu[q.b]) >> 1) + ru));
+            nv[v] = int8_t(uint8_t(((nv[q.a] + nv[q.b]) >> 1) + rv));
+        });
     } else {
-        for (uint32_t v = 0; v < V; ++v) {
+        for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
             const Pred q = pred[v];
-            int pu = std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127);
-            int pv = std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127);
-            nu[v] = int8_t(uint8_t(pu + unzigzag(get_value(dec, tu))));
-            nv[v] = int8_t(uint8_t(pv + unzigzag(get_value(dec, tv))));
-        }
+            int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
+            nu[v] = int8_t(uint8_t(std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127) + ru));
+            nv[v] = int8_t(uint8_t(std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127) + rv));
+        });
     }
     io = dec;
     for (uint32_t v = 0; v < V; ++v) {
@@ -1076,23 +1183,20 @@ void decode_colors(rans::Decoder& io, Workspace& ws, bool parallelogram, bool de
     rgb[V] = {0, 0, 0, 0};
     rans::Decoder dec = io;
     const rans::TableView tr(ws.tables[kStreamColR]), tg(ws.tables[kStreamColG]), tb(ws.tables[kStreamColB]);
-    for (uint32_t v = 0; v < V; ++v) {
+    const int32_t dmask = decorrelate ? -1 : 0;
+    for_each_item(dec, V, 3, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
         const Pred q = pred[v];
+        int32_t rg = dresidual<kFast, 0>(dec, tg);
+        int32_t rr = dresidual<kFast, 1>(dec, tr) + (rg & dmask);
+        int32_t rb = dresidual<kFast, 2>(dec, tb) + (rg & dmask);
         int pc[3];
         for (int c = 0; c < 3; ++c) {
             int a = rgb[q.a][size_t(c)], b = rgb[q.b][size_t(c)];
             pc[c] = parallelogram ? std::clamp(a + b - rgb[q.c][size_t(c)], 0, 255) : (a + b + 1) >> 1;
         }
-        int rg = unzigzag(get_value(dec, tg));
-        int rr = unzigzag(get_value(dec, tr));
-        int rb = unzigzag(get_value(dec, tb));
-        if (decorrelate) {
-            rr += rg;
-            rb += rg;
-        }
         rgb[v] = {uint8_t(pc[0] + rr), uint8_t(pc[1] + rg), uint8_t(pc[2] + rb), 0};
         vert[v].word1 |= uint32_t(rgb[v][0]) << 8 | uint32_t(rgb[v][1]) << 16 | uint32_t(rgb[v][2]) << 24;
-    }
+    });
     io = dec;
 }
 
@@ -1132,7 +1236,7 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
     }
     // Every triangle takes one symbol (three to start a component), every BOUNDARY one of the
     // at most 3 R front edges.
-    if (conn_symbols > 6 * uint64_t(R)) return FragmentStatus::Corrupt;
+    if (conn_symbols > 6 * uint64_t(R) || conn_symbols < R) return FragmentStatus::Corrupt;
     if (R > 0 && V < 3) return FragmentStatus::Corrupt;
 
     rans::Decoder dec;
@@ -1146,7 +1250,7 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
 
     out.vertices.resize(V);
     out.indices.resize(size_t(T) * 3);
-    grow(ws.pred, V);
+    grow(ws.pred, size_t(V) + 1);
     Pred* pred = ws.pred.data();
     uint32_t seen = 0;
     FragmentStatus st = decode_connectivity(dec, ws.tables[kStreamConn], V, R, uint32_t(conn_symbols), ws,
@@ -1159,16 +1263,14 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
     const int index_bits = V > 0 ? bit_width_u32(V - 1) : 0;
     uint32_t* tri = out.indices.data() + 3 * size_t(R);
     for (uint64_t k = 0; k < 3 * E; ++k) {
-        uint32_t v = get_wide(dec, index_bits);
+        uint32_t v = dec.get_bits(uint32_t(index_bits));
         if (v >= V) return FragmentStatus::Corrupt;
         *tri++ = v;
     }
     if (!dec.ok()) return FragmentStatus::Corrupt;
 
     // Positions (index V: the virtual zero vertex).
-    grow(ws.sa, size_t(V) + 1);
-    grow(ws.sb, size_t(V) + 1);
-    grow(ws.sc, size_t(V) + 1);
+    grow(ws.coords, size_t(V) + 1);
     if (!decode_positions(dec, ws, pos_mode, V, pred, out.vertices.data())) return FragmentStatus::Corrupt;
     decode_normals(dec, ws, normal_mode, matrix, V, T, pred, out.indices.data(), out.vertices.data());
     decode_colors(dec, ws, color_parallelogram, color_decorrelate, V, pred, out.vertices.data());
@@ -1178,9 +1280,9 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
 
 }  // namespace
 
-FragmentStatus fragment_decode(const uint8_t* data, size_t size, FragmentMesh& out) {
-    out.vertices.clear();
-    out.indices.clear();
+namespace {
+
+FragmentStatus decode_fragment(const uint8_t* data, size_t size, FragmentMesh& out) {
     uint32_t V = 0, T = 0;
     FragmentStatus st = fragment_peek(data, size, V, T);
     if (st != FragmentStatus::Ok) return st;
@@ -1192,19 +1294,22 @@ FragmentStatus fragment_decode(const uint8_t* data, size_t size, FragmentMesh& o
     if (payload_size < 3) return FragmentStatus::Corrupt;
     if (read_u16(payload) != header_fold(data)) return FragmentStatus::Corrupt;
     const uint8_t coding = payload[2];
-    if (coding == kCodingStored)
-        st = decode_stored(payload + 3, payload_size - 3, V, T, out);
-    else if (coding == kCodingCompressed) {
-        if (V <= kWorkspaceKeepVertices) {
-            thread_local Workspace ws;
-            st = decode_compressed(payload + 3, payload_size - 3, V, T, out, ws);
-        } else {
-            Workspace ws;
-            st = decode_compressed(payload + 3, payload_size - 3, V, T, out, ws);
-        }
+    if (coding == kCodingStored) return decode_stored(payload + 3, payload_size - 3, V, T, out);
+    if (coding != kCodingCompressed) return FragmentStatus::Corrupt;
+    if (V <= kWorkspaceKeepVertices) {
+        thread_local Workspace ws;
+        return decode_compressed(payload + 3, payload_size - 3, V, T, out, ws);
     }
-    else
-        st = FragmentStatus::Corrupt;
+    Workspace ws;
+    return decode_compressed(payload + 3, payload_size - 3, V, T, out, ws);
+}
+
+}  // namespace
+
+FragmentStatus fragment_decode(const uint8_t* data, size_t size, FragmentMesh& out) {
+    // `out` is resized, not cleared first: every element is overwritten, and reusing a mesh
+    // of similar size then costs no zero-filling.
+    FragmentStatus st = decode_fragment(data, size, out);
     if (st != FragmentStatus::Ok) {
         out.vertices.clear();
         out.indices.clear();

@@ -13,20 +13,28 @@ uint32_t weight_value(int code) { return code <= 0 ? 0u : uint32_t(4 + (code - 1
 
 // Meta table for the table descriptions: symbol 0 = absent, 1..29 = delta (sym - 15) of the
 // weight code against the previous present one (starting at kMaxWeightCode), 30 = escape
-// followed by the code in 6 raw bits. Frequencies (sum 4096) fitted to the tables of real
-// fragments: weights mostly fall by 1-6 codes per symbol (residual magnitudes decay).
+// followed by the code in 6 raw bits. Frequencies (sum 4096; the escape takes the remainder)
+// fitted to the tables of the bunny fragments (smoothed): absent symbols are common in the
+// sparse tails, present weights mostly fall by 1-6 codes per symbol.
 constexpr int kMetaSymbols = 31;
 constexpr int kMetaEscape = 30;
 constexpr int kMetaBias = 15;
 constexpr std::array<uint16_t, kMetaSymbols> kMetaFreq = {
     // absent, then delta -14 .. -1
-    180, 24, 28, 34, 42, 52, 64, 84, 112, 150, 200, 260, 330, 400, 460,
+    1025, 19, 26, 40, 43, 58, 71, 101, 115, 164, 159, 255, 164, 206, 243,
     // delta 0
-    430,
+    648,
     // delta +1 .. +14
-    380, 280, 190, 120, 76, 48, 30, 20, 14, 10, 8, 6, 6, 6,
+    186, 119, 61, 85, 51, 59, 38, 21, 23, 14, 11, 6, 4, 4,
     // escape
     0 /* the remainder of 4096 */};
+
+constexpr uint32_t meta_listed_sum() {
+    uint32_t sum = 0;
+    for (int i = 0; i < kMetaEscape; ++i) sum += kMetaFreq[size_t(i)];
+    return sum;
+}
+static_assert(meta_listed_sum() < 4096, "the escape symbol needs a frequency");
 
 struct Meta {
     FreqTable freqs;
@@ -208,6 +216,7 @@ double table_cost_bits(const TableDesc& desc) {
 }
 
 void Encoder::put_bits(uint32_t value, int nbits) {
+    assert(nbits <= kMaxRawBits);
     if (nbits <= 0) return;
     uint64_t v = nbits < 32 ? value & ((1u << nbits) - 1) : value;
     bit_acc_ |= v << bit_fill_;
@@ -229,14 +238,14 @@ void Encoder::put_table(const TableDesc& desc) {
     for (int i = 0; i < desc.nsym; ++i) {
         int k = desc.code[size_t(i)];
         if (k == 0) {
-            put(m, 0);
+            put(m, 0, 0);
             continue;
         }
         int d = k - prev;
         if (d >= 1 - kMetaBias && d <= kMetaEscape - 1 - kMetaBias) {
-            put(m, uint32_t(d + kMetaBias));
+            put(m, uint32_t(d + kMetaBias), 0);
         } else {
-            put(m, kMetaEscape);
+            put(m, kMetaEscape, 0);
             put_bits(uint32_t(k), 6);
         }
         prev = k;
@@ -267,7 +276,7 @@ void Encoder::finish(std::vector<uint8_t>& out, std::vector<size_t>* section_byt
     for (size_t i = ops_.size(); i-- > 0;) {
         while (section > 0 && sections_[section - 1].first_op > i) --section;
         const Op& op = ops_[i];
-        uint32_t& x = state[i & 3];
+        uint32_t& x = state[op.lane];
         const uint32_t x_max = ((kStateLower >> op.scale) << 8) * op.freq;
         size_t before = rev.size();
         while (x >= x_max) {
@@ -326,16 +335,26 @@ bool Decoder::init(const uint8_t* data, size_t size) {
     bit_end = stop;
     bit_buf = 0;
     bit_count = 0;
+    bit_phantom = 0;
     failed = false;
     return true;
 }
 
-Decoder::Slow Decoder::renorm_slow(uint32_t x, const uint8_t* p, const uint8_t* end) {
+uint32_t Decoder::get_slow(const TableView& t, int which) {
+    uint32_t& state = which == 0 ? x0 : which == 1 ? x1 : which == 2 ? x2 : x3;
+    uint32_t x = state;
+    uint32_t e = t.lut[x & t.mask];
+    x = (e & 0x1fffu) * (x >> t.shift) + ((e >> 13) & 0xfffu);
     for (int i = 0; i < 2 && x < kStateLower; ++i) {
-        if (p == end) return {x | kStateLower, p, true};  // keep the state in range; the stream is invalid
+        if (p == end) {
+            failed = true;
+            x |= kStateLower;  // keep the state in range; the stream is already invalid
+            break;
+        }
         x = (x << 8) | *p++;
     }
-    return {x, p, false};
+    state = x;
+    return e >> 25;
 }
 
 void Decoder::refill_slow(uint32_t need) {
@@ -344,8 +363,9 @@ void Decoder::refill_slow(uint32_t need) {
         bit_count += 8;
     }
     if (bit_count < need) {
-        // Past the end: supply zero bits (bit_buf holds zeros above bit_count) and fail.
-        failed = true;
+        // Past the end: supply zero bits (bit_buf holds zeros above bit_count), remembered so
+        // that consuming them is detected at the end.
+        bit_phantom += need - bit_count;
         bit_count = need;
     }
 }
@@ -354,9 +374,12 @@ bool Decoder::finished_cleanly() const {
     if (failed) return false;
     if (x0 != kStateLower || x1 != kStateLower || x2 != kStateLower || x3 != kStateLower) return false;
     if (p != end) return false;
-    // Unconsumed bits: the buffered ones (only the low bit_count are valid) and unread bytes.
-    uint64_t valid = bit_count >= 64 ? bit_buf : bit_buf & ((uint64_t(1) << bit_count) - 1);
-    return bit_p == bit_end && bit_count < 8 && valid == 0;
+    // Supplied zero bits sit on top of the buffer: none may have been consumed. The real bits
+    // left (fewer than 8: padding) must be zero, and no byte may be left unread.
+    if (bit_p != bit_end || bit_count < bit_phantom) return false;
+    uint64_t real = bit_count - bit_phantom;
+    if (real >= 8) return false;
+    return (bit_buf & ((uint64_t(1) << real) - 1)) == 0;
 }
 
 bool Decoder::get_table(FreqTable& freqs, DecodeTable& table) {

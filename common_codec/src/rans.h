@@ -1,15 +1,16 @@
 #pragma once
 // Static rANS entropy coder plus a raw bit stream (private to common_codec).
 //
-// Symbols are coded with four interleaved 32-bit rANS states sharing one byte stream (symbol i
-// in decode order on state i & 3), so the decoder has four independent dependency chains.
-// States live in [kStateLower, 2^31); renormalisation is byte-wise, at most two bytes per
-// symbol, branch-free. Raw bits (the low bits of large residuals, explicit indices, table
-// fields) go to a separate little-endian bit stream read through a 64-bit buffer. The encoder
-// collects everything first and encodes the symbols backwards once the tables are known; it
-// starts every state at kStateLower, so the decoder checks that all states return to exactly
-// kStateLower after the last symbol, with every byte consumed and the bit stream's padding
-// zero: a strong end-of-stream integrity check.
+// Symbols are coded with four 32-bit rANS states ("lanes") sharing one byte stream. Every
+// symbol names its lane (the codec assigns lanes statically, e.g. one per coordinate, so a
+// decoder loop has up to four independent dependency chains without any state rotation). The
+// shared byte stream is consumed in decode order. States live in [kStateLower, 2^31);
+// renormalisation is byte-wise, at most two bytes per symbol, branch-free. Raw bits (the low
+// bits of large residuals, explicit indices, table fields) go to a separate little-endian bit
+// stream read through a 64-bit buffer. The encoder collects everything first and encodes the
+// symbols backwards once the tables are known; it starts every state at kStateLower, so the
+// decoder checks that all states return to exactly kStateLower after the last symbol, with
+// every byte consumed and the bit stream's padding zero: a strong end-of-stream check.
 //
 // Layout: u32 state0..state3 | varint bit_bytes | rANS bytes | bit stream (bit_bytes)
 //
@@ -18,8 +19,9 @@
 // (put_table/get_table): alphabet size (5 raw bits) and scale (3 raw bits), then per symbol a
 // log-domain weight code (0 = absent, else 1..40 for (4 + (k-1)%4) << ((k-1)/4): two mantissa
 // bits, about 19% steps, which costs < 0.003 bit per coded symbol) coded as the delta to the
-// previous present code with a fixed built-in meta table (escape: 6 raw bits). Frequencies are
-// derived from the weights by one deterministic integer normalisation (build_freqs).
+// previous present code with a fixed built-in meta table on lane 0 (escape: 6 raw bits).
+// Frequencies are derived from the weights by one deterministic integer normalisation
+// (build_freqs).
 #include <array>
 #include <bit>
 #include <cstddef>
@@ -71,9 +73,9 @@ struct DecodeTable {
 
 class Encoder {
 public:
-    // Appends, in decode order, a symbol / raw bits (nbits <= 32).
-    void put(const FreqTable& t, uint32_t sym) {
-        ops_.push_back(Op{t.start[sym], uint16_t(t.freq[sym]), uint8_t(t.scale_bits)});
+    // Appends, in decode order, a symbol on `lane` (0..3) / raw bits (nbits <= 32).
+    void put(const FreqTable& t, uint32_t sym, int lane) {
+        ops_.push_back(Op{t.start[sym], uint16_t(t.freq[sym]), uint8_t(t.scale_bits), uint8_t(lane)});
     }
     void put_bits(uint32_t value, int nbits);
     void put_table(const TableDesc& desc);
@@ -90,6 +92,7 @@ private:
         uint32_t start;
         uint16_t freq;
         uint8_t scale;
+        uint8_t lane;
     };
     struct Section {
         size_t first_op;
@@ -113,55 +116,77 @@ struct TableView {
 
 // The decoder is a plain value: hot loops copy it into a local (so that every field lives in a
 // register), decode, and copy it back. Nothing here takes the address of a field.
+//
+// Hot loops use the unchecked forms (sym, take_bits) after establishing the preconditions with
+// rans_bytes_left() (each symbol consumes at most 2 bytes) and need_bits(); the checked forms
+// (get, get_bits) work anywhere.
 struct Decoder {
+    static constexpr uint32_t kMaxBytesPerSymbol = 2;
+
     // Parses the layout; false if it is inconsistent (lengths, states out of range).
     bool init(const uint8_t* data, size_t size);
 
-    CATPAQ_RANS_INLINE uint32_t get(const TableView& t) {
-        uint32_t x = x0;
+    template <int L>
+    CATPAQ_RANS_INLINE uint32_t& lane() {
+        static_assert(L >= 0 && L < 4);
+        if constexpr (L == 0) return x0;
+        if constexpr (L == 1) return x1;
+        if constexpr (L == 2) return x2;
+        if constexpr (L == 3) return x3;
+    }
+    size_t rans_bytes_left() const { return size_t(end - p); }
+
+    // Symbol on lane L; requires rans_bytes_left() >= 2.
+    template <int L>
+    CATPAQ_RANS_INLINE uint32_t sym(const TableView& t) {
+        uint32_t x = lane<L>();
         uint32_t e = t.lut[x & t.mask];
         x = (e & 0x1fffu) * (x >> t.shift) + ((e >> 13) & 0xfffu);
-        if (end - p >= 2) [[likely]] {
-            // At most two bytes are needed (every step leaves x >= kStateLower >> 12); both
-            // reads are in bounds, the unneeded ones are masked off.
-            uint32_t n1 = x < kStateLower;
-            x = (x << (8 * n1)) | (uint32_t(p[0]) & (0u - n1));
-            uint32_t n2 = x < kStateLower;
-            x = (x << (8 * n2)) | (uint32_t(p[1]) & (0u - n2));
-            p += n1 + n2;
-        } else {
-            Slow r = renorm_slow(x, p, end);
-            x = r.x;
-            p = r.p;
-            failed |= r.failed;
-        }
-        x0 = x1;
-        x1 = x2;
-        x2 = x3;
-        x3 = x;
+        // k = 0, 1 or 2 bytes are needed (every step leaves x >= kStateLower >> 12): read two
+        // (in bounds by the precondition) and keep the first k.
+        const uint32_t k = uint32_t(x < kStateLower) + uint32_t(x < (kStateLower >> 8));
+        const uint32_t two = (uint32_t(p[0]) << 8) | p[1];
+        x = (x << (8 * k)) | (two >> (16 - 8 * k));
+        p += k;
+        lane<L>() = x;
         return e >> 25;
     }
-    // Raw bits from the bit stream (0 <= nbits <= 32).
-    CATPAQ_RANS_INLINE uint32_t get_bits(uint32_t nbits) {
-        if (bit_count < nbits) [[unlikely]]
-            refill(nbits);
+    // Symbol on lane L, any position.
+    template <int L>
+    CATPAQ_RANS_INLINE uint32_t get(const TableView& t) {
+        if (rans_bytes_left() >= kMaxBytesPerSymbol) [[likely]]
+            return sym<L>(t);
+        return get_slow(t, L);
+    }
+    uint32_t get(const TableView& t) { return get<0>(t); }
+
+    // Makes at least n <= 56 bits available to take_bits. Past the end of the bit stream zero
+    // bits are supplied; consuming any of them makes finished_cleanly() false.
+    CATPAQ_RANS_INLINE void need_bits(uint32_t n) {
+        if (bit_count < n) [[unlikely]]
+            refill(n);
+    }
+    // Raw bits; requires need_bits(>= nbits) since the last refill accounting.
+    CATPAQ_RANS_INLINE uint32_t take_bits(uint32_t nbits) {
         uint32_t v = uint32_t(bit_buf & ((uint64_t(1) << nbits) - 1));
         bit_buf >>= nbits;
         bit_count -= nbits;
         return v;
     }
-    // A value: symbol s from table t, then nbits[s] (<= 24) raw bits; returns base[s] | bits.
-    CATPAQ_RANS_INLINE uint32_t get_value(const TableView& t, const uint32_t* base, const uint8_t* nbits) {
-        uint32_t s = get(t);
-        return base[s] | get_bits(nbits[s]);
+    // Raw bits, any position (0 <= nbits <= 32).
+    CATPAQ_RANS_INLINE uint32_t get_bits(uint32_t nbits) {
+        if (nbits > 32) nbits = 32;
+        if (bit_count < nbits) refill(nbits);
+        return take_bits(nbits);
     }
+
     // Reads a table description and builds both forms; false if invalid.
     bool get_table(FreqTable& freqs, DecodeTable& table);
 
     // False once any stream was read past its end.
     bool ok() const { return !failed; }
     // True if no read went past an end, every byte was consumed, the bit stream's padding is
-    // zero and both states are back at their initial value.
+    // zero and all states are back at their initial value.
     bool finished_cleanly() const;
 
     uint32_t x0 = 0, x1 = 0, x2 = 0, x3 = 0;
@@ -169,15 +194,11 @@ struct Decoder {
     const uint8_t *bit_p = nullptr, *bit_end = nullptr;
     uint64_t bit_buf = 0;
     uint32_t bit_count = 0;  // valid low bits in bit_buf
+    uint64_t bit_phantom = 0;  // zero bits supplied past the end of the bit stream
     bool failed = true;
 
 private:
-    struct Slow {
-        uint32_t x;
-        const uint8_t* p;
-        bool failed;
-    };
-    static Slow renorm_slow(uint32_t x, const uint8_t* p, const uint8_t* end);
+    uint32_t get_slow(const TableView& t, int lane);
     CATPAQ_RANS_INLINE void refill(uint32_t need) {
         if (bit_end - bit_p >= 8) [[likely]] {
             uint64_t w;

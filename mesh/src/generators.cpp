@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cassert>
 #include <cmath>
+#include <thread>
 #include <utility>
 
 #include "readers.h"  // reserve_huge
@@ -42,7 +43,8 @@ double value_noise(double x, double y, double z, uint64_t seed) {
     int64_t ix = int64_t(fx), iy = int64_t(fy), iz = int64_t(fz);
     double u = fade(x - fx), v = fade(y - fy), w = fade(z - fz);
     // Neighbouring cells must agree on shared corners: the seed goes in after the coordinates.
-    uint64_t key = uint64_t(ix) * kLatticeX + uint64_t(iy) * kLatticeY + uint64_t(iz) * kLatticeZ, salt = mix64(seed);
+    uint64_t key = uint64_t(ix) * kLatticeX + uint64_t(iy) * kLatticeY + uint64_t(iz) * kLatticeZ;
+    uint64_t salt = mix64(seed);
     double corner[2][2][2];
     for (int dz = 0; dz < 2; ++dz)
         for (int dy = 0; dy < 2; ++dy)
@@ -111,6 +113,26 @@ Rgb8 smooth_color(const Vec3d& p, uint64_t seed) {
     return out;
 }
 
+// Runs body(begin, end) on slices of [0, n) in parallel. Every element is computed on its own,
+// so the result does not depend on the number of threads.
+template <class Body>
+void parallel_for(size_t n, Body body) {
+    size_t threads = n < 65536 ? 1 : std::clamp<size_t>(std::thread::hardware_concurrency(), 1, 16);
+    std::vector<std::thread> workers;
+    for (size_t t = 1; t < threads; ++t) workers.emplace_back(body, n * t / threads, n * (t + 1) / threads);
+    body(0, n / threads);
+    for (std::thread& worker : workers) worker.join();
+}
+
+// Colours every vertex from its position.
+template <class Color>
+void color_vertices(Mesh& mesh, Color color) {
+    mesh.colors.resize(mesh.positions.size());
+    parallel_for(mesh.positions.size(), [&](size_t begin, size_t end) {
+        for (size_t v = begin; v < end; ++v) mesh.colors[v] = color(mesh.positions[v]);
+    });
+}
+
 // Splits `splits` of `quads` quads evenly: quad q is split when the running quota steps.
 bool split_here(size_t q, size_t splits, size_t quads) { return (q + 1) * splits / quads > q * splits / quads; }
 
@@ -149,6 +171,19 @@ struct BoxGrid {
         else if (p <= size_t(a) + b) i = a, j = uint32_t(p - a);
         else if (p <= 2 * size_t(a) + b) i = uint32_t(2 * size_t(a) + b - p), j = b;
         else i = 0, j = uint32_t(2 * size_t(a) + 2 * size_t(b) - p);
+    }
+    // The lattice point of vertex `index` (the inverse of index()).
+    void point(size_t index, uint32_t& i, uint32_t& j, uint32_t& k) const {
+        size_t middle = full_layer() + size_t(n[2] - 1) * ring();
+        if (index < full_layer() || index >= middle) {
+            k = index < full_layer() ? 0 : n[2];
+            size_t in_layer = index < full_layer() ? index : index - middle;
+            i = uint32_t(in_layer % (n[0] + 1));
+            j = uint32_t(in_layer / (n[0] + 1));
+        } else {
+            k = uint32_t(1 + (index - full_layer()) / ring());
+            ring_point((index - full_layer()) % ring(), i, j);
+        }
     }
     uint32_t index(uint32_t i, uint32_t j, uint32_t k) const {
         if (k == 0) return uint32_t(size_t(j) * (n[0] + 1) + i);
@@ -196,18 +231,13 @@ Mesh box_surface(const BoxGrid& g, size_t splits, Position position, Keep keep =
     Mesh mesh;
     mesh_io::reserve_huge(mesh.positions, g.vertex_count() + splits);
     mesh.positions.resize(g.vertex_count() + splits);
-    for (uint32_t k = 0; k <= g.n[2]; ++k) {
-        if (k == 0 || k == g.n[2]) {
-            for (uint32_t j = 0; j <= g.n[1]; ++j)
-                for (uint32_t i = 0; i <= g.n[0]; ++i) mesh.positions[g.index(i, j, k)] = position(g.cube(i, j, k));
-        } else {
-            for (size_t p = 0; p < g.ring(); ++p) {
-                uint32_t i, j;
-                g.ring_point(p, i, j);
-                mesh.positions[g.index(i, j, k)] = position(g.cube(i, j, k));
-            }
+    parallel_for(g.vertex_count(), [&](size_t begin, size_t end) {
+        for (size_t v = begin; v < end; ++v) {
+            uint32_t i, j, k;
+            g.point(v, i, j, k);
+            mesh.positions[v] = position(g.cube(i, j, k));
         }
-    }
+    });
     mesh_io::reserve_huge(mesh.indices, 6 * g.quad_count() + 6 * splits);
     size_t quad = 0, centre = g.vertex_count();
     for (int axis = 0; axis < 3; ++axis) {
@@ -303,8 +333,7 @@ Mesh make_sphere(size_t target_triangles, uint64_t seed) {
         Vec3d unit = normalized({n[0], n[1], n[2]});
         n = {float(unit[0]), float(unit[1]), float(unit[2])};
     }
-    mesh.colors.resize(mesh.positions.size());
-    for (size_t v = 0; v < mesh.positions.size(); ++v) mesh.colors[v] = smooth_color(mesh.positions[v], seed);
+    color_vertices(mesh, [seed](const Vec3d& p) { return smooth_color(p, seed); });
     return mesh;
 }
 
@@ -346,8 +375,7 @@ Mesh make_torus(size_t target_triangles, uint64_t seed) {
                       uint32_t(j1 * major + i), (i + j) % 2 == 0, middle);
         }
     }
-    mesh.colors.resize(mesh.positions.size());
-    for (size_t v = 0; v < mesh.positions.size(); ++v) mesh.colors[v] = smooth_color(mesh.positions[v], seed);
+    color_vertices(mesh, [seed](const Vec3d& p) { return smooth_color(p, seed); });
     return mesh;
 }
 
@@ -371,15 +399,12 @@ Mesh make_scan_like(size_t target_triangles, uint64_t seed) {
     Mesh mesh = box_surface(grid, splits, position);
     round_to_float(mesh);
     mesh.normals = compute_vertex_normals(mesh);
-    mesh.colors.resize(mesh.positions.size());
-    for (size_t v = 0; v < mesh.positions.size(); ++v) {
-        const Vec3d& p = mesh.positions[v];
+    color_vertices(mesh, [shape_seed](const Vec3d& p) {
         // Stone: a warm grey, veined by a second noise field.
-        double vein = fbm(p, 3.0, 2, shape_seed + 100);
-        double shade = 150.0 + 60.0 * vein;
-        mesh.colors[v] = {uint8_t(std::clamp(shade + 12.0, 0.0, 255.0)), uint8_t(std::clamp(shade + 4.0, 0.0, 255.0)),
-                          uint8_t(std::clamp(shade - 8.0, 0.0, 255.0))};
-    }
+        double shade = 150.0 + 60.0 * fbm(p, 3.0, 2, shape_seed + 100);
+        return Rgb8{uint8_t(std::clamp(shade + 12.0, 0.0, 255.0)), uint8_t(std::clamp(shade + 4.0, 0.0, 255.0)),
+                    uint8_t(std::clamp(shade - 8.0, 0.0, 255.0))};
+    });
     return mesh;
 }
 
@@ -565,7 +590,8 @@ Mesh non_manifold_edges() {
     Builder b;
     // Three sheets hinged on the edge (0.5,0.5,0)-(0.5,0.5,1), reaching x=1, y=1 and (0,0).
     const Vec3d e0{0.5, 0.5, 0}, e1{0.5, 0.5, 1};
-    for (const auto& far : {std::array<double, 2>{1, 0.5}, std::array<double, 2>{0.5, 1}, std::array<double, 2>{0, 0}}) {
+    const std::array<double, 2> far_edges[3] = {{1, 0.5}, {0.5, 1}, {0, 0}};
+    for (const auto& far : far_edges) {
         uint32_t h0 = b.vertex(e0), h1 = b.vertex(e1);
         uint32_t f0 = b.vertex({far[0], far[1], 0}), f1 = b.vertex({far[0], far[1], 1});
         b.triangle(h0, f0, f1);
@@ -645,7 +671,8 @@ void finish_hard_case(Mesh& mesh, uint64_t seed) {
 
     mesh.normals = compute_vertex_normals(mesh);
     Bounds bounds = mesh.bounds();
-    double extent = std::max({bounds.max[0] - bounds.min[0], bounds.max[1] - bounds.min[1], bounds.max[2] - bounds.min[2]});
+    double extent = 0;
+    for (int k = 0; k < 3; ++k) extent = std::max(extent, bounds.max[k] - bounds.min[k]);
     mesh.colors.resize(n);
     for (size_t v = 0; v < n; ++v) {
         const Vec3d& p = mesh.positions[v];

@@ -1,7 +1,6 @@
 #include "mesh/mesh.h"
 
 #include <algorithm>
-#include <cassert>
 #include <cmath>
 
 #include "base/error.h"

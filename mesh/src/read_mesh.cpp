@@ -55,7 +55,8 @@ Format sniff(const std::string& path) {
     // Skip comment lines, then classify by the first token.
     for (size_t pos = 0; pos < start.size();) {
         size_t end = start.find('\n', pos);
-        std::string_view line = mesh_io::strip_comment(start.substr(pos, end == std::string_view::npos ? end : end - pos));
+        size_t length = end == std::string_view::npos ? end : end - pos;
+        std::string_view line = mesh_io::strip_comment(start.substr(pos, length));
         pos = end == std::string_view::npos ? start.size() : end + 1;
         std::string_view first;
         if (!mesh_io::Tokens(line).next(first)) continue;

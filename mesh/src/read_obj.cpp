@@ -1,5 +1,6 @@
 // Wavefront OBJ: geometry ("v", "f") plus MeshLab-style vertex colours ("v x y z r g b");
 // every other statement (vt, g, o, s, usemtl, mtllib, l, p, ...) is ignored.
+#include <algorithm>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -11,8 +12,6 @@
 
 namespace catpaq::mesh_io {
 namespace {
-
-using ull = unsigned long long;
 
 class ObjReader {
 public:

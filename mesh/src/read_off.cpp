@@ -83,7 +83,8 @@ void OffReader::parse_counts(Tokens& tokens) {
     if (n < 2) file_.fail_line("malformed OFF header: expected 'vertices faces edges'");
     header_.vertices = uint64_t(counts[0]);
     header_.faces = uint64_t(counts[1]);
-    if (header_.vertices > UINT32_MAX) file_.fail_line("%lld vertices exceed the 32-bit index limit", (long long)counts[0]);
+    if (header_.vertices > UINT32_MAX)
+        file_.fail_line("%lld vertices exceed the 32-bit index limit", (long long)counts[0]);
     // Every vertex and face takes a line of at least 2 bytes: this bounds the counts by the file
     // size before anything is reserved. (Ordinary truncation gets a precise message later.)
     unsigned __int128 needed = ((unsigned __int128)header_.vertices + header_.faces) * 2;
@@ -150,7 +151,8 @@ void OffReader::face(std::string_view line, Mesh& mesh) {
     uint32_t first = 0, previous = 0;
     for (int64_t corner = 0; corner < count; ++corner) {
         int64_t v;
-        if (!tokens.next(token)) file_.fail_line("face declares %lld vertices but lists %lld", (long long)count, (long long)corner);
+        if (!tokens.next(token))
+            file_.fail_line("face declares %lld vertices but lists %lld", (long long)count, (long long)corner);
         if (!parse_int(token, v)) file_.fail_line("malformed vertex index %s", quoted(token).c_str());
         if (v < 0 || uint64_t(v) >= header_.vertices)
             file_.fail_line("vertex index %lld is out of range (%llu vertices)", (long long)v, ull(header_.vertices));

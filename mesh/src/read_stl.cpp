@@ -46,7 +46,9 @@ public:
 private:
     static constexpr uint32_t kEmpty = UINT32_MAX;
 
-    static bool same_bits(const Vec3d& a, const Vec3d& b) { return std::memcmp(a.data(), b.data(), sizeof(Vec3d)) == 0; }
+    static bool same_bits(const Vec3d& a, const Vec3d& b) {
+        return std::memcmp(a.data(), b.data(), sizeof(Vec3d)) == 0;
+    }
 
     static size_t hash(const Vec3d& p) {
         uint64_t h = 0x9e3779b97f4a7c15ull;
@@ -124,7 +126,8 @@ public:
     Mesh read() {
         std::string_view keyword;
         Tokens tokens = next("solid", keyword);
-        if (!keyword_is(keyword, "solid")) file_.fail_line("not an STL file: expected 'solid', found %s", quoted(keyword).c_str());
+        if (!keyword_is(keyword, "solid"))
+            file_.fail_line("not an STL file: expected 'solid', found %s", quoted(keyword).c_str());
         for (;;) {
             tokens = next("'facet' or 'endsolid'", keyword);
             if (keyword_is(keyword, "facet")) {
@@ -220,8 +223,8 @@ Mesh read_stl_file(InputFile& file) {
         if (size == 84 + 50 * uint64_t(triangles)) return read_binary(file, triangles);
         // Binary content whose size disagrees with its count: cut short, or with junk appended.
         if (has_control_bytes)
-            file.fail("truncated or malformed binary STL: the header declares %u triangles (%llu bytes) but the file has "
-                      "%llu bytes",
+            file.fail("truncated or malformed binary STL: the header declares %u triangles (%llu bytes) but the "
+                      "file has %llu bytes",
                       triangles, ull(84 + 50 * uint64_t(triangles)), ull(size));
     }
     if (!starts_solid || has_control_bytes)

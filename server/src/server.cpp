@@ -2,16 +2,18 @@
 // hand-written HTTP/1.1 connection loop (parser in http.cpp, answers in router.cpp).
 //
 // Why not cpp-httplib: measured with bench/server/run.sh on the 2-core machine (wrk, 100
-// keep-alive connections, random 4-40 KB nodes, `catpaq serve` vs nginx serving the same file by
-// Range requests), a cpp-httplib server (pre-routing handler, no regex routes, content provider
-// from the mapping, a 128-thread pool because every keep-alive connection pins a pool thread)
-// reached about half of nginx's requests per second with a much worse p99 latency: each request
-// costs it a poll() before every read, separate writes for headers and body and a context switch
-// between its ~100 blocked threads, and its thread-per-connection model cannot hold 512 idle
-// keep-alive clients on a small pool. This event loop does one readv-sized read, parses every
-// pipelined request in the buffer and answers all of them with one writev straight from the
-// dataset's memory mapping (no copy of node bytes in user space), which puts it at or above
-// nginx. The numbers are in bench/server/README.md.
+// keep-alive connections, random 4-40 KB nodes; `catpaq serve` vs nginx serving the same file by
+// Range requests), a cpp-httplib server doing the same node route as well as its API allows
+// (pre-routing handler instead of std::regex routes, a content provider sending from the memory
+// mapping, a 108-thread pool because every keep-alive connection pins a pool thread) reached
+// 0.49x-0.70x of nginx's requests/s with p99 latencies up to 1.4 s and occasional timeouts: it
+// makes about 10 system calls per keep-alive request (5 polls, recv, getpeername, getsockname,
+// separate sends for headers and body), context-switches between ~100 blocked threads, and its
+// thread-per-connection model needs a thread per idle keep-alive client.
+// This event loop reads once, parses every pipelined request in the buffer and answers them with
+// one gather write straight from the dataset's memory mapping (about 2 system calls per request):
+// 0.93x-2.04x of nginx's requests/s in the same runs, comparable p99, no errors
+// (bench/server/README.md).
 //
 // Per connection: read -> parse all complete requests -> queue responses -> gather-write ->
 // repeat. Bodies of requests are read and discarded. A sweeper timer per thread enforces the
@@ -71,7 +73,6 @@ struct Shared {
     http::Limits limits;
     Router router;
     Clock::duration timeout{};
-    std::atomic<bool> stopping{false};
 };
 
 struct Worker {
@@ -264,8 +265,7 @@ private:
         }
         if (write_index_ < queued_ && !close_after) return write();
         queued_ = write_index_ = write_offset_ = 0;
-        if (close_after) return linger();
-        if (worker_.stopping) return close();
+        if (close_after || worker_.stopping) return linger();
         process();
     }
 
@@ -457,7 +457,6 @@ void StreamingServer::stop() {
     std::lock_guard lock(m.mutex);
     if (!m.started || m.stopped) return;
     m.stopped = true;
-    m.shared.stopping = true;
     asio::post(m.workers[0]->io, [&m] {
         error_code ec;
         m.acceptor->close(ec);

@@ -175,7 +175,7 @@ FragmentMesh icosphere(int subdivisions) {
         f = g;
     }
     FragmentMesh m;
-    const double center[3] = {700, 450, 200}, radius = 150;
+    const double center[3] = {700, 450, 200}, radius = 170;
     for (const auto& v : p) {
         double q[3] = {center[0] + radius * v[0], center[1] + radius * v[1], center[2] + radius * v[2]};
         m.vertices.push_back(smooth_vertex(q, v.data()));
@@ -223,7 +223,7 @@ TEST(FragmentCodec, RoundTripIsLosslessOnAClosedIcosphere) {
 }
 
 TEST(FragmentCodec, GeometricNormalPredictorIsChosenForSurfaceNormals) {
-    FragmentMesh m = icosphere(4);
+    FragmentMesh m = icosphere(3);
     std::vector<uint8_t> bytes = expect_round_trip(m);
     ASSERT_EQ(bytes[kCodingOffset], 0);
     EXPECT_EQ((bytes[kModesOffset] >> 2) & 3, 2) << "normal predictor";
@@ -348,6 +348,19 @@ TEST(FragmentCodec, RoundTripIsLosslessOnA200kTriangleMesh) {
     EXPECT_EQ(bytes[kCodingOffset], 0);
 }
 
+TEST(FragmentCodec, RoundTripIsLosslessOnAHighValenceFanAndStackedDuplicates) {
+    FragmentMesh m = grid_patch(3);
+    // 3000 triangles around vertex 4 (a non-manifold fan: each rim edge is used many times),
+    // then 2000 copies of one triangle.
+    for (uint32_t k = 0; k < 3000; ++k) {
+        uint32_t a = k % 9, b = (k + 1 + k / 9) % 9;
+        if (a == 4 || b == 4 || a == b) continue;
+        m.indices.insert(m.indices.end(), {4, a, b});
+    }
+    for (int k = 0; k < 2000; ++k) m.indices.insert(m.indices.end(), {0, 1, 4});
+    expect_round_trip(m);
+}
+
 // ---- damaged input --------------------------------------------------------------------------
 
 TEST(FragmentCodec, EveryTruncationIsRejected) {
@@ -419,10 +432,15 @@ TEST(FragmentCodec, FuzzedInputNeverCrashesTheDecoder) {
     auto check = [&](const std::vector<uint8_t>& b) {
         FragmentStatus st = fragment_decode(b.data(), b.size(), out);
         if (st == FragmentStatus::Ok) {
-            for (uint32_t i : out.indices) ASSERT_LT(i, out.vertices.size());
+            uint32_t vc = 0, tc = 0;
+            EXPECT_EQ(fragment_peek(b.data(), b.size(), vc, tc), FragmentStatus::Ok);
+            EXPECT_EQ(out.vertices.size(), vc);
+            EXPECT_EQ(out.indices.size(), 3 * size_t(tc));
+            for (uint32_t i : out.indices) EXPECT_LT(i, out.vertices.size());
         } else {
-            ASSERT_TRUE(out.vertices.empty() && out.indices.empty());
+            EXPECT_TRUE(out.vertices.empty() && out.indices.empty());
         }
+        return st == FragmentStatus::Ok;
     };
     // Random buffers, with and without a plausible header.
     for (int i = 0; i < 3000; ++i) {
@@ -446,7 +464,7 @@ TEST(FragmentCodec, FuzzedInputNeverCrashesTheDecoder) {
     }
     int parsed_ok = 0;
     for (const auto& seed : seeds)
-        for (int i = 0; i < 4000; ++i) {
+        for (int i = 0; i < 2500; ++i) {
             std::vector<uint8_t> b = seed;
             int edits = 1 + int(rng() % 4);
             for (int e = 0; e < edits; ++e) {
@@ -459,30 +477,44 @@ TEST(FragmentCodec, FuzzedInputNeverCrashesTheDecoder) {
                 }
                 if (b.size() <= kHeaderSize + 3) break;
             }
-            if (rng() % 8 == 0) b[8 + rng() % 8] ^= uint8_t(1u << (rng() % 8));  // counts too
+            // Sometimes the low byte of a count too (large counts only cost allocation time).
+            if (rng() % 8 == 0) b[rng() % 2 ? 8 : 12] ^= uint8_t(1u << (rng() % 8));
             refresh_integrity(b);
-            check(b);
-            parsed_ok += fragment_decode(b.data(), b.size(), out) == FragmentStatus::Ok;
+            parsed_ok += check(b);
         }
     // Most mutations must be caught by the parser's own consistency checks.
-    EXPECT_LT(parsed_ok, 4000);
+    EXPECT_LT(parsed_ok, 1000);
 }
 
 // ---- format stability -----------------------------------------------------------------------
 
 TEST(FragmentCodec, GoldenBytesOfATinyFragmentAreStable) {
+    // A 5 x 5 grid patch (32 triangles) with integer-built vertex words: the compressed coding.
     FragmentMesh m;
-    // Two triangles sharing an edge, plus a third on the border; fixed vertex words.
-    BaryWeights w[5] = {{400, 21, 21, 21}, {380, 41, 21, 21}, {380, 21, 41, 21}, {360, 41, 41, 21}, {390, 30, 20, 23}};
-    for (int i = 0; i < 5; ++i)
-        m.vertices.push_back(PackedVertex::make(bary_pack(w[i]), uint16_t(0x7f00 + i), uint8_t(10 * i), 20, 30));
-    m.indices = {0, 1, 2, 2, 1, 3, 1, 0, 4};
+    for (int j = 0; j < 5; ++j)
+        for (int i = 0; i < 5; ++i) {
+            BaryWeights w = {300 - 7 * i - 6 * j, 40 + 7 * i, 60 + 6 * j, 63};
+            uint16_t normal = uint16_t(uint8_t(int8_t(10 + i)) | (uint8_t(int8_t(-20 + 2 * j)) << 8));
+            m.vertices.push_back(PackedVertex::make(bary_pack(w), normal, uint8_t(100 + 3 * i), uint8_t(50 + 5 * j), 7));
+        }
+    for (uint32_t j = 0; j < 4; ++j)
+        for (uint32_t i = 0; i < 4; ++i) {
+            uint32_t a = j * 5 + i, b = a + 1, c = a + 5, d = c + 1;
+            m.indices.insert(m.indices.end(), {a, b, d, a, d, c});
+        }
     std::vector<uint8_t> bytes = expect_round_trip(m);
+    EXPECT_EQ(bytes[kCodingOffset], 0) << "the golden fragment must exercise the compressed coding";
     std::string hex;
     char buf[4];
     for (uint8_t b : bytes) {
         std::snprintf(buf, sizeof buf, "%02x", b);
         hex += buf;
     }
-    EXPECT_EQ(hex, "GOLDEN");
+    // If this changes, the bitstream changed: bump the version in fragment_codec.cpp (and the
+    // format documentation) unless the change is deliberate and nothing was ever stored.
+    EXPECT_EQ(hex,
+              "43465247010000001900000020000000477d510788a0072738000015002dc76b"
+              "3f0200e6e46505d0220a3c9d40261567a51c54ccbddb9b90d9db141c2c2170dc"
+              "e7cff200d5ad2f072d1cce917a93eaa6b387b2aff9d7b05ff856fe0e565e5259"
+              "b5521e050ed683f56029580c5684f5602558107be1114401");
 }

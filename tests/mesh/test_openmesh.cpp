@@ -16,7 +16,8 @@ using OpenMeshTriangles = OpenMesh::TriMesh_ArrayKernelT<>;
 namespace {
 
 std::string write_off(const std::string& name, const Mesh& mesh) {
-    std::string text = "OFF\n" + std::to_string(mesh.vertex_count()) + " " + std::to_string(mesh.triangle_count()) + " 0\n";
+    std::string text = "OFF\n" + std::to_string(mesh.vertex_count()) + " " + std::to_string(mesh.triangle_count());
+    text += " 0\n";
     char line[128];
     for (const Vec3d& p : mesh.positions) {
         std::snprintf(line, sizeof line, "%.9g %.9g %.9g\n", p[0], p[1], p[2]);

@@ -177,7 +177,12 @@ TEST(PlyPerformance, BinaryReadingSpeed) {
     std::printf("[ speed    ] binary PLY: %.1f MB in %.3f s CPU (%.0f MB/s), %.3f s wall (%.0f MB/s)\n", megabytes, cpu,
                 megabytes / cpu, wall, megabytes / wall);
     // CPU time, so a busy shared machine does not fail the test; the floor catches an accidental
-    // per-value slow path (iostreams, virtual calls), not noise.
-    EXPECT_GT(megabytes / cpu, 100.0);
+    // per-value slow path (iostreams, virtual calls), not noise. Sanitizers slow parsing ~4x.
+#if defined(__SANITIZE_ADDRESS__)
+    const double floor_mb_per_s = 25.0;
+#else
+    const double floor_mb_per_s = 100.0;
+#endif
+    EXPECT_GT(megabytes / cpu, floor_mb_per_s);
     std::filesystem::remove(path);
 }

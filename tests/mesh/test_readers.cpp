@@ -254,7 +254,8 @@ TEST(ReadMesh, UnknownExtensionsAreSniffed) {
         "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\nproperty float z\n"
         "element face 1\nproperty list uchar int vertex_indices\nend_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
     EXPECT_EQ(read_mesh(write_file("sniff_ply.dat", triangle_ply)).triangle_count(), 1u);
-    EXPECT_EQ(read_mesh(write_file("sniff_off", "# c\nOFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")).triangle_count(), 1u);
+    const std::string triangle_off = "# c\nOFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n";
+    EXPECT_EQ(read_mesh(write_file("sniff_off", triangle_off)).triangle_count(), 1u);
     EXPECT_EQ(read_mesh(write_file("sniff_obj.txt", "# c\nv 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")).triangle_count(), 1u);
     EXPECT_EQ(read_mesh(write_file("sniff_stl.mesh", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n"
                                                      "vertex 1 0 0\nvertex 0 1 0\nendloop\nendfacet\nendsolid x\n"))

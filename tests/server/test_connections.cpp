@@ -1,4 +1,6 @@
 // HTTP/1.1 connection handling: keep-alive, pipelining, HTTP/1.0, malformed requests, limits.
+#include <random>
+
 #include "support.h"
 
 namespace catpaq::test {
@@ -199,6 +201,33 @@ TEST_F(Connections, RequestSplitIntoSingleBytesIsParsed) {
     HttpResponse r;
     ASSERT_TRUE(client.read(r));
     EXPECT_EQ(r.body, to_string(node.bytes));
+}
+
+TEST_F(Connections, RandomGarbageNeverStopsTheServer) {
+    std::mt19937 rng{42};
+    const std::string base = request_text("GET", "/files/alpha.cpq", "Range: bytes=0-9\r\n");
+    for (int i = 0; i < 200; ++i) {
+        std::string bytes;
+        if (i % 2) {  // mutate a valid request
+            bytes = base;
+            for (int k = 0; k < 4; ++k) bytes[rng() % bytes.size()] = char(rng());
+            bytes += "\r\n\r\n";  // keep the head complete: no waiting for the timeout
+        } else {  // pure noise, sometimes with line ends
+            bytes.resize(rng() % 600);
+            for (char& c : bytes) c = char(rng() % 4 == 0 ? '\n' : rng());
+            bytes += "\r\n\r\n";
+        }
+        RawClient client(port());
+        client.send(bytes);
+        HttpResponse r;
+        while (client.read(r)) {  // whatever comes back is well-framed HTTP, until the close
+            ASSERT_GE(r.status, 200) << i;
+            ASSERT_LT(r.status, 600) << i;
+            if (r.header("Connection") == "close") break;
+            client.send(request_text("GET", "/nope", "Connection: close\r\n"));
+        }
+    }
+    expect_server_still_answers();
 }
 
 TEST_F(Connections, BareLineFeedsAndLeadingEmptyLinesAreTolerated) {

@@ -20,9 +20,12 @@ namespace catpaq {
 
 enum class EglPlatform { Auto, Surfaceless, Device, Default };
 
+// Auto: desktop OpenGL 3.3 core, else OpenGL ES 3.0. Desktop / Gles: only that API.
+enum class GlApi { Auto, Desktop, Gles };
+
 struct GlContextOptions {
     EglPlatform platform = EglPlatform::Auto;  // Auto: surfaceless, then device, then default
-    bool allow_gles = true;                    // fall back to OpenGL ES 3.0 if desktop 3.3 core fails
+    GlApi api = GlApi::Auto;
     bool debug = false;                        // request a debug context
 };
 

@@ -24,8 +24,9 @@ Mesh make_torus(size_t target_triangles, uint64_t seed = 1);
 // A dense "scanned statue": a closed star-shaped blob (a cube sphere displaced along its radius
 // by multi-octave value noise, the finest octave a few triangles wide), scaled by
 // (0.8, 1.3, 0.7) so it lies within [-1.04,1.04] x [-1.69,1.69] x [-0.91,0.91], with stone-like
-// colours and area-weighted normals. `seed` changes the shape. Triangle count within 1 of max(target_triangles, 12); memory and time
-// are proportional to the output (20M triangles take a few seconds).
+// colours and area-weighted normals. `seed` changes the shape. Triangle count within 1 of
+// max(target_triangles, 12). Memory and time are proportional to the output (20M triangles: about
+// 6 s of CPU, spread over the available cores).
 Mesh make_scan_like(size_t target_triangles, uint64_t seed = 1);
 
 // Small meshes that stress numerical robustness. Unless stated otherwise a case's bounding box

@@ -49,8 +49,9 @@ std::vector<Vec3f> compute_vertex_normals(const Mesh& mesh);
 // Counts edges used by exactly one triangle (undirected, by vertex index).
 size_t count_border_edges(const std::vector<uint32_t>& indices);
 
-// Edge usage statistics over undirected edges (by vertex index). A triangle with a repeated
-// index contributes no edge for the repeated pair (a "self edge" a-a is not an edge).
+// Edge usage statistics over undirected edges (by vertex index), as count_border_edges counts
+// them: a triangle's edges are its three corner pairs, skipping pairs of equal indices, so the
+// degenerate (a,a,b) uses edge a-b twice and (a,a,a) uses none.
 struct EdgeCounts {
     size_t edges = 0;        // distinct undirected edges
     size_t border = 0;       // used by exactly one triangle

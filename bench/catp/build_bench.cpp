@@ -1,0 +1,125 @@
+// catp_build_bench: the CATP converter on the bundled bunny and generated scan-like meshes of
+// growing size. Prints input triangles/s, output bytes, bits per vertex and peak memory per
+// build, and, as a machine-independent reference, the same run's throughput of meshoptimizer's
+// simplifier halving the same mesh (one pass, single thread): the ratio says how much slower
+// than "one simplification pass" the whole out-of-core-ready pipeline is.
+//
+// usage: catp_build_bench [--sizes 100000,1000000,10000000] [--bunny PATH] [--keep DIR]
+// Each build runs in a child process so its peak memory is its own.
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <string>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <vector>
+
+#include <meshoptimizer.h>
+
+#include "base/sysinfo.h"
+#include "catp/builder.h"
+#include "mesh/generators.h"
+#include "mesh/io.h"
+
+using namespace catpaq;
+namespace fs = std::filesystem;
+
+struct Result {
+    double seconds = 0, triangles_per_second = 0, bits_per_vertex = 0, peak_mib = 0, file_bytes = 0;
+    double meshopt_triangles_per_second = 0;
+    int leaf_level = 0;
+    size_t stored_vertices = 0;
+};
+
+static Result run_one(const Mesh& mesh, const std::string& output) {
+    Result r;
+    CatpBuildSettings settings;
+    settings.progress = false;
+    CatpBuildReport report = build_catp(mesh, output, settings);
+    r.seconds = report.seconds;
+    r.triangles_per_second = double(report.input_triangles) / report.seconds;
+    for (const CatpLevelStats& l : report.levels) r.stored_vertices += l.vertices;
+    r.bits_per_vertex = 8.0 * double(report.file_bytes) / double(std::max<size_t>(1, r.stored_vertices));
+    r.peak_mib = double(report.peak_rss) / (1 << 20);
+    r.file_bytes = double(report.file_bytes);
+    r.leaf_level = report.leaf_level;
+    // Baseline in the same process: meshopt_simplify to half, float positions.
+    std::vector<float> positions(mesh.positions.size() * 3);
+    for (size_t v = 0; v < mesh.positions.size(); ++v)
+        for (int i = 0; i < 3; ++i) positions[3 * v + i] = float(mesh.positions[v][i]);
+    std::vector<uint32_t> out(mesh.indices.size());
+    double t0 = now_seconds();
+    meshopt_simplify(out.data(), mesh.indices.data(), mesh.indices.size(), positions.data(), mesh.positions.size(),
+                     12, mesh.indices.size() / 2, 1e-2f, 0, nullptr);
+    r.meshopt_triangles_per_second = double(mesh.triangle_count()) / (now_seconds() - t0);
+    return r;
+}
+
+// Runs the build in a child so peak memory is measured per build; results come back by pipe.
+static bool run_in_child(const std::string& name, size_t triangles, const std::string& bunny, const std::string& dir,
+                         Result& out) {
+    int fds[2];
+    if (pipe(fds) != 0) return false;
+    pid_t pid = fork();
+    if (pid == 0) {
+        close(fds[0]);
+        Mesh mesh = name == "bunny" ? read_mesh(bunny) : make_scan_like(triangles, 1);
+        Result r = run_one(mesh, dir + "/" + name + ".cpq");
+        ssize_t written = write(fds[1], &r, sizeof r);
+        _exit(written == ssize_t(sizeof r) ? 0 : 1);
+    }
+    close(fds[1]);
+    ssize_t n = read(fds[0], &out, sizeof out);
+    close(fds[0]);
+    int status = 0;
+    waitpid(pid, &status, 0);
+    return n == ssize_t(sizeof out) && WIFEXITED(status) && WEXITSTATUS(status) == 0;
+}
+
+int main(int argc, char** argv) {
+    std::vector<size_t> sizes = {100000, 1000000, 10000000};
+    std::string bunny = std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply";
+    std::string dir = (fs::temp_directory_path() / ("catp_build_bench_" + std::to_string(getpid()))).string();
+    bool keep = false;
+    for (int i = 1; i + 1 < argc; i += 2) {
+        std::string key = argv[i], value = argv[i + 1];
+        if (key == "--sizes") {
+            sizes.clear();
+            size_t start = 0;
+            while (start < value.size()) {
+                size_t comma = value.find(',', start);
+                sizes.push_back(std::stoull(value.substr(start, comma - start)));
+                start = comma == std::string::npos ? value.size() : comma + 1;
+            }
+        } else if (key == "--bunny") {
+            bunny = value;
+        } else if (key == "--keep") {
+            dir = value;
+            keep = true;
+        } else {
+            std::fprintf(stderr, "unknown option %s\n", key.c_str());
+            return 2;
+        }
+    }
+    fs::create_directories(dir);
+    std::printf("catp_build_bench on %s (%ld cores)\n", cpu_model().c_str(), sysconf(_SC_NPROCESSORS_ONLN));
+    std::printf("%-12s %11s %8s %12s %11s %10s %10s %14s %10s\n", "input", "triangles", "seconds", "tri/s", "bits/vert",
+                "MiB peak", "leaf lvl", "meshopt tri/s", "ratio");
+    std::vector<std::pair<std::string, size_t>> runs = {{"bunny", 0}};
+    for (size_t s : sizes) runs.push_back({"scan" + std::to_string(s), s});
+    for (auto& [name, size] : runs) {
+        Result r;
+        if (!run_in_child(name, size, bunny, dir, r)) {
+            std::printf("%-12s failed\n", name.c_str());
+            continue;
+        }
+        double triangles = r.triangles_per_second * r.seconds;
+        std::printf("%-12s %11.0f %8.2f %12.0f %11.2f %10.1f %10d %14.0f %10.3f\n", name.c_str(), triangles, r.seconds,
+                    r.triangles_per_second, r.bits_per_vertex, r.peak_mib, r.leaf_level, r.meshopt_triangles_per_second,
+                    r.triangles_per_second / r.meshopt_triangles_per_second);
+        std::fflush(stdout);
+    }
+    std::printf("ratio = full CATP build throughput / meshopt_simplify (one 50%% pass, 1 thread) throughput\n");
+    if (!keep) fs::remove_all(dir);
+    return 0;
+}

@@ -1,0 +1,284 @@
+#pragma once
+// The view-dependent cut of a multiresolution DAG (client/hierarchy.h), one piece of code for
+// every format.
+//
+// State: the refined set R, closed under parents, kept from frame to frame. The *active* nodes
+// (drawn) are the nodes not in R with at least one parent in R, and the roots while unrefined;
+// each draws the parts created by its refined parents. The *frontier* is the nodes of R without a
+// refined child: the ones that can be coarsened next. Active and frontier nodes form the cut;
+// the caches pin it (pinned()).
+//
+// Each frame, update():
+//  1. recounts the cut (residency and exact draw counts may have changed since last frame);
+//  2. coarsens frontier nodes whose projected error fell below tolerance * hysteresis and whose
+//     data is resident (they are drawn again), cascading to parents that become frontier;
+//  3. if a budget is exceeded (budgets lowered), coarsens the lowest-error frontier nodes until it
+//     fits;
+//  4. refines active nodes in order of decreasing projected error (a priority queue), while their
+//     projected error exceeds the tolerance: a node P is refined together with the ancestors it
+//     needs (closure under parents), only if every child that would become drawn is resident —
+//     otherwise P stays coarse and its missing children are requested (never waits) — and only if
+//     the budgets still hold; when they do not, frontier nodes whose projected error is below
+//     P's * hysteresis are coarsened to make room (all or nothing), so under a budget the cut
+//     converges to the best one by projected error without thrashing. Virtual nodes (no data)
+//     are refined only as ancestors a refinement needs, and coarsened as soon as they have no
+//     refined child;
+//  5. requests: drawn nodes that are not resident first, then children needed by refinements
+//     (priority: the projected error of the node that needs them), then nodes wanted for a
+//     coarsening; ties coarse levels first. Nodes outside the frustum have projected error 0:
+//     never refined for their own sake, and they request nothing. At most max_new_requests new
+//     requests per frame; requests made earlier and no longer wanted are reported as cancelled.
+//
+// Projected error of a node: error * k / max(distance from the eye to the closest point of its
+// box, near), k = viewport height / (2 tan(fov / 2)) pixels per unit at distance 1 — an upper
+// bound of the on-screen size of the node's error, monotone from child to parent because boxes
+// and errors nest.
+#include <array>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <vector>
+
+#include "client/hierarchy.h"
+
+namespace catpaq {
+
+struct ViewParams {
+    std::array<double, 3> eye{0, 0, 0};
+    // Frustum planes in world coordinates, (a, b, c, d) with the inside where
+    // a x + b y + c z + d >= 0. Ignored when use_frustum is false.
+    std::array<std::array<double, 4>, 6> planes{};
+    bool use_frustum = true;
+    // Pixels per world unit at distance 1: pixels_per_unit if > 0, else
+    // viewport_height / (2 tan(fov_y_radians / 2)).
+    double pixels_per_unit = 0;
+    double viewport_height = 0;
+    double fov_y_radians = 0;
+    double near = 1e-3;         // distances are clamped to at least this (world units)
+    double tolerance_px = 1.5;  // refine while the projected error exceeds this
+    double hysteresis = 0.7;    // coarsen only below tolerance * hysteresis
+    // Visibility hysteresis: a node leaving the frustum keeps its projected error for coarsening
+    // decisions until its box, grown by frustum_margin times its distance from the eye (about
+    // that many radians), is outside too — so nodes at the frustum's edge do not flip.
+    double frustum_margin = 0.1;
+
+    double k() const;
+    // Planes of an OpenGL view-projection matrix (clip = M * world, column-major, clip volume
+    // -w <= x, y, z <= w), normalized.
+    static std::array<std::array<double, 4>, 6> planes_from_view_projection(const std::array<double, 16>& m);
+    // A perspective camera: eye looking at target, vertical fov, viewport size, clip distances.
+    static ViewParams look_at(const std::array<double, 3>& eye, const std::array<double, 3>& target,
+                              const std::array<double, 3>& up, double fov_y_radians, int width, int height,
+                              double near, double far);
+    // False if the box is certainly outside the frustum (conservative plane test); `grow`
+    // enlarges the box by that much on every side first.
+    bool may_see(const Aabb& box, double grow = 0) const;
+};
+
+// What a node costs while it is in the cut: GPU bytes while drawn, CPU (decoded) bytes while in
+// the cut (drawn or frontier).
+struct NodeBytes {
+    uint64_t gpu = 0;
+    uint64_t cpu = 0;
+};
+
+// Which parents are refined, for DrawCounter.
+struct RefinedView {
+    const uint8_t* flags = nullptr;
+    bool operator()(uint32_t node) const { return node == kNoNode || flags[node] != 0; }
+};
+
+// Per-format: the exact number of primitives a node draws while unrefined, given which of its
+// parents are refined (CATP: the triangles of the slots whose slot_parent is refined). May be an
+// estimate for a node that is not resident; the engine only makes a node drawn once resident.
+class DrawCounter {
+public:
+    virtual ~DrawCounter() = default;
+    virtual uint64_t count(uint32_t node, const RefinedView& refined) const = 0;
+};
+
+// The generic counter over the hierarchy's parts: sums the parts whose parent is refined (or
+// unconditional). Starts from the parts' index estimates; set_counts() gives exact ones.
+class PartDrawCounter : public DrawCounter {
+public:
+    explicit PartDrawCounter(const Hierarchy& hierarchy);
+    uint64_t count(uint32_t node, const RefinedView& refined) const override;
+    // Exact primitives of each part of `node`, in the order of HierarchyNode::parts.
+    void set_counts(uint32_t node, const uint32_t* counts, size_t n);
+    uint32_t part_count(uint32_t node, size_t part) const { return counts_[offsets_[node] + part]; }
+
+private:
+    const Hierarchy& hierarchy_;
+    std::vector<uint32_t> offsets_;
+    std::vector<uint32_t> counts_;
+};
+
+// What the engine asks about data: loaded and decoded (resident), and what it costs.
+class Residency {
+public:
+    virtual ~Residency() = default;
+    // Virtual nodes (no data) are treated as resident whatever this says.
+    virtual bool resident(uint32_t node) const = 0;
+    // Exact when resident, an estimate otherwise.
+    virtual NodeBytes bytes(uint32_t node) const = 0;
+};
+
+// A plain table: set_resident() on arrival, set_evicted() when a cache drops the node.
+// Non-resident estimate: `bytes_per_primitive` times the node's primitives, for GPU and CPU.
+class ResidencyTable : public Residency {
+public:
+    explicit ResidencyTable(const Hierarchy& hierarchy, double bytes_per_primitive = 16.0);
+    bool resident(uint32_t node) const override { return resident_[node] != 0; }
+    NodeBytes bytes(uint32_t node) const override;
+    void set_resident(uint32_t node, NodeBytes bytes);
+    void set_evicted(uint32_t node);
+    size_t resident_count() const { return resident_count_; }
+
+private:
+    const Hierarchy& hierarchy_;
+    double bytes_per_primitive_;
+    std::vector<uint8_t> resident_;
+    std::vector<NodeBytes> bytes_;
+    size_t resident_count_ = 0;
+};
+
+struct CutBudgets {
+    static constexpr uint64_t kUnlimited = std::numeric_limits<uint64_t>::max();
+    uint64_t max_primitives = kUnlimited;  // primitives drawn
+    uint64_t max_gpu_bytes = kUnlimited;   // sum over drawn nodes
+    uint64_t max_cpu_bytes = kUnlimited;   // sum over the cut (drawn and frontier nodes)
+    uint32_t max_new_requests = 16;        // new requests per frame
+    uint32_t max_outstanding_requests = 256;
+    uint32_t max_refinements = std::numeric_limits<uint32_t>::max();  // per frame, closure included
+};
+
+enum class RequestReason : uint8_t { Drawn = 0, Refine = 1, Coarsen = 2 };
+
+struct CutRequest {
+    uint32_t node = kNoNode;
+    uint64_t key = 0;
+    uint16_t level = 0;
+    RequestReason reason = RequestReason::Refine;
+    double priority = 0;  // projected error (pixels) of the node that needs it
+};
+
+struct CutFrameStats {
+    uint64_t frame = 0;
+    uint64_t primitives = 0, gpu_bytes = 0, cpu_bytes = 0;
+    double certified_error_px = 0;  // max projected error over drawn nodes with data
+    size_t drawn_nodes = 0, refined_nodes = 0, frontier_nodes = 0;
+    size_t holes = 0;  // drawn nodes with data that are not resident (draw nothing yet)
+    uint32_t refinements = 0, coarsenings = 0;
+    uint32_t budget_blocked = 0;  // refinements refused by a budget
+    uint32_t waiting = 0;         // refinements waiting for data
+    uint32_t new_requests = 0;
+    bool over_budget = false;  // a budget is exceeded and coarsening could not fix it (yet)
+    double seconds = 0;
+};
+
+struct CutFrame {
+    CutFrameStats stats;
+    std::vector<uint32_t> drawn;          // the active nodes
+    std::vector<CutRequest> requests;     // every wanted fetch (earlier ones re-prioritised), best first
+    std::vector<CutRequest> cancelled;    // earlier requests no longer wanted
+};
+
+class CutEngine {
+public:
+    // `hierarchy` and `counter` must outlive the engine.
+    CutEngine(const Hierarchy& hierarchy, const DrawCounter& counter, CutBudgets budgets = {});
+
+    const CutFrame& update(const ViewParams& view, const Residency& residency);
+
+    void set_budgets(const CutBudgets& budgets) { budgets_ = budgets; }
+    const CutBudgets& budgets() const { return budgets_; }
+    const CutFrame& last_frame() const { return frame_; }
+
+    bool refined(uint32_t node) const { return refined_[node] != 0; }
+    bool drawn(uint32_t node) const;
+    std::vector<uint32_t> refined_nodes() const;
+    const std::vector<uint32_t>& drawn_nodes() const { return active_.items; }
+    // The nodes with data in the cut (drawn and frontier): what caches must keep.
+    std::vector<uint32_t> pinned() const;
+    // The projected error of a node for the last view (pixels; 0 outside the frustum).
+    double projected_error(uint32_t node) const;
+    // Drops the whole cut (back to the roots) and the outstanding requests.
+    void reset();
+
+    // Recomputes everything from scratch and compares with the incremental state: R closed under
+    // parents, the drawn and frontier sets, the totals. Empty string when consistent.
+    std::string check(const Residency& residency) const;
+
+private:
+    struct DenseSet {
+        std::vector<uint32_t> items;
+        std::vector<uint32_t> pos;
+        bool contains(uint32_t n) const { return pos[n] != kNoNode; }
+        void insert(uint32_t n);
+        void erase(uint32_t n);
+    };
+    struct Totals {
+        uint64_t primitives = 0, gpu = 0, cpu = 0;
+    };
+    struct Op {
+        uint32_t node;
+        bool refine;
+    };
+    struct Want {
+        RequestReason reason = RequestReason::Coarsen;
+        double priority = -1;
+    };
+
+    bool is_active(uint32_t n) const;
+    bool is_frontier(uint32_t n) const { return refined_[n] && refined_children_[n] == 0; }
+    bool is_resident(uint32_t n) const;
+    double proj(uint32_t n);       // 0 outside the frustum
+    double keep_proj(uint32_t n);  // for coarsening: 0 only outside the grown frustum
+    bool in_view(uint32_t n);
+    void recount(uint32_t n);
+    void set_refined(uint32_t n, bool on, std::vector<Op>* log);
+    void revert(std::vector<Op>& log, size_t to);
+    bool fits(const Totals& before) const;
+    bool exceeds() const;
+    void closure(uint32_t n, std::vector<uint32_t>& out);
+    void want(uint32_t n, RequestReason reason, double priority);
+    void coarsen_phase();
+    void enforce_budgets();
+    void refine_phase();
+    bool make_room(double limit, std::vector<Op>& log, const Totals& before);
+    void emit_requests();
+
+    const Hierarchy& h_;
+    const DrawCounter& counter_;
+    CutBudgets budgets_;
+    ViewParams view_;
+    const Residency* residency_ = nullptr;
+    double k_ = 1;
+    uint64_t frame_number_ = 0;
+    size_t refined_count_ = 0;
+
+    std::vector<uint8_t> refined_;
+    std::vector<uint32_t> refined_parents_, refined_children_;
+    DenseSet active_, frontier_;
+    std::vector<uint64_t> c_prim_, c_gpu_, c_cpu_;  // counted contributions
+    Totals totals_;
+
+    std::vector<double> proj_, keep_proj_;
+    std::vector<uint8_t> visible_;
+    std::vector<uint64_t> proj_frame_;
+    std::vector<uint32_t> mark_;  // closure stamps
+    uint32_t stamp_ = 0;
+
+    std::vector<Want> want_;
+    std::vector<uint32_t> wanted_;       // nodes with a want this frame
+    std::vector<uint8_t> outstanding_;
+    std::vector<uint32_t> outstanding_list_;
+    std::vector<uint64_t> want_frame_;
+
+    std::vector<std::pair<double, uint32_t>> room_heap_;  // frontier min-heap for make_room
+    bool room_heap_built_ = false;
+
+    CutFrame frame_;
+};
+
+}  // namespace catpaq

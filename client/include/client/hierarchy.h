@@ -1,0 +1,136 @@
+#pragma once
+// The format-agnostic multiresolution DAG the cut engine (client/cut_engine.h) works on.
+//
+// A node is one unit of streaming and of refinement: a CATP diamond, later an AQP patch or a
+// point-cloud node. Every node knows its parents and children (node indices), its object-space
+// error (monotone: a parent's error is >= each child's), a world-space box that bounds its
+// geometry and its descendants' (so projected errors are monotone too), where its bytes are in
+// the archive, and its *parts*: what it draws while unrefined, each part created by one parent
+// (CATP: slot s of a diamond is drawn only while slot_parent(s) is refined; the root draws all
+// its slots). A node without data (`has_data == false`) is *virtual*: a diamond absent from the
+// index, which holds no geometry but is needed in the refined set so that the set stays closed
+// under parents.
+//
+// Invariants after finalize(): levels strictly increase from parent to child, parents and
+// children lists are mutually consistent and sorted, errors and boxes are monotone, every part's
+// parent is a parent of its node (or kNoNode for a root).
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <limits>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "common_codec/archive.h"
+
+namespace catpaq {
+
+class CatpIndex;
+
+constexpr uint32_t kNoNode = std::numeric_limits<uint32_t>::max();
+
+// Axis-aligned box in world coordinates (double: scans live around 1e6).
+struct Aabb {
+    std::array<double, 3> min{std::numeric_limits<double>::infinity(), std::numeric_limits<double>::infinity(),
+                              std::numeric_limits<double>::infinity()};
+    std::array<double, 3> max{-std::numeric_limits<double>::infinity(), -std::numeric_limits<double>::infinity(),
+                              -std::numeric_limits<double>::infinity()};
+
+    bool empty() const { return min[0] > max[0] || min[1] > max[1] || min[2] > max[2]; }
+    void extend(const std::array<double, 3>& p);
+    void extend(const Aabb& b);
+    bool contains(const Aabb& b) const;  // an empty b is contained in anything
+    // Distance from p to the closest point of the box (0 inside; +inf for an empty box).
+    double distance_to(const std::array<double, 3>& p) const;
+};
+
+// What a node draws while it is unrefined, under one condition: `parent` is refined (or, for
+// kNoNode, always: the parts of a root). `id` is format-specific (CATP: the slot).
+// `primitives` is the count known from the index alone: exact for formats whose index says it,
+// an estimate for CATP (the index gives a diamond's total only; the exact per-slot counts are
+// known once the node is decoded, see PartDrawCounter in client/cut_engine.h).
+struct HierarchyPart {
+    uint32_t parent = kNoNode;
+    uint8_t id = 0;
+    uint32_t primitives = 0;
+};
+
+struct HierarchyNode {
+    uint32_t index = 0;
+    uint64_t key = 0;       // format node id (CATP: DiamondId bits)
+    uint16_t level = 0;     // 0 = coarsest; a child's level is greater than each parent's
+    std::vector<uint32_t> parents, children;  // sorted node indices
+    double error = 0;       // object-space error bound, world units (monotone)
+    Aabb bounds;            // world box of the node's geometry and of all its descendants
+    bool has_data = false;  // false: virtual node (no bytes, draws nothing)
+    bool leaf = false;      // never refined (no children, or the format says so)
+    // Where the bytes are (valid when has_data).
+    uint32_t entry = kNoNode;  // index in the archive's entry list
+    uint64_t payload_offset = 0;
+    uint32_t payload_bytes = 0;
+    uint64_t checksum = 0;
+    uint16_t flags = 0;      // the archive entry's flags (CATP: slot mask | leaf bit)
+    uint32_t primitives = 0;  // total triangles / points of the node
+    std::vector<HierarchyPart> parts;
+};
+
+class Hierarchy {
+public:
+    // Appends a node (parents given as keys or indices later through add_parent). Returns its index.
+    uint32_t add_node(uint64_t key, uint16_t level, double error, const Aabb& bounds, bool has_data);
+    void add_parent(uint32_t node, uint32_t parent);
+    HierarchyNode& mutable_node(uint32_t i) { return nodes_[i]; }
+
+    // Derives children from parents, sorts the lists, makes errors and boxes monotone (bottom-up:
+    // a parent's error becomes at least the max of its children's, its box grows to hold
+    // theirs), marks nodes without children as leaves and checks the invariants above.
+    // Throws Error naming the problem (a cycle, a level that does not increase, a part whose
+    // parent is not a parent, duplicate keys).
+    void finalize();
+
+    size_t size() const { return nodes_.size(); }
+    const HierarchyNode& node(uint32_t i) const { return nodes_[i]; }
+    const std::vector<HierarchyNode>& nodes() const { return nodes_; }
+    // Node with `key`, or kNoNode.
+    uint32_t find(uint64_t key) const;
+    const std::vector<uint32_t>& roots() const { return roots_; }
+    size_t virtual_count() const;
+    size_t data_count() const { return nodes_.size() - virtual_count(); }
+    // Empty string if the invariants hold, else the first problem (used by finalize and tests).
+    std::string check() const;
+
+private:
+    std::vector<HierarchyNode> nodes_;
+    std::unordered_map<uint64_t, uint32_t> by_key_;
+    std::vector<uint32_t> roots_;
+};
+
+// The CATP hierarchy of a dataset: every index entry is a node (has_data); every missing parent
+// (diamond_parents) of a node is added, recursively up to the root, as a virtual node. Bounds:
+// the box of the diamond's existing tetrahedra in world units (origin + lattice * cell), grown
+// to hold its children's; virtual nodes: the union of their children's boxes. Parts: one per slot
+// with geometry (the entry's slot mask), created by slot_parent(slot) (kNoNode for the root).
+// Part primitive counts are estimates (the diamond's count split evenly over its slots) until the
+// node is decoded.
+Hierarchy build_catp_hierarchy(const CatpIndex& index);
+
+// A random DAG for tests and benchmarks: a quadtree of cells over [0, size]^2 (thin in z), where
+// each child cell also gets, with probability `extra_parent`, the parent-level cells next to it
+// (on the side it lies on) as parents, so nodes have 1 to 4 parents. Cells are kept with
+// probability `keep` (at least one child per refined cell), interior non-root nodes are virtual
+// with probability `virtual_fraction`. Errors shrink with the cell size; primitives: leaves 50 to
+// 150, interior nodes about as many as one child (1.5 / children of what their children draw for
+// them, at most all of it); one part per data parent (a node's primitives split among them), so
+// refining never lowers the primitives drawn.
+struct SyntheticHierarchySettings {
+    int levels = 7;  // level 0 is the root cell
+    double keep = 1.0;
+    double extra_parent = 0.3;
+    double virtual_fraction = 0.0;
+    double size = 1000.0;
+    uint64_t seed = 1;
+};
+Hierarchy build_synthetic_hierarchy(const SyntheticHierarchySettings& settings);
+
+}  // namespace catpaq

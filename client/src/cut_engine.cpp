@@ -1,0 +1,673 @@
+#include "client/cut_engine.h"
+
+#include <algorithm>
+#include <cassert>
+#include <chrono>
+#include <cmath>
+
+#include "base/error.h"
+
+namespace catpaq {
+
+// ---------------------------------------------------------------------------------------------
+// ViewParams
+
+double ViewParams::k() const {
+    if (pixels_per_unit > 0) return pixels_per_unit;
+    assert(viewport_height > 0 && fov_y_radians > 0 && fov_y_radians < M_PI);
+    if (!(viewport_height > 0 && fov_y_radians > 0 && fov_y_radians < M_PI)) return 1.0;
+    return viewport_height / (2.0 * std::tan(fov_y_radians / 2.0));
+}
+
+namespace {
+
+using Vec3 = std::array<double, 3>;
+
+Vec3 sub(const Vec3& a, const Vec3& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
+double dot(const Vec3& a, const Vec3& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+Vec3 cross(const Vec3& a, const Vec3& b) {
+    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
+}
+Vec3 scale(const Vec3& a, double s) { return {a[0] * s, a[1] * s, a[2] * s}; }
+Vec3 add(const Vec3& a, const Vec3& b) { return {a[0] + b[0], a[1] + b[1], a[2] + b[2]}; }
+Vec3 normalize(const Vec3& a) {
+    double l = std::sqrt(dot(a, a));
+    return l > 0 ? scale(a, 1.0 / l) : a;
+}
+
+std::array<double, 4> normalized_plane(std::array<double, 4> p) {
+    double l = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+    if (l > 0)
+        for (double& v : p) v /= l;
+    return p;
+}
+
+std::array<double, 4> plane_through(const Vec3& normal, const Vec3& point) {
+    return normalized_plane({normal[0], normal[1], normal[2], -dot(normal, point)});
+}
+
+}  // namespace
+
+std::array<std::array<double, 4>, 6> ViewParams::planes_from_view_projection(const std::array<double, 16>& m) {
+    auto row = [&](int i) { return std::array<double, 4>{m[i], m[4 + i], m[8 + i], m[12 + i]}; };
+    std::array<double, 4> r0 = row(0), r1 = row(1), r2 = row(2), r3 = row(3);
+    std::array<std::array<double, 4>, 6> out;
+    for (int j = 0; j < 4; ++j) {
+        out[0][j] = r3[j] + r0[j];
+        out[1][j] = r3[j] - r0[j];
+        out[2][j] = r3[j] + r1[j];
+        out[3][j] = r3[j] - r1[j];
+        out[4][j] = r3[j] + r2[j];
+        out[5][j] = r3[j] - r2[j];
+    }
+    for (auto& p : out) p = normalized_plane(p);
+    return out;
+}
+
+ViewParams ViewParams::look_at(const std::array<double, 3>& eye, const std::array<double, 3>& target,
+                               const std::array<double, 3>& up, double fov_y_radians, int width, int height,
+                               double near, double far) {
+    ViewParams v;
+    v.eye = eye;
+    v.viewport_height = height;
+    v.fov_y_radians = fov_y_radians;
+    v.near = near;
+    Vec3 f = normalize(sub(target, eye));
+    Vec3 r = normalize(cross(f, up));
+    Vec3 u = cross(r, f);
+    double ty = std::tan(fov_y_radians / 2.0);
+    double tx = ty * double(width) / double(height);
+    v.planes[0] = plane_through(add(scale(f, tx), r), eye);   // left:  z tx + x >= 0
+    v.planes[1] = plane_through(sub(scale(f, tx), r), eye);   // right: z tx - x >= 0
+    v.planes[2] = plane_through(add(scale(f, ty), u), eye);   // bottom
+    v.planes[3] = plane_through(sub(scale(f, ty), u), eye);   // top
+    v.planes[4] = plane_through(f, add(eye, scale(f, near)));             // near
+    v.planes[5] = plane_through(scale(f, -1.0), add(eye, scale(f, far)));  // far
+    return v;
+}
+
+bool ViewParams::may_see(const Aabb& box, double grow) const {
+    if (box.empty()) return false;
+    if (!use_frustum) return true;
+    for (const auto& p : planes) {
+        double x = p[0] >= 0 ? box.max[0] + grow : box.min[0] - grow;
+        double y = p[1] >= 0 ? box.max[1] + grow : box.min[1] - grow;
+        double z = p[2] >= 0 ? box.max[2] + grow : box.min[2] - grow;
+        if (p[0] * x + p[1] * y + p[2] * z + p[3] < 0) return false;
+    }
+    return true;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Draw counts and residency
+
+PartDrawCounter::PartDrawCounter(const Hierarchy& hierarchy) : hierarchy_(hierarchy) {
+    offsets_.resize(hierarchy.size() + 1);
+    uint32_t total = 0;
+    for (uint32_t n = 0; n < hierarchy.size(); ++n) {
+        offsets_[n] = total;
+        total += uint32_t(hierarchy.node(n).parts.size());
+    }
+    offsets_[hierarchy.size()] = total;
+    counts_.resize(total);
+    for (uint32_t n = 0; n < hierarchy.size(); ++n) {
+        const auto& parts = hierarchy.node(n).parts;
+        for (size_t p = 0; p < parts.size(); ++p) counts_[offsets_[n] + p] = parts[p].primitives;
+    }
+}
+
+uint64_t PartDrawCounter::count(uint32_t node, const RefinedView& refined) const {
+    const auto& parts = hierarchy_.node(node).parts;
+    const uint32_t* counts = counts_.data() + offsets_[node];
+    uint64_t sum = 0;
+    for (size_t p = 0; p < parts.size(); ++p)
+        if (refined(parts[p].parent)) sum += counts[p];
+    return sum;
+}
+
+void PartDrawCounter::set_counts(uint32_t node, const uint32_t* counts, size_t n) {
+    assert(n == offsets_[node + 1] - offsets_[node]);
+    size_t m = std::min<size_t>(n, offsets_[node + 1] - offsets_[node]);
+    std::copy(counts, counts + m, counts_.begin() + offsets_[node]);
+}
+
+ResidencyTable::ResidencyTable(const Hierarchy& hierarchy, double bytes_per_primitive)
+    : hierarchy_(hierarchy),
+      bytes_per_primitive_(bytes_per_primitive),
+      resident_(hierarchy.size(), 0),
+      bytes_(hierarchy.size()) {}
+
+NodeBytes ResidencyTable::bytes(uint32_t node) const {
+    if (resident_[node]) return bytes_[node];
+    const HierarchyNode& n = hierarchy_.node(node);
+    if (!n.has_data) return {};
+    uint64_t estimate = uint64_t(std::ceil(double(n.primitives) * bytes_per_primitive_));
+    return {estimate, estimate};
+}
+
+void ResidencyTable::set_resident(uint32_t node, NodeBytes bytes) {
+    if (!resident_[node]) resident_count_++;
+    resident_[node] = 1;
+    bytes_[node] = bytes;
+}
+
+void ResidencyTable::set_evicted(uint32_t node) {
+    if (resident_[node]) resident_count_--;
+    resident_[node] = 0;
+    bytes_[node] = {};
+}
+
+// ---------------------------------------------------------------------------------------------
+// CutEngine: bookkeeping
+
+void CutEngine::DenseSet::insert(uint32_t n) {
+    if (pos[n] != kNoNode) return;
+    pos[n] = uint32_t(items.size());
+    items.push_back(n);
+}
+
+void CutEngine::DenseSet::erase(uint32_t n) {
+    uint32_t i = pos[n];
+    if (i == kNoNode) return;
+    uint32_t last = items.back();
+    items[i] = last;
+    pos[last] = i;
+    items.pop_back();
+    pos[n] = kNoNode;
+}
+
+CutEngine::CutEngine(const Hierarchy& hierarchy, const DrawCounter& counter, CutBudgets budgets)
+    : h_(hierarchy), counter_(counter), budgets_(budgets) {
+    reset();
+}
+
+void CutEngine::reset() {
+    size_t n = h_.size();
+    refined_.assign(n, 0);
+    refined_parents_.assign(n, 0);
+    refined_children_.assign(n, 0);
+    active_.items.clear();
+    active_.pos.assign(n, kNoNode);
+    frontier_.items.clear();
+    frontier_.pos.assign(n, kNoNode);
+    c_prim_.assign(n, 0);
+    c_gpu_.assign(n, 0);
+    c_cpu_.assign(n, 0);
+    totals_ = {};
+    refined_count_ = 0;
+    proj_.assign(n, 0);
+    keep_proj_.assign(n, 0);
+    visible_.assign(n, 0);
+    proj_frame_.assign(n, 0);
+    mark_.assign(n, 0);
+    stamp_ = 0;
+    want_.assign(n, {});
+    want_frame_.assign(n, 0);
+    wanted_.clear();
+    outstanding_.assign(n, 0);
+    outstanding_list_.clear();
+    // The roots are drawn; their counts are filled by the first update's recount.
+    for (uint32_t r : h_.roots()) active_.insert(r);
+    frame_ = {};
+}
+
+bool CutEngine::is_active(uint32_t n) const {
+    return !refined_[n] && (h_.node(n).parents.empty() || refined_parents_[n] > 0);
+}
+
+bool CutEngine::is_resident(uint32_t n) const { return !h_.node(n).has_data || residency_->resident(n); }
+
+bool CutEngine::drawn(uint32_t node) const { return active_.contains(node); }
+
+double CutEngine::proj(uint32_t n) {
+    if (proj_frame_[n] == frame_number_) return proj_[n];
+    proj_frame_[n] = frame_number_;
+    const HierarchyNode& node = h_.node(n);
+    double distance = node.bounds.distance_to(view_.eye);
+    double unculled = node.error * k_ / std::max(distance, view_.near);
+    bool visible = view_.may_see(node.bounds);
+    visible_[n] = visible;
+    proj_[n] = visible ? unculled : 0.0;
+    keep_proj_[n] = visible || (view_.frustum_margin > 0 && view_.may_see(node.bounds, view_.frustum_margin * distance))
+                        ? unculled
+                        : 0.0;
+    return proj_[n];
+}
+
+double CutEngine::keep_proj(uint32_t n) {
+    proj(n);
+    return keep_proj_[n];
+}
+
+bool CutEngine::in_view(uint32_t n) {
+    proj(n);
+    return visible_[n] != 0;
+}
+
+double CutEngine::projected_error(uint32_t node) const {
+    if (frame_number_ == 0) return 0;
+    if (proj_frame_[node] == frame_number_) return proj_[node];
+    const HierarchyNode& n = h_.node(node);
+    if (!view_.may_see(n.bounds)) return 0;
+    return n.error * view_.k() / std::max(n.bounds.distance_to(view_.eye), view_.near);
+}
+
+void CutEngine::recount(uint32_t n) {
+    bool act = is_active(n), fr = is_frontier(n);
+    uint64_t p = 0, g = 0, c = 0;
+    const HierarchyNode& node = h_.node(n);
+    if (act) p = counter_.count(n, RefinedView{refined_.data()});
+    if (node.has_data && (act || fr)) {
+        NodeBytes b = residency_->bytes(n);
+        if (act) g = b.gpu;
+        c = b.cpu;
+    }
+    totals_.primitives += p - c_prim_[n];
+    totals_.gpu += g - c_gpu_[n];
+    totals_.cpu += c - c_cpu_[n];
+    c_prim_[n] = p;
+    c_gpu_[n] = g;
+    c_cpu_[n] = c;
+    if (act) active_.insert(n);
+    else active_.erase(n);
+    if (fr) frontier_.insert(n);
+    else frontier_.erase(n);
+}
+
+void CutEngine::set_refined(uint32_t n, bool on, std::vector<Op>* log) {
+    assert(bool(refined_[n]) != on);
+    refined_[n] = on;
+    refined_count_ += on ? 1 : size_t(-1);
+    const HierarchyNode& node = h_.node(n);
+    for (uint32_t c : node.children) refined_parents_[c] += on ? 1u : uint32_t(-1);
+    for (uint32_t p : node.parents) refined_children_[p] += on ? 1u : uint32_t(-1);
+    recount(n);
+    for (uint32_t c : node.children) recount(c);
+    for (uint32_t p : node.parents) recount(p);
+    if (log) log->push_back({n, on});
+}
+
+void CutEngine::revert(std::vector<Op>& log, size_t to) {
+    while (log.size() > to) {
+        Op op = log.back();
+        log.pop_back();
+        set_refined(op.node, !op.refine, nullptr);
+    }
+}
+
+bool CutEngine::fits(const Totals& before) const {
+    // A resource may stay above its budget only if it did not grow (budgets lowered, or a cut
+    // that cannot be coarsened further): never make an excess appear or grow.
+    auto ok = [](uint64_t now, uint64_t was, uint64_t budget) { return now <= budget || now <= was; };
+    return ok(totals_.primitives, before.primitives, budgets_.max_primitives) &&
+           ok(totals_.gpu, before.gpu, budgets_.max_gpu_bytes) && ok(totals_.cpu, before.cpu, budgets_.max_cpu_bytes);
+}
+
+bool CutEngine::exceeds() const {
+    return totals_.primitives > budgets_.max_primitives || totals_.gpu > budgets_.max_gpu_bytes ||
+           totals_.cpu > budgets_.max_cpu_bytes;
+}
+
+void CutEngine::closure(uint32_t n, std::vector<uint32_t>& out) {
+    out.clear();
+    if (++stamp_ == 0) {
+        std::fill(mark_.begin(), mark_.end(), 0);
+        stamp_ = 1;
+    }
+    // Parents first (iterative depth-first), so applying `out` in order keeps R closed.
+    std::vector<uint32_t> stack{n};
+    while (!stack.empty()) {
+        uint32_t d = stack.back();
+        if (mark_[d] == stamp_) {
+            stack.pop_back();
+            continue;
+        }
+        bool ready = true;
+        for (uint32_t p : h_.node(d).parents)
+            if (!refined_[p] && mark_[p] != stamp_) {
+                stack.push_back(p);
+                ready = false;
+            }
+        if (ready) {
+            mark_[d] = stamp_;
+            out.push_back(d);
+            stack.pop_back();
+        }
+    }
+}
+
+void CutEngine::want(uint32_t n, RequestReason reason, double priority) {
+    if (want_frame_[n] != frame_number_) {
+        want_frame_[n] = frame_number_;
+        want_[n] = {reason, priority};
+        wanted_.push_back(n);
+        return;
+    }
+    Want& w = want_[n];
+    if (reason < w.reason || (reason == w.reason && priority > w.priority)) w = {reason, priority};
+}
+
+// ---------------------------------------------------------------------------------------------
+// CutEngine: the frame
+
+void CutEngine::coarsen_phase() {
+    double threshold = view_.tolerance_px * view_.hysteresis;
+    std::vector<uint32_t> work = frontier_.items;
+    std::vector<Op> log;
+    for (size_t i = 0; i < work.size(); ++i) {
+        uint32_t n = work[i];
+        if (!is_frontier(n)) continue;
+        // A virtual node is in R only for its refined children's sake: once it has none, it goes.
+        double e = h_.node(n).has_data ? keep_proj(n) : 0.0;
+        if (e >= threshold) continue;
+        if (!is_resident(n)) {
+            // It must be drawn again: fetch it first (only for what the viewer can see).
+            if (in_view(n)) want(n, RequestReason::Coarsen, proj(n));
+            continue;
+        }
+        Totals before = totals_;
+        log.clear();
+        set_refined(n, false, &log);
+        if (!fits(before)) {
+            revert(log, 0);
+            continue;
+        }
+        frame_.stats.coarsenings++;
+        for (uint32_t p : h_.node(n).parents)
+            if (is_frontier(p)) work.push_back(p);
+    }
+}
+
+void CutEngine::enforce_budgets() {
+    if (!exceeds()) return;
+    using Entry = std::pair<double, uint32_t>;
+    std::vector<Entry> heap;
+    for (uint32_t n : frontier_.items) heap.push_back({keep_proj(n), n});
+    auto cmp = [](const Entry& a, const Entry& b) { return a.first > b.first; };  // min-heap
+    std::make_heap(heap.begin(), heap.end(), cmp);
+    std::vector<Op> log;
+    while (exceeds() && !heap.empty()) {
+        std::pop_heap(heap.begin(), heap.end(), cmp);
+        uint32_t n = heap.back().second;
+        heap.pop_back();
+        if (!is_frontier(n)) continue;
+        if (!is_resident(n)) {
+            if (in_view(n)) want(n, RequestReason::Coarsen, proj(n));
+            continue;
+        }
+        Totals before = totals_;
+        log.clear();
+        set_refined(n, false, &log);
+        if (!fits(before)) {
+            revert(log, 0);
+            continue;
+        }
+        frame_.stats.coarsenings++;
+        for (uint32_t p : h_.node(n).parents)
+            if (is_frontier(p)) {
+                heap.push_back({keep_proj(p), p});
+                std::push_heap(heap.begin(), heap.end(), cmp);
+            }
+    }
+}
+
+// Coarsens frontier nodes with projected error below `limit`, lowest first, until the totals
+// fit the budgets again (relative to `before`). Every change is appended to `log`; the caller
+// reverts on failure. Returns whether the totals fit.
+bool CutEngine::make_room(double limit, std::vector<Op>& log, const Totals& before) {
+    using Entry = std::pair<double, uint32_t>;
+    auto cmp = [](const Entry& a, const Entry& b) { return a.first > b.first; };
+    if (!room_heap_built_) {
+        room_heap_.clear();
+        for (uint32_t n : frontier_.items) room_heap_.push_back({keep_proj(n), n});
+        std::make_heap(room_heap_.begin(), room_heap_.end(), cmp);
+        room_heap_built_ = true;
+    }
+    std::vector<Entry> popped;
+    bool ok = false;
+    while (!room_heap_.empty() && room_heap_.front().first < limit) {
+        std::pop_heap(room_heap_.begin(), room_heap_.end(), cmp);
+        Entry top = room_heap_.back();
+        room_heap_.pop_back();
+        popped.push_back(top);
+        uint32_t f = top.second;
+        if (!is_frontier(f) || !is_resident(f)) continue;
+        Totals b = totals_;
+        size_t mark = log.size();
+        set_refined(f, false, &log);
+        // A coarsening that makes an exceeded resource grow does not help.
+        bool helps = !((totals_.primitives > budgets_.max_primitives && totals_.primitives > b.primitives) ||
+                       (totals_.gpu > budgets_.max_gpu_bytes && totals_.gpu > b.gpu) ||
+                       (totals_.cpu > budgets_.max_cpu_bytes && totals_.cpu > b.cpu));
+        if (!helps) {
+            revert(log, mark);
+            continue;
+        }
+        for (uint32_t p : h_.node(f).parents)
+            if (is_frontier(p)) {
+                room_heap_.push_back({keep_proj(p), p});
+                std::push_heap(room_heap_.begin(), room_heap_.end(), cmp);
+            }
+        if (fits(before)) {
+            ok = true;
+            break;
+        }
+    }
+    // Entries are validated when popped, so putting every popped one back is always safe: the
+    // caller may revert, and skipped nodes (not resident) stay candidates.
+    for (const Entry& e : popped) {
+        room_heap_.push_back(e);
+        std::push_heap(room_heap_.begin(), room_heap_.end(), cmp);
+    }
+    return ok;
+}
+
+void CutEngine::refine_phase() {
+    struct Candidate {
+        double e;
+        uint16_t level;
+        uint32_t n;
+    };
+    auto less = [](const Candidate& a, const Candidate& b) {
+        if (a.e != b.e) return a.e < b.e;
+        if (a.level != b.level) return a.level > b.level;
+        return a.n > b.n;
+    };
+    double tol = view_.tolerance_px;
+    std::vector<Candidate> heap;
+    // Virtual nodes draw nothing: refining one for its own sake gains nothing, so they are
+    // refined only as ancestors a refinement needs (closure).
+    for (uint32_t n : active_.items) {
+        const HierarchyNode& node = h_.node(n);
+        if (node.leaf || !node.has_data) continue;
+        double e = proj(n);
+        if (e > tol) heap.push_back({e, node.level, n});
+    }
+    std::make_heap(heap.begin(), heap.end(), less);
+    std::vector<uint32_t> closure_set, missing;
+    std::vector<Op> log;
+    while (!heap.empty()) {
+        std::pop_heap(heap.begin(), heap.end(), less);
+        Candidate cand = heap.back();
+        heap.pop_back();
+        uint32_t n = cand.n;
+        if (!is_active(n)) continue;
+        closure(n, closure_set);
+        missing.clear();
+        for (uint32_t s : closure_set)
+            for (uint32_t c : h_.node(s).children)
+                if (mark_[c] != stamp_ && h_.node(c).has_data && !residency_->resident(c)) missing.push_back(c);
+        bool capped = uint64_t(frame_.stats.refinements) + closure_set.size() > budgets_.max_refinements;
+        Totals before = totals_;
+        log.clear();
+        for (uint32_t s : closure_set) set_refined(s, true, &log);
+        bool ok = fits(before);
+        if (!ok) ok = make_room(cand.e * view_.hysteresis, log, before);
+        if (!ok || !missing.empty() || capped) {
+            revert(log, 0);
+            if (!ok) {
+                frame_.stats.budget_blocked++;
+            } else if (!missing.empty()) {
+                frame_.stats.waiting++;
+                for (uint32_t c : missing) want(c, RequestReason::Refine, cand.e);
+            }
+            continue;
+        }
+        for (const Op& op : log) {
+            if (op.refine) frame_.stats.refinements++;
+            else frame_.stats.coarsenings++;
+        }
+        for (uint32_t s : closure_set)
+            for (uint32_t c : h_.node(s).children) {
+                const HierarchyNode& child = h_.node(c);
+                if (child.leaf || !child.has_data || !is_active(c)) continue;
+                double e = proj(c);
+                if (e > tol) {
+                    heap.push_back({e, child.level, c});
+                    std::push_heap(heap.begin(), heap.end(), less);
+                }
+            }
+    }
+}
+
+void CutEngine::emit_requests() {
+    CutFrameStats& st = frame_.stats;
+    for (uint32_t n : active_.items) {
+        if (is_resident(n)) continue;
+        st.holes++;
+        if (in_view(n)) want(n, RequestReason::Drawn, proj(n));
+    }
+    // Retire finished and stale requests.
+    size_t kept = 0;
+    for (uint32_t n : outstanding_list_) {
+        if (is_resident(n)) {
+            outstanding_[n] = 0;
+            continue;
+        }
+        if (want_frame_[n] != frame_number_) {
+            outstanding_[n] = 0;
+            frame_.cancelled.push_back({n, h_.node(n).key, h_.node(n).level, RequestReason::Refine, 0});
+            continue;
+        }
+        outstanding_list_[kept++] = n;
+    }
+    outstanding_list_.resize(kept);
+    std::sort(wanted_.begin(), wanted_.end(), [&](uint32_t a, uint32_t b) {
+        const Want& wa = want_[a];
+        const Want& wb = want_[b];
+        if (wa.reason != wb.reason) return wa.reason < wb.reason;
+        if (wa.priority != wb.priority) return wa.priority > wb.priority;
+        const HierarchyNode& na = h_.node(a);
+        const HierarchyNode& nb = h_.node(b);
+        if (na.level != nb.level) return na.level < nb.level;
+        return na.key < nb.key;
+    });
+    for (uint32_t n : wanted_) {
+        const HierarchyNode& node = h_.node(n);
+        CutRequest r{n, node.key, node.level, want_[n].reason, want_[n].priority};
+        if (outstanding_[n]) {
+            frame_.requests.push_back(r);
+            continue;
+        }
+        if (st.new_requests >= budgets_.max_new_requests || outstanding_list_.size() >= budgets_.max_outstanding_requests)
+            continue;
+        outstanding_[n] = 1;
+        outstanding_list_.push_back(n);
+        st.new_requests++;
+        frame_.requests.push_back(r);
+    }
+}
+
+const CutFrame& CutEngine::update(const ViewParams& view, const Residency& residency) {
+    auto start = std::chrono::steady_clock::now();
+    view_ = view;
+    residency_ = &residency;
+    k_ = view.k();
+    ++frame_number_;
+    frame_.requests.clear();
+    frame_.cancelled.clear();
+    frame_.drawn.clear();
+    frame_.stats = {};
+    frame_.stats.frame = frame_number_;
+    wanted_.clear();
+    room_heap_built_ = false;
+
+    // 1. Residency and exact counts may have changed: recount the cut (memberships do not change).
+    for (size_t i = 0; i < active_.items.size(); ++i) recount(active_.items[i]);
+    for (size_t i = 0; i < frontier_.items.size(); ++i) recount(frontier_.items[i]);
+
+    coarsen_phase();     // 2.
+    enforce_budgets();   // 3.
+    refine_phase();      // 4.
+    emit_requests();     // 5.
+
+    CutFrameStats& st = frame_.stats;
+    st.primitives = totals_.primitives;
+    st.gpu_bytes = totals_.gpu;
+    st.cpu_bytes = totals_.cpu;
+    st.drawn_nodes = active_.items.size();
+    st.frontier_nodes = frontier_.items.size();
+    st.refined_nodes = refined_count_;
+    double certified = 0;
+    for (uint32_t n : active_.items)
+        if (h_.node(n).has_data) certified = std::max(certified, proj(n));
+    st.certified_error_px = certified;
+    st.over_budget = exceeds();
+    frame_.drawn = active_.items;
+    residency_ = nullptr;
+    st.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    return frame_;
+}
+
+std::vector<uint32_t> CutEngine::refined_nodes() const {
+    std::vector<uint32_t> out;
+    for (uint32_t n = 0; n < refined_.size(); ++n)
+        if (refined_[n]) out.push_back(n);
+    return out;
+}
+
+std::vector<uint32_t> CutEngine::pinned() const {
+    std::vector<uint32_t> out;
+    for (uint32_t n : active_.items)
+        if (h_.node(n).has_data) out.push_back(n);
+    for (uint32_t n : frontier_.items)
+        if (h_.node(n).has_data) out.push_back(n);
+    return out;
+}
+
+std::string CutEngine::check(const Residency& residency) const {
+    size_t n = h_.size();
+    Totals t;
+    size_t active = 0, frontier = 0;
+    for (uint32_t i = 0; i < n; ++i) {
+        const HierarchyNode& node = h_.node(i);
+        uint32_t rp = 0, rc = 0;
+        for (uint32_t p : node.parents) rp += refined_[p];
+        for (uint32_t c : node.children) rc += refined_[c];
+        if (rp != refined_parents_[i] || rc != refined_children_[i])
+            return strprintf("node %u: refined neighbour counts are stale", i);
+        if (refined_[i] && rp != node.parents.size())
+            return strprintf("node %u is refined but not all its parents are: R is not closed", i);
+        bool act = !refined_[i] && (node.parents.empty() || rp > 0);
+        bool fr = refined_[i] && rc == 0;
+        if (act != active_.contains(i)) return strprintf("node %u: drawn set is stale", i);
+        if (fr != frontier_.contains(i)) return strprintf("node %u: frontier set is stale", i);
+        active += act;
+        frontier += fr;
+        if (act) t.primitives += counter_.count(i, RefinedView{refined_.data()});
+        if (node.has_data && (act || fr)) {
+            NodeBytes b = residency.bytes(i);
+            if (act) t.gpu += b.gpu;
+            t.cpu += b.cpu;
+        }
+        if (active_.contains(i) && active_.items[active_.pos[i]] != i) return "drawn set index is broken";
+        if (frontier_.contains(i) && frontier_.items[frontier_.pos[i]] != i) return "frontier set index is broken";
+    }
+    if (active != active_.items.size() || frontier != frontier_.items.size()) return "set sizes are stale";
+    if (t.primitives != totals_.primitives) return strprintf("primitives %llu, counted %llu", (unsigned long long)t.primitives, (unsigned long long)totals_.primitives);
+    if (t.gpu != totals_.gpu) return strprintf("gpu bytes %llu, counted %llu", (unsigned long long)t.gpu, (unsigned long long)totals_.gpu);
+    if (t.cpu != totals_.cpu) return strprintf("cpu bytes %llu, counted %llu", (unsigned long long)t.cpu, (unsigned long long)totals_.cpu);
+    return {};
+}
+
+}  // namespace catpaq

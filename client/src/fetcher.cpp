@@ -1,0 +1,603 @@
+#include "client/fetcher.h"
+
+#include <fcntl.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+
+#include "base/checksum.h"
+#include "base/error.h"
+#include "common_codec/archive.h"
+
+namespace catpaq {
+
+// ---------------------------------------------------------------------------------------------
+// NodeSource blocking helpers
+
+std::vector<uint8_t> NodeSource::fetch(SourceRequest request) {
+    static std::atomic<uint64_t> next_id{uint64_t(1) << 62};
+    request.id = next_id++;
+    submit(request);
+    std::vector<SourceResult> results;
+    for (;;) {
+        results.clear();
+        poll(results, 100);
+        for (SourceResult& r : results) {
+            if (r.id != request.id) continue;
+            if (!r.ok) fail("%s: %s", describe().c_str(), r.error.c_str());
+            return std::move(r.bytes);
+        }
+    }
+}
+
+std::vector<uint8_t> NodeSource::fetch_range(uint64_t offset, uint64_t size) {
+    SourceRequest r;
+    r.kind = SourceRequest::Kind::Range;
+    r.offset = offset;
+    r.size = size;
+    return fetch(r);
+}
+
+std::vector<uint8_t> NodeSource::fetch_node(uint64_t key, uint64_t offset, uint64_t size) {
+    SourceRequest r;
+    r.kind = SourceRequest::Kind::Node;
+    r.key = key;
+    r.offset = offset;
+    r.size = size;
+    return fetch(r);
+}
+
+// ---------------------------------------------------------------------------------------------
+// LocalFileSource
+
+LocalFileSource::LocalFileSource(const std::string& path) : path_(path) {
+    fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
+    if (fd_ < 0) fail("cannot open '%s': %s", path.c_str(), std::strerror(errno));
+    struct stat st;
+    if (::fstat(fd_, &st) != 0) {
+        int err = errno;
+        ::close(fd_);
+        fail("cannot stat '%s': %s", path.c_str(), std::strerror(err));
+    }
+    size_ = uint64_t(st.st_size);
+}
+
+LocalFileSource::~LocalFileSource() {
+    if (fd_ >= 0) ::close(fd_);
+}
+
+void LocalFileSource::submit(const SourceRequest& request) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    queue_.push_back(request);
+    cv_.notify_all();
+}
+
+void LocalFileSource::cancel(uint64_t id) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    queue_.erase(std::remove_if(queue_.begin(), queue_.end(), [&](const SourceRequest& r) { return r.id == id; }),
+                 queue_.end());
+}
+
+void LocalFileSource::wakeup() {
+    std::lock_guard<std::mutex> lock(mutex_);
+    woken_ = true;
+    cv_.notify_all();
+}
+
+size_t LocalFileSource::in_flight() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return queue_.size();
+}
+
+void LocalFileSource::poll(std::vector<SourceResult>& out, int timeout_ms) {
+    std::deque<SourceRequest> work;
+    {
+        std::unique_lock<std::mutex> lock(mutex_);
+        if (queue_.empty() && timeout_ms > 0)
+            cv_.wait_for(lock, std::chrono::milliseconds(timeout_ms), [&] { return !queue_.empty() || woken_; });
+        woken_ = false;
+        work.swap(queue_);
+    }
+    for (const SourceRequest& req : work) {
+        SourceResult r;
+        r.id = req.id;
+        uint64_t offset = req.offset, size = req.size;
+        if (req.kind == SourceRequest::Kind::Prefix) {
+            offset = 0;
+            size = std::min(req.size, size_);
+        }
+        if (offset > size_ || size > size_ - offset) {
+            r.retryable = false;
+            r.error = strprintf("bytes %llu..%llu are outside the file (%llu bytes)", (unsigned long long)offset,
+                                (unsigned long long)(offset + size), (unsigned long long)size_);
+            out.push_back(std::move(r));
+            continue;
+        }
+        r.bytes.resize(size);
+        uint64_t done = 0;
+        while (done < size) {
+            ssize_t n = ::pread(fd_, r.bytes.data() + done, size - done, off_t(offset + done));
+            if (n < 0 && errno == EINTR) continue;
+            if (n <= 0) {
+                r.error = n < 0 ? std::string(std::strerror(errno)) : std::string("unexpected end of file");
+                break;
+            }
+            done += uint64_t(n);
+        }
+        if (done == size) r.ok = true;
+        else r.bytes.clear();
+        out.push_back(std::move(r));
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Prefix
+
+std::unique_ptr<NodeSource> open_node_source(const std::string& location, HttpSettings http) {
+    if (location.rfind("http://", 0) == 0 || location.rfind("https://", 0) == 0)
+        return std::make_unique<HttpSource>(location, http);
+    return std::make_unique<LocalFileSource>(location);
+}
+
+std::vector<uint8_t> fetch_prefix(NodeSource& source, int attempts) {
+    std::string last;
+    for (int attempt = 0; attempt < std::max(1, attempts); ++attempt) {
+        if (attempt > 0) std::this_thread::sleep_for(std::chrono::milliseconds(100 << std::min(attempt - 1, 4)));
+        try {
+            SourceRequest probe;
+            probe.kind = SourceRequest::Kind::Prefix;
+            probe.size = kPrefixProbeBytes;
+            std::vector<uint8_t> bytes = source.fetch(probe);
+            ArchiveHeader header;
+            std::string problem = parse_archive_header(bytes.data(), bytes.size(), header);
+            if (!problem.empty()) fail("%s", problem.c_str());
+            uint64_t prefix = header.index_offset + header.index_size;
+            if (prefix > header.file_size) fail("the index lies past the end of the file");
+            if (bytes.size() < prefix) {
+                std::vector<uint8_t> rest = source.fetch_range(bytes.size(), prefix - bytes.size());
+                bytes.insert(bytes.end(), rest.begin(), rest.end());
+            }
+            return bytes;
+        } catch (const Error& e) {
+            last = e.what();
+        }
+    }
+    fail("%s: cannot load the dataset prefix: %s", source.describe().c_str(), last.c_str());
+}
+
+CatpIndex load_catp_index(NodeSource& source, int attempts) {
+    std::vector<uint8_t> bytes = fetch_prefix(source, attempts);
+    return CatpIndex::from_prefix(bytes.data(), bytes.size(), source.describe());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Fetcher
+
+FetchRequest FetchRequest::of(const HierarchyNode& node) {
+    FetchRequest r;
+    r.node = node.index;
+    r.key = node.key;
+    r.offset = node.payload_offset;
+    r.size = node.payload_bytes;
+    r.checksum = node.checksum;
+    return r;
+}
+
+Fetcher::Fetcher(std::unique_ptr<NodeSource> source, FetcherSettings settings)
+    : source_(std::move(source)), settings_(std::move(settings)) {
+    if (!settings_.decode) {
+        settings_.decode = [](const FetchRequest&, const uint8_t* data, size_t size, DiamondFragments& out) {
+            return decode_diamond_node(data, size, out);
+        };
+    }
+    if (settings_.max_attempts == 0) settings_.max_attempts = 1;
+    size_t threads = std::max<size_t>(1, settings_.decode_threads);
+    for (size_t i = 0; i < threads; ++i) workers_.emplace_back([this] { decode_loop(); });
+    fetch_thread_ = std::thread([this] { fetch_loop(); });
+}
+
+Fetcher::~Fetcher() {
+    stop_ = true;
+    source_->wakeup();
+    {
+        std::lock_guard<std::mutex> lock(decode_mutex_);
+        decode_cv_.notify_all();
+    }
+    if (fetch_thread_.joinable()) fetch_thread_.join();
+    for (std::thread& t : workers_) t.join();
+}
+
+void Fetcher::request(const std::vector<FetchRequest>& wanted) {
+    {
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        wanted_ = wanted;
+        has_wanted_ = true;
+        wanted_seq_ = ++command_seq_;
+    }
+    source_->wakeup();
+}
+
+void Fetcher::cancel(const std::vector<uint64_t>& keys) {
+    if (keys.empty()) return;
+    {
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        cancels_.insert(cancels_.end(), keys.begin(), keys.end());
+        command_seq_++;
+    }
+    source_->wakeup();
+}
+
+void Fetcher::supply(const FetchRequest& request, std::shared_ptr<const std::vector<uint8_t>> bytes) {
+    {
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        DecodeJob job;
+        job.request = request;
+        job.bytes = std::move(bytes);
+        job.supplied = true;
+        supplied_.push_back(std::move(job));
+        command_seq_++;
+    }
+    source_->wakeup();
+}
+
+size_t Fetcher::poll(std::vector<FetchedNode>& out) {
+    uint64_t seq;
+    {
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        seq = command_seq_;
+    }
+    std::deque<FetchedNode> done;
+    {
+        std::lock_guard<std::mutex> lock(done_mutex_);
+        done.swap(done_);
+        // Lists issued up to now may still name these nodes: they must not fetch them again.
+        for (const FetchedNode& n : done)
+            if (n.ok) recent_[n.key] = seq;
+    }
+    for (FetchedNode& n : done) out.push_back(std::move(n));
+    return done.size();
+}
+
+FetcherStats Fetcher::stats() const {
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    return stats_;
+}
+
+bool Fetcher::idle() const {
+    uint64_t seq;
+    {
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        seq = command_seq_;
+    }
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    return applied_seq_ == seq && !stats_.queued && !stats_.in_flight && !stats_.decoding && !stats_.waiting_retry;
+}
+
+void Fetcher::deliver(FetchedNode node) {
+    std::lock_guard<std::mutex> lock(done_mutex_);
+    if (node.ok) recent_[node.key] = kUnpolled;
+    done_.push_back(std::move(node));
+}
+
+void Fetcher::fetch_loop() {
+    std::vector<SourceResult> results;
+    std::deque<DecodeDone> decoded;
+    while (!stop_) {
+        uint64_t seq = apply_commands();
+        auto now = std::chrono::steady_clock::now();
+        for (auto& [key, e] : entries_) {
+            if (e.state == State::Backoff && e.retry_at <= now) e.state = State::Queued;
+            if (e.state == State::Failed && e.wanted && e.retry_at <= now) {
+                e.state = State::Queued;
+                e.attempts = 0;
+            }
+        }
+        {
+            std::lock_guard<std::mutex> lock(decode_mutex_);
+            decoded.swap(decoded_);
+        }
+        for (DecodeDone& d : decoded) handle_decoded(d);
+        decoded.clear();
+        dispatch();
+        update_counts(seq);
+
+        // Wait for transfers, commands (wakeup) or the next retry, whichever comes first.
+        auto wait = std::chrono::milliseconds(50);
+        now = std::chrono::steady_clock::now();
+        for (const auto& [key, e] : entries_)
+            if (e.state == State::Backoff || (e.state == State::Failed && e.wanted))
+                wait = std::min(wait, std::chrono::duration_cast<std::chrono::milliseconds>(
+                                          std::max(e.retry_at - now, std::chrono::steady_clock::duration::zero())));
+        results.clear();
+        source_->poll(results, int(wait.count()));
+        for (SourceResult& r : results) handle_result(r);
+        update_counts(seq);
+    }
+}
+
+uint64_t Fetcher::apply_commands() {
+    bool has_wanted;
+    std::vector<FetchRequest> wanted;
+    std::vector<uint64_t> cancels;
+    std::vector<DecodeJob> supplied;
+    uint64_t seq, wanted_seq;
+    {
+        std::lock_guard<std::mutex> lock(command_mutex_);
+        has_wanted = has_wanted_;
+        wanted_seq = wanted_seq_;
+        has_wanted_ = false;
+        wanted.swap(wanted_);
+        cancels.swap(cancels_);
+        supplied.swap(supplied_);
+        seq = command_seq_;
+    }
+    auto now = std::chrono::steady_clock::now();
+    // Forgets a node nobody wants any more; a running transfer finishes (its bytes are still
+    // useful to a cache) unless abort_stale_in_flight.
+    auto drop = [&](std::unordered_map<uint64_t, Entry>::iterator it) {
+        Entry& e = it->second;
+        switch (e.state) {
+            case State::Queued:
+            case State::Backoff:
+                stats_cancelled_++;
+                entries_.erase(it);
+                return;
+            case State::Failed:
+                entries_.erase(it);
+                return;
+            case State::Running:
+                if (settings_.abort_stale_in_flight) {
+                    source_->cancel(e.transfer);
+                    transfer_key_.erase(e.transfer);
+                    stats_cancelled_++;
+                    entries_.erase(it);
+                } else {
+                    e.stale = true;
+                    e.wanted = false;
+                }
+                return;
+            case State::Decoding:
+                e.stale = true;
+                e.wanted = false;
+                return;
+        }
+    };
+    if (has_wanted) {
+        // A node delivered and not polled yet, or polled after this list was issued, is in the
+        // list only because the caller did not know yet: do not fetch it again.
+        std::unordered_map<uint64_t, uint64_t> recent;
+        {
+            std::lock_guard<std::mutex> lock(done_mutex_);
+            for (auto it = recent_.begin(); it != recent_.end();) {
+                if (it->second < wanted_seq) it = recent_.erase(it);  // later lists know
+                else ++it;
+            }
+            recent = recent_;
+        }
+        for (auto& [key, e] : entries_) e.wanted = false;
+        order_.clear();
+        for (const FetchRequest& req : wanted) {
+            if (recent.count(req.key)) continue;
+            auto it = entries_.find(req.key);
+            if (it == entries_.end()) {
+                Entry e;
+                e.request = req;
+                e.state = State::Queued;
+                it = entries_.emplace(req.key, std::move(e)).first;
+            } else if (it->second.wanted) {
+                continue;  // listed twice
+            }
+            Entry& e = it->second;
+            e.wanted = true;
+            e.stale = false;
+            if (e.state == State::Failed && e.retry_at <= now) {
+                e.state = State::Queued;
+                e.attempts = 0;
+            }
+            order_.push_back(req.key);
+        }
+        for (auto it = entries_.begin(); it != entries_.end();) {
+            auto next = std::next(it);
+            if (!it->second.wanted) drop(it);
+            it = next;
+        }
+    }
+    for (uint64_t key : cancels) {
+        auto it = entries_.find(key);
+        if (it == entries_.end()) continue;
+        it->second.wanted = false;
+        drop(it);
+    }
+    for (DecodeJob& job : supplied) {
+        auto it = entries_.find(job.request.key);
+        if (it != entries_.end() && (it->second.state == State::Running || it->second.state == State::Decoding)) continue;
+        if (it == entries_.end()) {
+            Entry e;
+            e.request = job.request;
+            e.wanted = false;  // not in the list: delivered, and forgotten if it has to be fetched
+            it = entries_.emplace(job.request.key, std::move(e)).first;
+        }
+        it->second.state = State::Decoding;
+        job.attempts = it->second.attempts;
+        std::lock_guard<std::mutex> lock(decode_mutex_);
+        decode_queue_.push_back(std::move(job));
+        decode_cv_.notify_one();
+    }
+    return seq;
+}
+
+void Fetcher::dispatch() {
+    size_t cap = source_->max_parallel();
+    if (source_->in_flight() >= cap) return;
+    for (uint64_t key : order_) {
+        if (source_->in_flight() >= cap) break;
+        auto it = entries_.find(key);
+        if (it == entries_.end() || it->second.state != State::Queued) continue;
+        Entry& e = it->second;
+        SourceRequest sr;
+        sr.id = next_transfer_++;
+        sr.kind = SourceRequest::Kind::Node;
+        sr.key = key;
+        sr.offset = e.request.offset;
+        sr.size = e.request.size;
+        e.state = State::Running;
+        e.transfer = sr.id;
+        transfer_key_[sr.id] = key;
+        stats_transfers_++;
+        if (e.attempts > 0) stats_retries_++;
+        source_->submit(sr);
+    }
+}
+
+void Fetcher::fail_attempt(uint64_t key, const std::string& error, bool permanent) {
+    auto it = entries_.find(key);
+    if (it == entries_.end()) return;
+    Entry& e = it->second;
+    e.attempts = permanent ? std::max(e.attempts + 1, settings_.max_attempts) : e.attempts + 1;
+    e.last_error = error;
+    if (e.stale || !e.wanted) {
+        entries_.erase(it);  // nobody is waiting for it
+        return;
+    }
+    auto now = std::chrono::steady_clock::now();
+    if (e.attempts >= settings_.max_attempts) {
+        e.state = State::Failed;
+        e.retry_at = now + settings_.failed_retry_delay;
+        stats_failed_++;
+        FetchedNode node;
+        node.node = e.request.node;
+        node.key = key;
+        node.ok = false;
+        node.error = error;
+        node.attempts = e.attempts;
+        deliver(std::move(node));
+        return;
+    }
+    auto delay = settings_.backoff_initial * (int64_t(1) << std::min<uint32_t>(e.attempts - 1, 20));
+    e.state = State::Backoff;
+    e.retry_at = now + std::min<std::chrono::milliseconds>(delay, settings_.backoff_max);
+}
+
+void Fetcher::handle_result(SourceResult& r) {
+    auto tk = transfer_key_.find(r.id);
+    if (tk == transfer_key_.end()) return;  // cancelled
+    uint64_t key = tk->second;
+    transfer_key_.erase(tk);
+    auto it = entries_.find(key);
+    if (it == entries_.end() || it->second.state != State::Running || it->second.transfer != r.id) return;
+    Entry& e = it->second;
+    if (!r.ok) {
+        stats_transport_errors_++;
+        fail_attempt(key, r.error, !r.retryable);
+        return;
+    }
+    stats_bytes_ += r.bytes.size();
+    e.state = State::Decoding;
+    DecodeJob job;
+    job.request = e.request;
+    job.bytes = std::make_shared<const std::vector<uint8_t>>(std::move(r.bytes));
+    job.attempts = e.attempts + 1;
+    std::lock_guard<std::mutex> lock(decode_mutex_);
+    decode_queue_.push_back(std::move(job));
+    decode_cv_.notify_one();
+}
+
+void Fetcher::handle_decoded(DecodeDone& d) {
+    auto it = entries_.find(d.node.key);
+    if (d.checksum_failed) stats_checksum_failures_++;
+    else if (d.corrupt) stats_decode_failures_++;
+    if (d.corrupt) {
+        if (it != entries_.end() && it->second.state == State::Decoding) {
+            if (d.supplied && it->second.wanted) {
+                it->second.state = State::Queued;  // the cached bytes were bad: fetch them
+            } else {
+                fail_attempt(d.node.key, d.node.error, false);
+            }
+        }
+        return;
+    }
+    if (it != entries_.end() && it->second.state == State::Decoding) entries_.erase(it);
+    if (d.supplied) stats_supplied_++;
+    stats_delivered_++;
+    deliver(std::move(d.node));
+}
+
+void Fetcher::decode_loop() {
+    for (;;) {
+        DecodeJob job;
+        {
+            std::unique_lock<std::mutex> lock(decode_mutex_);
+            decode_cv_.wait(lock, [&] { return stop_ || !decode_queue_.empty(); });
+            if (stop_) return;
+            job = std::move(decode_queue_.front());
+            decode_queue_.pop_front();
+        }
+        DecodeDone d;
+        d.supplied = job.supplied;
+        d.node.node = job.request.node;
+        d.node.key = job.request.key;
+        d.node.attempts = job.attempts;
+        const std::vector<uint8_t>& bytes = *job.bytes;
+        if (bytes.size() != job.request.size || checksum64(bytes.data(), bytes.size()) != job.request.checksum) {
+            d.corrupt = true;
+            d.checksum_failed = true;
+            d.node.error = strprintf("node %llu: %zu bytes that do not match the index checksum",
+                                     (unsigned long long)job.request.key, bytes.size());
+        } else {
+            auto fragments = std::make_shared<DiamondFragments>();
+            std::string problem;
+            try {
+                problem = settings_.decode(job.request, bytes.data(), bytes.size(), *fragments);
+            } catch (const std::exception& e) {
+                problem = e.what();
+            }
+            if (!problem.empty()) {
+                d.corrupt = true;
+                d.node.error = strprintf("node %llu: %s", (unsigned long long)job.request.key, problem.c_str());
+            } else {
+                d.node.ok = true;
+                d.node.compressed = job.bytes;
+                d.node.fragments = std::move(fragments);
+            }
+        }
+        {
+            std::lock_guard<std::mutex> lock(decode_mutex_);
+            decoded_.push_back(std::move(d));
+        }
+        source_->wakeup();
+    }
+}
+
+void Fetcher::update_counts(uint64_t seq) {
+    size_t queued = 0, running = 0, decoding = 0, waiting = 0;
+    for (const auto& [key, e] : entries_) {
+        switch (e.state) {
+            case State::Queued: queued++; break;
+            case State::Running: running++; break;
+            case State::Decoding: decoding++; break;
+            case State::Backoff: waiting++; break;
+            case State::Failed: break;
+        }
+    }
+    std::lock_guard<std::mutex> lock(stats_mutex_);
+    stats_.transfers = stats_transfers_;
+    stats_.bytes_fetched = stats_bytes_;
+    stats_.delivered = stats_delivered_;
+    stats_.transport_errors = stats_transport_errors_;
+    stats_.checksum_failures = stats_checksum_failures_;
+    stats_.decode_failures = stats_decode_failures_;
+    stats_.retries = stats_retries_;
+    stats_.failed = stats_failed_;
+    stats_.cancelled = stats_cancelled_;
+    stats_.supplied = stats_supplied_;
+    stats_.queued = queued;
+    stats_.in_flight = running;
+    stats_.decoding = decoding;
+    stats_.waiting_retry = waiting;
+    applied_seq_ = seq;
+}
+
+}  // namespace catpaq

@@ -1,0 +1,228 @@
+// The cut engine on a real CATP dataset (a sphere built with build_catp): the hierarchy built from
+// the index, and every cut the engine produces — fed by the real fetcher and caches — decodes to
+// a closed surface (welded by exact integer position, no border edges).
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include "catp/cut.h"
+#include "catp/dataset.h"
+#include "client/cache.h"
+#include "client/cut_engine.h"
+#include "client/fetcher.h"
+#include "client/hierarchy.h"
+#include "crack_check.h"
+#include "test_core_support.h"
+
+using namespace catpaq;
+
+namespace {
+
+RefinedSet as_refined_set(const Hierarchy& h, const CutEngine& engine) {
+    RefinedSet r;
+    for (uint32_t n : engine.refined_nodes()) r.refine(DiamondId{h.node(n).key});
+    return r;
+}
+
+// The slots the engine draws: for each drawn node, the parts whose creating parent is refined.
+std::set<std::pair<uint64_t, int>> engine_slots(const Hierarchy& h, const CutEngine& engine) {
+    std::set<std::pair<uint64_t, int>> out;
+    for (uint32_t n : engine.drawn_nodes())
+        for (const HierarchyPart& p : h.node(n).parts)
+            if (p.parent == kNoNode || engine.refined(p.parent)) out.insert({h.node(n).key, int(p.id)});
+    return out;
+}
+
+std::set<std::pair<uint64_t, int>> reference_slots(const CatpIndex& index, const RefinedSet& r) {
+    std::set<std::pair<uint64_t, int>> out;
+    for (const DrawnSlot& d : drawn_slots(index, r)) out.insert({d.entry->key, d.slot});
+    return out;
+}
+
+// Bounds of the model and a camera orbiting it.
+struct Orbit {
+    double centre[3], radius;
+    explicit Orbit(const CatpIndex& index) {
+        const CatpMeta& m = index.meta();
+        radius = 0;
+        for (int i = 0; i < 3; ++i) {
+            centre[i] = 0.5 * (m.bounds_min[i] + m.bounds_max[i]);
+            radius = std::max(radius, 0.5 * (m.bounds_max[i] - m.bounds_min[i]));
+        }
+    }
+    ViewParams view(int frame, int frames, double tolerance) const {
+        double t = double(frame) / double(frames);
+        double a = t * 2 * M_PI;
+        double d = radius * (1.15 + 2.5 * (0.5 + 0.5 * std::cos(3 * a)));  // close to far
+        std::array<double, 3> eye{centre[0] + d * std::cos(a), centre[1] + d * std::sin(a), centre[2] + 0.4 * d * std::sin(2 * a)};
+        std::array<double, 3> target{centre[0] + 0.3 * radius * std::cos(5 * a), centre[1], centre[2]};
+        return test::camera(eye, target, tolerance, 50);
+    }
+};
+
+}  // namespace
+
+TEST(CatpHierarchy, EveryEntryIsANodeAndMissingParentsAreVirtualUpToTheRoot) {
+    CatpFile file(test::sphere_dataset());
+    const CatpIndex& index = file.index();
+    Hierarchy h = build_catp_hierarchy(index);
+    EXPECT_EQ(h.check(), "");
+    EXPECT_EQ(h.data_count(), index.entries().size());
+    ASSERT_EQ(h.roots().size(), 1u);
+    EXPECT_EQ(h.node(h.roots()[0]).key, root_diamond().bits);
+    for (const HierarchyNode& n : h.nodes()) {
+        DiamondId id{n.key};
+        const ArchiveEntry* e = index.find(id);
+        EXPECT_EQ(n.has_data, e != nullptr);
+        if (e) {
+            EXPECT_EQ(n.payload_bytes, e->size);
+            EXPECT_EQ(n.payload_offset, e->offset);
+            EXPECT_EQ(n.primitives, e->count);
+            EXPECT_GE(n.error, double(e->error));
+            EXPECT_EQ(n.parts.size(), size_t(__builtin_popcount(e->flags & 0xff)));
+        } else {
+            EXPECT_TRUE(n.parts.empty());
+            EXPECT_FALSE(n.children.empty()) << "a virtual node exists only as somebody's parent";
+        }
+        // Parents are exactly the diamond's parents, all present.
+        std::set<uint64_t> expected, got;
+        for (DiamondId p : diamond_parents(id)) expected.insert(p.bits);
+        for (uint32_t p : n.parents) got.insert(h.node(p).key);
+        EXPECT_EQ(got, expected);
+        // The box of a diamond with data holds all its existing tetrahedra (lattice to world);
+        // a virtual node's is the union of its children's (checked by h.check()).
+        DiamondInfo info = diamond_info(id);
+        uint8_t mask = n.has_data ? existing_slots(info) : 0;
+        for (int s = 0; s < info.ring_size; ++s) {
+            if (!(mask & (1 << s))) continue;
+            for (const LatticePoint& p : diamond_tetrahedron(info, s)) {
+                double l[3] = {double(p[0]), double(p[1]), double(p[2])}, w[3];
+                index.lattice_to_world(l, w);
+                for (int i = 0; i < 3; ++i) {
+                    EXPECT_LE(n.bounds.min[i], w[i]);
+                    EXPECT_GE(n.bounds.max[i], w[i]);
+                }
+            }
+        }
+        for (const HierarchyPart& p : n.parts)
+            if (p.parent != kNoNode) {
+                EXPECT_EQ(h.node(p.parent).key, slot_parent(info, p.id).bits);
+            }
+    }
+    EXPECT_GT(h.virtual_count(), 0u) << "the sphere leaves diamonds without geometry inside";
+}
+
+TEST(CatpCut, EveryEngineCutFedByTheFetcherIsConformingAndCrackFree) {
+    CatpFile file(test::sphere_dataset());
+    const CatpIndex& index = file.index();
+    Hierarchy h = build_catp_hierarchy(index);
+    const uint64_t cache_budget = 6u << 20;
+    CatpNodeStore store(h, cache_budget, 1u << 20);
+    CutBudgets budgets;
+    budgets.max_cpu_bytes = cache_budget / 2;
+    budgets.max_primitives = 30000;
+    budgets.max_new_requests = 24;
+    CutEngine engine(h, store.counter(), budgets);
+    Fetcher fetcher(std::make_unique<LocalFileSource>(test::sphere_dataset()));
+    Orbit orbit(index);
+    std::unordered_map<uint64_t, DiamondFragments> decoded;
+    size_t checked = 0, mixed = 0;
+    std::vector<FetchedNode> arrived;
+    for (int f = 0; f < 90; ++f) {
+        ViewParams v = orbit.view(f, 90, 1.0);
+        arrived.clear();
+        fetcher.poll(arrived);
+        for (FetchedNode& n : arrived) {
+            ASSERT_TRUE(n.ok) << n.error;
+            store.add(n.node, n.fragments, n.compressed);
+        }
+        const CutFrame& frame = engine.update(v, store);
+        store.pin(engine.pinned());
+        std::vector<FetchRequest> wanted;
+        for (const CutRequest& r : frame.requests) wanted.push_back(FetchRequest::of(h.node(r.node)));
+        fetcher.request(wanted);
+
+        ASSERT_EQ(engine.check(store), "");
+        ASSERT_LE(frame.stats.primitives, budgets.max_primitives);
+        ASSERT_LE(frame.stats.cpu_bytes, budgets.max_cpu_bytes);
+        ASSERT_LE(store.fragment_cache().bytes(), cache_budget) << "memory must stay flat";
+        RefinedSet r = as_refined_set(h, engine);
+        ASSERT_EQ(r.size(), engine.refined_nodes().size()) << "R is not closed under parents";
+        ASSERT_EQ(engine_slots(h, engine), reference_slots(index, r));
+        if (frame.stats.holes == 0) {
+            // Primitives are exact once everything drawn is resident.
+            uint64_t triangles = 0;
+            for (const DrawnSlot& d : drawn_slots(index, r)) {
+                auto frag = store.fragments(h.find(d.entry->key));
+                ASSERT_TRUE(frag) << "a drawn node is not resident";
+                triangles += frag->slots[d.slot].triangle_count();
+            }
+            EXPECT_EQ(frame.stats.primitives, triangles);
+            if (f % 3 == 0) {
+                test::CutTopology topo = test::cut_topology(file, r, decoded);
+                EXPECT_EQ(topo.border_edges, 0u) << "frame " << f << ": " << topo.fragments << " fragments, levels "
+                                                 << topo.min_level << ".." << topo.max_level;
+                checked++;
+                mixed += topo.max_level > topo.min_level;
+            }
+        }
+        // A frame of the test waits for the fetcher, so the run is deterministic.
+        for (int i = 0; i < 20000 && !fetcher.idle(); ++i) std::this_thread::sleep_for(std::chrono::milliseconds(1));
+    }
+    EXPECT_GT(checked, 20u);
+    EXPECT_GT(mixed, 10u) << "the cuts should mix levels";
+    EXPECT_GT(fetcher.stats().delivered, 50u);
+    EXPECT_EQ(fetcher.stats().checksum_failures, 0u);
+}
+
+TEST(CatpCut, TinyToleranceConvergesToTheFinestCutWhichIsCrackFree) {
+    CatpFile file(test::sphere_dataset());
+    const CatpIndex& index = file.index();
+    Hierarchy h = build_catp_hierarchy(index);
+    CatpNodeStore store(h, uint64_t(1) << 32);
+    for (const HierarchyNode& n : h.nodes())
+        if (n.has_data) store.add(n.index, std::make_shared<DiamondFragments>(file.decode(index.entries()[n.entry])));
+    CutEngine engine(h, store.counter());
+    Orbit orbit(index);
+    ViewParams v = orbit.view(0, 1, 1e-9);
+    v.use_frustum = false;
+    const CutFrame& f = engine.update(v, store);
+    RefinedSet all;
+    for (const ArchiveEntry& e : index.entries())
+        if (!(e.flags & kCatpLeafFlag)) all.refine(DiamondId{e.key});
+    RefinedSet got = as_refined_set(h, engine);
+    EXPECT_EQ(got.ids(), all.ids());
+    EXPECT_EQ(engine_slots(h, engine), reference_slots(index, all));
+    std::unordered_map<uint64_t, DiamondFragments> decoded;
+    test::CutTopology topo = test::cut_topology(file, got, decoded);
+    EXPECT_EQ(topo.border_edges, 0u);
+    EXPECT_EQ(f.stats.primitives, topo.triangles);
+    EXPECT_EQ(f.stats.holes, 0u);
+}
+
+TEST(CatpCut, LoweringTheToleranceOnlyRefinesAndLowersTheCertifiedError) {
+    CatpFile file(test::sphere_dataset());
+    const CatpIndex& index = file.index();
+    Hierarchy h = build_catp_hierarchy(index);
+    CatpNodeStore store(h, uint64_t(1) << 32);
+    for (const HierarchyNode& n : h.nodes())
+        if (n.has_data) store.add(n.index, std::make_shared<DiamondFragments>(file.decode(index.entries()[n.entry])));
+    CutEngine engine(h, store.counter());
+    Orbit orbit(index);
+    std::set<uint32_t> last;
+    double last_error = 1e300;
+    std::unordered_map<uint64_t, DiamondFragments> decoded;
+    for (double tol = 32; tol >= 0.5; tol /= 2) {
+        ViewParams v = orbit.view(1, 8, tol);
+        const CutFrame& f = engine.update(v, store);
+        std::vector<uint32_t> rv = engine.refined_nodes();
+        std::set<uint32_t> r(rv.begin(), rv.end());
+        EXPECT_TRUE(std::includes(r.begin(), r.end(), last.begin(), last.end()));
+        EXPECT_LE(f.stats.certified_error_px, last_error);
+        test::CutTopology topo = test::cut_topology(file, as_refined_set(h, engine), decoded);
+        EXPECT_EQ(topo.border_edges, 0u) << "tolerance " << tol;
+        last = r;
+        last_error = f.stats.certified_error_px;
+    }
+    EXPECT_GT(last.size(), 10u);
+}

@@ -1,0 +1,354 @@
+// Node sources and the fetcher: exact bytes from a local file and over HTTP (our server's routes
+// and raw Range requests, against a small in-test server), checksum failures and transport
+// errors retried with backoff, a server restart survived, stale requests cancelled.
+#include <gtest/gtest.h>
+
+#include <set>
+
+#include "base/checksum.h"
+#include "base/error.h"
+#include "catp/dataset.h"
+#include "client/fetcher.h"
+#include "client/hierarchy.h"
+#include "common_codec/archive.h"
+#include "test_core_support.h"
+
+using namespace catpaq;
+using Fault = catpaq::test::TestHttpServer::Fault;
+
+namespace {
+
+// Waits (polling, generous deadline: a safety net, not a timing assertion) until `done()`.
+template <class F>
+bool eventually(F done, int seconds = 60) {
+    auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(seconds);
+    while (!done()) {
+        if (std::chrono::steady_clock::now() > deadline) return false;
+        std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    return true;
+}
+
+FetcherSettings fast_retries() {
+    FetcherSettings s;
+    s.backoff_initial = std::chrono::milliseconds(2);
+    s.backoff_max = std::chrono::milliseconds(20);
+    s.max_attempts = 4;
+    s.failed_retry_delay = std::chrono::milliseconds(30);
+    return s;
+}
+
+struct Dataset {
+    std::string path = test::sphere_dataset();
+    std::vector<uint8_t> bytes = test::read_file(path);
+    CatpFile file{path};
+    Hierarchy h = build_catp_hierarchy(file.index());
+
+    std::vector<uint8_t> node_bytes(const ArchiveEntry& e) const {
+        return std::vector<uint8_t>(bytes.begin() + long(e.offset), bytes.begin() + long(e.offset + e.size));
+    }
+    std::vector<FetchRequest> all_requests() const {
+        std::vector<FetchRequest> out;
+        for (const HierarchyNode& n : h.nodes())
+            if (n.has_data) out.push_back(FetchRequest::of(n));
+        return out;
+    }
+};
+
+const Dataset& dataset() {
+    static Dataset d;
+    return d;
+}
+
+// Fetches every node through a source with the non-blocking interface, all submitted at once.
+void expect_exact_nodes(NodeSource& source, const Dataset& d) {
+    std::map<uint64_t, const ArchiveEntry*> by_id;
+    uint64_t id = 1;
+    for (const ArchiveEntry& e : d.file.index().entries()) {
+        SourceRequest r;
+        r.id = id;
+        r.kind = SourceRequest::Kind::Node;
+        r.key = e.key;
+        r.offset = e.offset;
+        r.size = e.size;
+        by_id[id++] = &e;
+        source.submit(r);
+    }
+    std::vector<SourceResult> results;
+    ASSERT_TRUE(eventually([&] {
+        source.poll(results, 10);
+        return results.size() == by_id.size();
+    }));
+    std::set<uint64_t> seen;
+    for (const SourceResult& r : results) {
+        ASSERT_TRUE(r.ok) << r.error;
+        ASSERT_TRUE(seen.insert(r.id).second);
+        const ArchiveEntry& e = *by_id.at(r.id);
+        EXPECT_EQ(r.bytes, d.node_bytes(e));
+        EXPECT_EQ(checksum64(r.bytes.data(), r.bytes.size()), e.checksum);
+    }
+}
+
+}  // namespace
+
+TEST(LocalFileSource, ReturnsTheExactBytesOfNodesRangesAndThePrefix) {
+    const Dataset& d = dataset();
+    LocalFileSource source(d.path);
+    EXPECT_EQ(source.file_size(), d.bytes.size());
+    expect_exact_nodes(source, d);
+    std::vector<uint8_t> range = source.fetch_range(100, 1000);
+    EXPECT_EQ(range, std::vector<uint8_t>(d.bytes.begin() + 100, d.bytes.begin() + 1100));
+    EXPECT_THROW(source.fetch_range(d.bytes.size() - 10, 11), Error);
+    CatpIndex index = load_catp_index(source);
+    EXPECT_EQ(index.entries().size(), d.file.index().entries().size());
+    EXPECT_THROW(LocalFileSource("/nonexistent/file.cpq"), Error);
+}
+
+TEST(HttpSource, ServerRoutesAndRawRangesReturnTheExactBytesOverFewConnections) {
+    const Dataset& d = dataset();
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    for (bool raw : {false, true}) {
+        SCOPED_TRACE(raw ? "raw .cpq with Range" : "server routes");
+        HttpSettings settings;
+        settings.parallel = 4;
+        HttpSource source(raw ? server.file_url() : server.base_url(), settings);
+        EXPECT_EQ(source.raw_mode(), raw);
+        size_t before = server.connections();
+        CatpIndex index = load_catp_index(source);
+        EXPECT_EQ(index.entries().size(), d.file.index().entries().size());
+        expect_exact_nodes(source, d);
+        // Persistent connections: hundreds of requests over at most `parallel` connections.
+        EXPECT_LE(server.connections() - before, settings.parallel);
+        EXPECT_LE(source.connections_opened(), settings.parallel);
+        std::vector<uint8_t> range = source.fetch_range(96, 5000);
+        EXPECT_EQ(range, std::vector<uint8_t>(d.bytes.begin() + 96, d.bytes.begin() + 5096));
+    }
+    // The prefix in raw mode: the first 64 KiB, then the rest of the index if longer.
+    std::vector<std::string> targets = server.targets();
+    EXPECT_TRUE(std::find(targets.begin(), targets.end(), "/api/datasets/sphere/prefix") != targets.end());
+}
+
+TEST(HttpSource, RawModeRefusesAWholeFileAnswerToAPartialRange) {
+    const Dataset& d = dataset();
+    ASSERT_GT(d.bytes.size(), kPrefixProbeBytes);
+    test::TestHttpServer server(d.path, "sphere");
+    server.ignore_ranges(true);
+    server.start();
+    HttpSource source(server.file_url());
+    const ArchiveEntry& e = d.file.index().entries().back();
+    try {
+        source.fetch_node(e.key, e.offset, e.size);
+        FAIL() << "a 200 answer to a partial range was accepted";
+    } catch (const Error& err) {
+        EXPECT_NE(std::string(err.what()).find("Range"), std::string::npos) << err.what();
+    }
+    EXPECT_THROW(load_catp_index(source, 1), Error);
+
+    // A file smaller than the prefix probe: the probe asked for the whole file, so a 200 with
+    // the whole body is the right answer.
+    std::string small = test::scratch_dir() + "/small.cpq";
+    {
+        ArchiveWriter writer(small, ArchiveKind::Catp);
+        CatpMeta meta;
+        std::vector<uint8_t> payload(300, 7);
+        ArchiveEntry entry;
+        entry.key = root_diamond().bits;
+        entry.level = 0;
+        writer.add_node(entry, payload.data(), payload.size());
+        writer.finish(encode_catp_meta(meta));
+    }
+    test::TestHttpServer small_server(small, "small");
+    small_server.ignore_ranges(true);
+    small_server.start();
+    HttpSource small_source(small_server.file_url());
+    std::vector<uint8_t> prefix = fetch_prefix(small_source, 1);
+    EXPECT_EQ(prefix, test::read_file(small));
+}
+
+TEST(HttpSource, NodeRouteErrorsAreReportedNotThrownAndUnknownNodesAreNotRetryable) {
+    const Dataset& d = dataset();
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    HttpSource source(server.base_url());
+    SourceRequest r;
+    r.id = 9;
+    r.key = 12345;  // not a node
+    r.size = 10;
+    source.submit(r);
+    std::vector<SourceResult> out;
+    ASSERT_TRUE(eventually([&] {
+        source.poll(out, 10);
+        return !out.empty();
+    }));
+    EXPECT_FALSE(out[0].ok);
+    EXPECT_FALSE(out[0].retryable);
+    EXPECT_EQ(out[0].http_status, 404);
+}
+
+TEST(Fetcher, DeliversEveryRequestedNodeVerifiedAndDecoded) {
+    const Dataset& d = dataset();
+    Fetcher fetcher(std::make_unique<LocalFileSource>(d.path));
+    std::vector<FetchRequest> wanted = d.all_requests();
+    fetcher.request(wanted);
+    std::vector<FetchedNode> got;
+    ASSERT_TRUE(eventually([&] {
+        fetcher.poll(got);
+        return got.size() >= wanted.size();
+    }));
+    EXPECT_EQ(got.size(), wanted.size());
+    std::set<uint64_t> keys;
+    for (const FetchedNode& n : got) {
+        ASSERT_TRUE(n.ok) << n.error;
+        keys.insert(n.key);
+        const ArchiveEntry& e = *d.file.index().find(DiamondId{n.key});
+        EXPECT_EQ(*n.compressed, d.node_bytes(e));
+        DiamondFragments ref = d.file.decode(e);
+        EXPECT_EQ(n.fragments->slot_mask, ref.slot_mask);
+        for (int s = 0; s < 8; ++s) EXPECT_EQ(n.fragments->slots[s].triangle_count(), ref.slots[s].triangle_count());
+        EXPECT_EQ(d.h.node(n.node).key, n.key);
+    }
+    EXPECT_EQ(keys.size(), wanted.size());
+    FetcherStats s = fetcher.stats();
+    EXPECT_EQ(s.delivered, wanted.size());
+    EXPECT_EQ(s.bytes_fetched, [&] {
+        uint64_t b = 0;
+        for (const FetchRequest& r : wanted) b += r.size;
+        return b;
+    }());
+    EXPECT_TRUE(eventually([&] { return fetcher.idle(); }));
+}
+
+TEST(Fetcher, ErrorsCorruptBytesAndDroppedConnectionsAreRetriedUntilEveryNodeArrives) {
+    const Dataset& d = dataset();
+    for (bool raw : {false, true}) {
+        SCOPED_TRACE(raw ? "raw" : "server");
+        test::TestHttpServer server(d.path, "sphere");
+        server.start();
+        server.inject(60, {Fault::Status500, Fault::Corrupt, Fault::Close, Fault::Truncate, Fault::None});
+        Fetcher fetcher(std::make_unique<HttpSource>(raw ? server.file_url() : server.base_url()), fast_retries());
+        std::vector<FetchRequest> wanted = d.all_requests();
+        std::set<uint64_t> pending;
+        for (const FetchRequest& r : wanted) pending.insert(r.key);
+        std::vector<FetchedNode> got;
+        size_t failures_reported = 0;
+        ASSERT_TRUE(eventually([&] {
+            fetcher.request(wanted);  // every frame, as the client does
+            got.clear();
+            fetcher.poll(got);
+            for (const FetchedNode& n : got) {
+                if (!n.ok) {
+                    failures_reported++;
+                    continue;
+                }
+                const ArchiveEntry& e = *d.file.index().find(DiamondId{n.key});
+                EXPECT_EQ(*n.compressed, d.node_bytes(e));
+                pending.erase(n.key);
+            }
+            // Delivered nodes leave the wanted list, as the engine's requests do.
+            wanted.erase(std::remove_if(wanted.begin(), wanted.end(), [&](const FetchRequest& r) { return !pending.count(r.key); }),
+                         wanted.end());
+            return pending.empty();
+        }));
+        FetcherStats s = fetcher.stats();
+        EXPECT_GT(s.checksum_failures, 0u);
+        EXPECT_GT(s.transport_errors, 0u);
+        EXPECT_GT(s.retries, 0u);
+        EXPECT_EQ(s.delivered, d.all_requests().size());
+    }
+}
+
+TEST(Fetcher, SurvivesTheServerGoingAwayAndComingBack) {
+    const Dataset& d = dataset();
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    Fetcher fetcher(std::make_unique<HttpSource>(server.base_url()), fast_retries());
+    std::vector<FetchRequest> all = d.all_requests();
+    std::vector<FetchRequest> first(all.begin(), all.begin() + long(all.size() / 2));
+    std::vector<FetchRequest> second(all.begin() + long(all.size() / 2), all.end());
+    std::vector<FetchedNode> got;
+    fetcher.request(first);
+    ASSERT_TRUE(eventually([&] {
+        fetcher.poll(got);
+        return got.size() == first.size();
+    }));
+    server.stop();
+    fetcher.request(second);
+    // Connection refused: failures, backoff, reported failed, retried later.
+    ASSERT_TRUE(eventually([&] { return fetcher.stats().transport_errors >= 5 && fetcher.stats().failed >= 1; }));
+    server.start();  // same port
+    std::set<uint64_t> pending;
+    for (const FetchRequest& r : second) pending.insert(r.key);
+    ASSERT_TRUE(eventually([&] {
+        fetcher.request(second);
+        got.clear();
+        fetcher.poll(got);
+        for (const FetchedNode& n : got)
+            if (n.ok) pending.erase(n.key);
+        return pending.empty();
+    }));
+    EXPECT_EQ(fetcher.stats().checksum_failures, 0u);
+}
+
+TEST(Fetcher, StaleRequestsAreCancelledBeforeTheyAreSent) {
+    const Dataset& d = dataset();
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    server.hold(true);
+    HttpSettings http;
+    http.parallel = 2;
+    Fetcher fetcher(std::make_unique<HttpSource>(server.base_url(), http), fast_retries());
+    std::vector<FetchRequest> all = d.all_requests();
+    ASSERT_GT(all.size(), 40u);
+    fetcher.request(all);
+    ASSERT_TRUE(eventually([&] { return server.waiting() == 2; }));  // two transfers at the gate
+    std::vector<FetchRequest> keep(all.end() - 5, all.end());
+    fetcher.request(keep);  // the camera turned: only these are still wanted
+    ASSERT_TRUE(eventually([&] { return fetcher.stats().cancelled >= all.size() - 5 - 2; }));
+    server.hold(false);
+    std::vector<FetchedNode> got;
+    ASSERT_TRUE(eventually([&] {
+        fetcher.poll(got);
+        return fetcher.idle();
+    }));
+    std::set<uint64_t> kept;
+    for (const FetchRequest& r : keep) kept.insert(r.key);
+    std::set<uint64_t> delivered;
+    for (const FetchedNode& n : got) delivered.insert(n.key);
+    for (uint64_t k : kept) EXPECT_TRUE(delivered.count(k));
+    // At most the two transfers already running when the list changed were not kept.
+    EXPECT_LE(delivered.size(), kept.size() + 2);
+    size_t node_requests = 0;
+    for (const std::string& t : server.targets()) node_requests += t.find("/nodes/") != std::string::npos;
+    EXPECT_LE(node_requests, kept.size() + 2);
+}
+
+TEST(Fetcher, SuppliedBytesAreVerifiedAndDecodedWithoutAFetch) {
+    const Dataset& d = dataset();
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    Fetcher fetcher(std::make_unique<HttpSource>(server.base_url()), fast_retries());
+    FetchRequest r = d.all_requests()[3];
+    const ArchiveEntry& e = *d.file.index().find(DiamondId{r.key});
+    fetcher.supply(r, std::make_shared<const std::vector<uint8_t>>(d.node_bytes(e)));
+    std::vector<FetchedNode> got;
+    ASSERT_TRUE(eventually([&] {
+        fetcher.poll(got);
+        return !got.empty();
+    }));
+    EXPECT_TRUE(got[0].ok);
+    EXPECT_EQ(server.requests(), 0u);
+    EXPECT_EQ(fetcher.stats().supplied, 1u);
+    // Corrupt supplied bytes of a wanted node: fetched from the server instead.
+    std::vector<uint8_t> bad = d.node_bytes(e);
+    bad[bad.size() / 2] ^= 1;
+    fetcher.request({r});
+    fetcher.supply(r, std::make_shared<const std::vector<uint8_t>>(bad));
+    got.clear();
+    ASSERT_TRUE(eventually([&] {
+        fetcher.poll(got);
+        return !got.empty();
+    }));
+    EXPECT_TRUE(got[0].ok);
+    EXPECT_EQ(*got[0].compressed, d.node_bytes(e));
+}
