@@ -95,7 +95,8 @@ Surface closed_surface(size_t triangles) {
     catpaq::Mesh m = catpaq::make_scan_like(triangles, 7);
     Surface s;
     s.positions.resize(m.positions.size());
-    for (size_t i = 0; i < m.positions.size(); ++i) s.positions[i] = {m.positions[i][0], m.positions[i][1], m.positions[i][2]};
+    for (size_t i = 0; i < m.positions.size(); ++i)
+        s.positions[i] = {m.positions[i][0], m.positions[i][1], m.positions[i][2]};
     s.indices = std::move(m.indices);
     return s;
 #else
@@ -233,9 +234,10 @@ int main(int argc, char** argv) {
     }
     std::printf("simplify_mesh (catp) vs meshopt_simplify 0.18 (LockBorder), to 50%% of the triangles, single thread,\n"
                 "best of 5; throughput in million input triangles/s by wall clock and by thread CPU time\n\n");
-    std::printf("%9s | %-25s | %-25s | %-11s | %-19s | %-19s\n", "", "catp Mt/s", "meshopt Mt/s", "catp/mopt", "reported error", "max dist in->out");
-    std::printf("%9s | %8s %8s %7s | %8s %8s %7s | %5s %5s | %9s %9s | %9s %9s\n", "triangles", "wall", "cpu", "out", "wall",
-                "cpu", "out", "wall", "cpu", "catp", "meshopt", "catp", "meshopt");
+    std::printf("%9s | %-25s | %-25s | %-11s | %-19s | %-19s\n", "", "catp Mt/s", "meshopt Mt/s", "catp/mopt",
+                "reported error", "max dist in->out");
+    std::printf("%9s | %8s %8s %7s | %8s %8s %7s | %5s %5s | %9s %9s | %9s %9s\n", "triangles", "wall", "cpu", "out",
+                "wall", "cpu", "out", "wall", "cpu", "catp", "meshopt", "catp", "meshopt");
     bool all_fast = true;
     std::vector<double> means;
     for (size_t size : sizes) {
@@ -259,12 +261,13 @@ int main(int argc, char** argv) {
         size_t mopt_count = 0;
         float mopt_rel_error = 0;
         const Timing t_mopt = best_of(5, [&] {
-            mopt_count = meshopt_simplify(mopt.data(), s.indices.data(), s.indices.size(), fpos.data(), s.positions.size(),
-                                          sizeof(float) * 3, target * 3, 1e30f, meshopt_SimplifyLockBorder,
-                                          &mopt_rel_error);
+            mopt_count = meshopt_simplify(mopt.data(), s.indices.data(), s.indices.size(), fpos.data(),
+                                          s.positions.size(), sizeof(float) * 3, target * 3, 1e30f,
+                                          meshopt_SimplifyLockBorder, &mopt_rel_error);
         });
         mopt.resize(mopt_count);
-        const double mopt_error = mopt_rel_error * meshopt_simplifyScale(fpos.data(), s.positions.size(), sizeof(float) * 3);
+        const double mopt_error =
+            mopt_rel_error * meshopt_simplifyScale(fpos.data(), s.positions.size(), sizeof(float) * 3);
 
         const double edge = mean_edge(s);
         double our_max = NAN, our_mean = NAN, mopt_max = NAN, mopt_mean = NAN;
@@ -281,10 +284,11 @@ int main(int argc, char** argv) {
                     mopt_error / edge, our_max / edge, mopt_max / edge);
     }
     std::printf("\nerrors and distances in mean input edge lengths; reported errors are each library's own metric;\n"
-                "max dist = largest distance from an input vertex to the output surface (brute force, up to 20k triangles)\n");
+                "max dist = largest distance from an input vertex to the output surface (brute force, up to 20k\n"
+                "triangles)\n");
     for (size_t i = 0; i < means.size(); i += 3)
-        std::printf("mean distance input vertex -> output surface at %.0f triangles: catp %.4f, meshopt %.4f\n", means[i],
-                    means[i + 1], means[i + 2]);
+        std::printf("mean distance input vertex -> output surface at %.0f triangles: catp %.4f, meshopt %.4f\n",
+                    means[i], means[i + 1], means[i + 2]);
     std::printf("catp >= 2M input triangles/s (thread CPU time) on every size: %s\n", all_fast ? "yes" : "NO");
     return 0;
 }

@@ -72,6 +72,7 @@ public:
         uint64_t p = h_.node(n).primitives;
         return {p * 16, p * 20 + 64};
     }
+    bool changes_since(uint64_t&, std::vector<uint32_t>&) const override { return true; }  // nothing ever changes
 
 private:
     const Hierarchy& h_;
@@ -86,6 +87,7 @@ public:
         uint64_t p = h_.node(n).primitives;
         return {p * 16, p * 20 + 64};
     }
+    bool changes_since(uint64_t& cursor, std::vector<uint32_t>& out) const override { return log_.since(cursor, out); }
     void frame(const CutFrame& f) {
         now_++;
         for (const CutRequest& c : f.cancelled) due_.erase(c.node);
@@ -94,6 +96,7 @@ public:
         for (auto it = due_.begin(); it != due_.end();) {
             if (it->second <= now_) {
                 resident_[it->first] = 1;
+                log_.add(it->first);
                 it = due_.erase(it);
             } else {
                 ++it;
@@ -107,6 +110,7 @@ private:
     std::vector<uint8_t> resident_;
     std::map<uint32_t, int64_t> due_;
     int64_t now_ = 0;
+    ChangeLog log_;
 };
 
 struct Summary {

@@ -3,7 +3,7 @@
 // Data layout: the live triangles are a flat index buffer. Every pass rebuilds a compact
 // vertex -> triangle adjacency (CSR) in which each incident triangle (x, a, b) of vertex x is
 // stored, rotated to start at x, as the pair (a, b): the pair list of x is x's fan. From it come
-// the candidates (the cheapest allowed target of each removable vertex), which are bucket-sorted by
+// the candidates (the two cheapest allowed targets of each removable vertex), bucket-sorted by
 // cost; then the cheapest candidates are collapsed, each vertex taking part in at most one
 // collapse per pass. Collapses inside a pass are recorded in a remap table (removed vertex ->
 // kept vertex) that the checks of later collapses in the same pass resolve through, so the
@@ -15,6 +15,10 @@
 // original fans (their triangles are the pass's pairs with remapped vertices; triangles that a
 // collapse removed are exactly those whose remapped vertices repeat), and their quadrics are
 // unchanged, so the candidate costs computed at the start of the pass are still exact.
+//
+// No allocation happens after the start: one arena holds every array (see Arena), and the only
+// std::vectors are the result and scratch for rare cases (fans above kLinearFan triangles,
+// duplicate triangles, vertex buffers much larger than the mesh).
 #include "catp/simplify.h"
 
 #include <algorithm>
@@ -565,29 +569,17 @@ void Simplifier::collect_candidates() {
         if (b0 == b1 || kind_[x] == kLocked) continue;
         const Quadric q = quadric_[x];
         const double w = vertex_[x].w;
-        // Costs as fractions num / den (den > 0), compared by cross-multiplication: divisions on
-        // the path to every comparison cost more than the rest of the evaluation. 1 / 0 = none.
-        double n1 = 1, d1 = 0, n2 = 1, d2 = 0;
-        uint32_t y1 = UINT32_MAX, y2 = UINT32_MAX;
+        // The two cheapest, selected without branches (which neighbour wins is a coin toss, and
+        // mispredicted branches would cost more than the evaluation itself): each target as the
+        // key (float cost bits, vertex), which orders by cost, then by vertex, under integer min.
+        uint64_t k1 = UINT64_MAX, k2 = UINT64_MAX;
         auto consider = [&](uint32_t y) {
             const VertexData& t = vertex_[y];
-            double num = std::max(q.eval(t.p) + t.e, 0.0), den = w + t.w;
-            if (!(den > 0)) {
-                num = 0;
-                den = 1;
-            }
-            if (num * d1 < n1 * den) {
-                n2 = n1;
-                d2 = d1;
-                y2 = y1;
-                n1 = num;
-                d1 = den;
-                y1 = y;
-            } else if (num * d2 < n2 * den) {
-                n2 = num;
-                d2 = den;
-                y2 = y;
-            }
+            const double num = q.eval(t.p) + t.e, den = w + t.w;
+            const float c = num > 0 && den > 0 ? float(num / den) : 0.0f;
+            const uint64_t key = uint64_t(std::bit_cast<uint32_t>(c)) << 32 | y;
+            k2 = std::min(k2, std::max(k1, key));
+            k1 = std::min(k1, key);
         };
         // Targets: every neighbour (the first elements of the fan's pairs) of an interior vertex,
         // the two border neighbours of a border vertex. One loop, so the evaluation inlines.
@@ -600,8 +592,8 @@ void Simplifier::collect_candidates() {
             count = border[0].a == border[1].a ? 1 : 2;
         }
         for (uint32_t i = 0; i < count; ++i) consider(targets[i].a);
-        if (y1 != UINT32_MAX) candidates_[n++] = {x, y1, float(n1 / d1)};
-        if (y2 != UINT32_MAX) candidates_[n++] = {x, y2, float(n2 / d2)};
+        for (uint64_t k : {k1, k2})
+            if (k != UINT64_MAX) candidates_[n++] = {x, uint32_t(k), std::bit_cast<float>(uint32_t(k >> 32))};
     }
     candidate_count_ = n;
 }

@@ -39,6 +39,7 @@ CatpNodeStore::CatpNodeStore(const Hierarchy& hierarchy, uint64_t fragment_budge
     fragments_.on_evict([this](uint64_t key, const std::shared_ptr<const DiamondFragments>&, uint64_t) {
         resident_[key] = 0;
         bytes_[key] = {};
+        log_.add(uint32_t(key));
     });
 }
 
@@ -63,6 +64,7 @@ bool CatpNodeStore::add(uint32_t node, std::shared_ptr<const DiamondFragments> f
     if (!fragments_.insert(node, std::move(fragments), b.cpu)) return false;
     resident_[node] = 1;
     bytes_[node] = b;
+    log_.add(node);
     return true;
 }
 

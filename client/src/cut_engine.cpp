@@ -101,7 +101,7 @@ bool ViewParams::may_see(const Aabb& box, double grow) const {
 // ---------------------------------------------------------------------------------------------
 // Draw counts and residency
 
-PartDrawCounter::PartDrawCounter(const Hierarchy& hierarchy) : hierarchy_(hierarchy) {
+PartDrawCounter::PartDrawCounter(const Hierarchy& hierarchy) {
     offsets_.resize(hierarchy.size() + 1);
     uint32_t total = 0;
     for (uint32_t n = 0; n < hierarchy.size(); ++n) {
@@ -110,19 +110,31 @@ PartDrawCounter::PartDrawCounter(const Hierarchy& hierarchy) : hierarchy_(hierar
     }
     offsets_[hierarchy.size()] = total;
     counts_.resize(total);
+    parents_.resize(total);
     for (uint32_t n = 0; n < hierarchy.size(); ++n) {
         const auto& parts = hierarchy.node(n).parts;
-        for (size_t p = 0; p < parts.size(); ++p) counts_[offsets_[n] + p] = parts[p].primitives;
+        for (size_t p = 0; p < parts.size(); ++p) {
+            counts_[offsets_[n] + p] = parts[p].primitives;
+            parents_[offsets_[n] + p] = parts[p].parent;
+        }
     }
 }
 
 uint64_t PartDrawCounter::count(uint32_t node, const RefinedView& refined) const {
-    const auto& parts = hierarchy_.node(node).parts;
-    const uint32_t* counts = counts_.data() + offsets_[node];
     uint64_t sum = 0;
-    for (size_t p = 0; p < parts.size(); ++p)
-        if (refined(parts[p].parent)) sum += counts[p];
+    for (uint32_t p = offsets_[node], e = offsets_[node + 1]; p < e; ++p)
+        if (refined(parents_[p])) sum += counts_[p];
     return sum;
+}
+
+bool ChangeLog::since(uint64_t& cursor, std::vector<uint32_t>& out) const {
+    if (cursor > seq_ || seq_ - cursor > ring_.size()) {
+        cursor = seq_;
+        return false;
+    }
+    for (uint64_t i = cursor; i < seq_; ++i) out.push_back(ring_[size_t(i % ring_.size())]);
+    cursor = seq_;
+    return true;
 }
 
 void PartDrawCounter::set_counts(uint32_t node, const uint32_t* counts, size_t n) {
@@ -149,12 +161,14 @@ void ResidencyTable::set_resident(uint32_t node, NodeBytes bytes) {
     if (!resident_[node]) resident_count_++;
     resident_[node] = 1;
     bytes_[node] = bytes;
+    log_.add(node);
 }
 
 void ResidencyTable::set_evicted(uint32_t node) {
     if (resident_[node]) resident_count_--;
     resident_[node] = 0;
     bytes_[node] = {};
+    log_.add(node);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -178,6 +192,27 @@ void CutEngine::DenseSet::erase(uint32_t n) {
 
 CutEngine::CutEngine(const Hierarchy& hierarchy, const DrawCounter& counter, CutBudgets budgets)
     : h_(hierarchy), counter_(counter), budgets_(budgets) {
+    size_t n = h_.size();
+    par_off_.resize(n + 1);
+    ch_off_.resize(n + 1);
+    box_.resize(n);
+    error_.resize(n);
+    flags_.resize(n);
+    level_.resize(n);
+    for (uint32_t i = 0; i < n; ++i) {
+        const HierarchyNode& node = h_.node(i);
+        par_off_[i] = uint32_t(par_.size());
+        par_.insert(par_.end(), node.parents.begin(), node.parents.end());
+        ch_off_[i] = uint32_t(ch_.size());
+        ch_.insert(ch_.end(), node.children.begin(), node.children.end());
+        box_[i] = {node.bounds.min[0], node.bounds.min[1], node.bounds.min[2],
+                   node.bounds.max[0], node.bounds.max[1], node.bounds.max[2]};
+        error_[i] = node.error;
+        flags_[i] = uint8_t((node.has_data ? 1 : 0) | (node.leaf ? 2 : 0));
+        level_[i] = node.level;
+    }
+    par_off_[n] = uint32_t(par_.size());
+    ch_off_[n] = uint32_t(ch_.size());
     reset();
 }
 
@@ -209,28 +244,58 @@ void CutEngine::reset() {
     // The roots are drawn; their counts are filled by the first update's recount.
     for (uint32_t r : h_.roots()) active_.insert(r);
     frame_ = {};
+    full_refresh_ = true;
 }
 
 bool CutEngine::is_active(uint32_t n) const {
-    return !refined_[n] && (h_.node(n).parents.empty() || refined_parents_[n] > 0);
+    return !refined_[n] && (par_off_[n] == par_off_[n + 1] || refined_parents_[n] > 0);
 }
 
-bool CutEngine::is_resident(uint32_t n) const { return !h_.node(n).has_data || residency_->resident(n); }
+bool CutEngine::is_resident(uint32_t n) const { return !has_data(n) || residency_->resident(n); }
 
 bool CutEngine::drawn(uint32_t node) const { return active_.contains(node); }
+
+namespace {
+
+// ViewParams::may_see on a compact box (min xyz, max xyz); the box is never empty here.
+inline bool box_visible(const ViewParams& v, const std::array<double, 6>& b, double grow) {
+    if (!v.use_frustum) return true;
+    for (const auto& p : v.planes) {
+        double x = p[0] >= 0 ? b[3] + grow : b[0] - grow;
+        double y = p[1] >= 0 ? b[4] + grow : b[1] - grow;
+        double z = p[2] >= 0 ? b[5] + grow : b[2] - grow;
+        if (p[0] * x + p[1] * y + p[2] * z + p[3] < 0) return false;
+    }
+    return true;
+}
+
+inline double box_distance(const std::array<double, 6>& b, const std::array<double, 3>& e) {
+    double d2 = 0;
+    for (int i = 0; i < 3; ++i) {
+        double d = e[i] < b[i] ? b[i] - e[i] : (e[i] > b[i + 3] ? e[i] - b[i + 3] : 0.0);
+        d2 += d * d;
+    }
+    return std::sqrt(d2);
+}
+
+}  // namespace
 
 double CutEngine::proj(uint32_t n) {
     if (proj_frame_[n] == frame_number_) return proj_[n];
     proj_frame_[n] = frame_number_;
-    const HierarchyNode& node = h_.node(n);
-    double distance = node.bounds.distance_to(view_.eye);
-    double unculled = node.error * k_ / std::max(distance, view_.near);
-    bool visible = view_.may_see(node.bounds);
+    const std::array<double, 6>& box = box_[n];
+    if (!(box[0] <= box[3] && box[1] <= box[4] && box[2] <= box[5])) {  // empty: nothing to see
+        visible_[n] = 0;
+        proj_[n] = keep_proj_[n] = 0;
+        return 0;
+    }
+    double distance = box_distance(box, view_.eye);
+    double unculled = error_[n] * k_ / std::max(distance, view_.near);
+    bool visible = box_visible(view_, box, 0);
     visible_[n] = visible;
     proj_[n] = visible ? unculled : 0.0;
-    keep_proj_[n] = visible || (view_.frustum_margin > 0 && view_.may_see(node.bounds, view_.frustum_margin * distance))
-                        ? unculled
-                        : 0.0;
+    keep_proj_[n] =
+        visible || (view_.frustum_margin > 0 && box_visible(view_, box, view_.frustum_margin * distance)) ? unculled : 0.0;
     return proj_[n];
 }
 
@@ -255,9 +320,8 @@ double CutEngine::projected_error(uint32_t node) const {
 void CutEngine::recount(uint32_t n) {
     bool act = is_active(n), fr = is_frontier(n);
     uint64_t p = 0, g = 0, c = 0;
-    const HierarchyNode& node = h_.node(n);
     if (act) p = counter_.count(n, RefinedView{refined_.data()});
-    if (node.has_data && (act || fr)) {
+    if (has_data(n) && (act || fr)) {
         NodeBytes b = residency_->bytes(n);
         if (act) g = b.gpu;
         c = b.cpu;
@@ -278,12 +342,11 @@ void CutEngine::set_refined(uint32_t n, bool on, std::vector<Op>* log) {
     assert(bool(refined_[n]) != on);
     refined_[n] = on;
     refined_count_ += on ? 1 : size_t(-1);
-    const HierarchyNode& node = h_.node(n);
-    for (uint32_t c : node.children) refined_parents_[c] += on ? 1u : uint32_t(-1);
-    for (uint32_t p : node.parents) refined_children_[p] += on ? 1u : uint32_t(-1);
+    for (uint32_t c : children(n)) refined_parents_[c] += on ? 1u : uint32_t(-1);
+    for (uint32_t p : parents(n)) refined_children_[p] += on ? 1u : uint32_t(-1);
     recount(n);
-    for (uint32_t c : node.children) recount(c);
-    for (uint32_t p : node.parents) recount(p);
+    for (uint32_t c : children(n)) recount(c);
+    for (uint32_t p : parents(n)) recount(p);
     if (log) log->push_back({n, on});
 }
 
@@ -315,7 +378,9 @@ void CutEngine::closure(uint32_t n, std::vector<uint32_t>& out) {
         stamp_ = 1;
     }
     // Parents first (iterative depth-first), so applying `out` in order keeps R closed.
-    std::vector<uint32_t> stack{n};
+    std::vector<uint32_t>& stack = stack_;
+    stack.clear();
+    stack.push_back(n);
     while (!stack.empty()) {
         uint32_t d = stack.back();
         if (mark_[d] == stamp_) {
@@ -323,7 +388,7 @@ void CutEngine::closure(uint32_t n, std::vector<uint32_t>& out) {
             continue;
         }
         bool ready = true;
-        for (uint32_t p : h_.node(d).parents)
+        for (uint32_t p : parents(d))
             if (!refined_[p] && mark_[p] != stamp_) {
                 stack.push_back(p);
                 ready = false;
@@ -358,7 +423,7 @@ void CutEngine::coarsen_phase() {
         uint32_t n = work[i];
         if (!is_frontier(n)) continue;
         // A virtual node is in R only for its refined children's sake: once it has none, it goes.
-        double e = h_.node(n).has_data ? keep_proj(n) : 0.0;
+        double e = has_data(n) ? keep_proj(n) : 0.0;
         if (e >= threshold) continue;
         if (!is_resident(n)) {
             // It must be drawn again: fetch it first (only for what the viewer can see).
@@ -373,7 +438,7 @@ void CutEngine::coarsen_phase() {
             continue;
         }
         frame_.stats.coarsenings++;
-        for (uint32_t p : h_.node(n).parents)
+        for (uint32_t p : parents(n))
             if (is_frontier(p)) work.push_back(p);
     }
 }
@@ -403,7 +468,7 @@ void CutEngine::enforce_budgets() {
             continue;
         }
         frame_.stats.coarsenings++;
-        for (uint32_t p : h_.node(n).parents)
+        for (uint32_t p : parents(n))
             if (is_frontier(p)) {
                 heap.push_back({keep_proj(p), p});
                 std::push_heap(heap.begin(), heap.end(), cmp);
@@ -443,7 +508,7 @@ bool CutEngine::make_room(double limit, std::vector<Op>& log, const Totals& befo
             revert(log, mark);
             continue;
         }
-        for (uint32_t p : h_.node(f).parents)
+        for (uint32_t p : parents(f))
             if (is_frontier(p)) {
                 room_heap_.push_back({keep_proj(p), p});
                 std::push_heap(room_heap_.begin(), room_heap_.end(), cmp);
@@ -478,10 +543,9 @@ void CutEngine::refine_phase() {
     // Virtual nodes draw nothing: refining one for its own sake gains nothing, so they are
     // refined only as ancestors a refinement needs (closure).
     for (uint32_t n : active_.items) {
-        const HierarchyNode& node = h_.node(n);
-        if (node.leaf || !node.has_data) continue;
+        if (leaf(n) || !has_data(n)) continue;
         double e = proj(n);
-        if (e > tol) heap.push_back({e, node.level, n});
+        if (e > tol) heap.push_back({e, level_[n], n});
     }
     std::make_heap(heap.begin(), heap.end(), less);
     std::vector<uint32_t> closure_set, missing;
@@ -495,8 +559,8 @@ void CutEngine::refine_phase() {
         closure(n, closure_set);
         missing.clear();
         for (uint32_t s : closure_set)
-            for (uint32_t c : h_.node(s).children)
-                if (mark_[c] != stamp_ && h_.node(c).has_data && !residency_->resident(c)) missing.push_back(c);
+            for (uint32_t c : children(s))
+                if (mark_[c] != stamp_ && has_data(c) && !residency_->resident(c)) missing.push_back(c);
         bool capped = uint64_t(frame_.stats.refinements) + closure_set.size() > budgets_.max_refinements;
         Totals before = totals_;
         log.clear();
@@ -518,12 +582,11 @@ void CutEngine::refine_phase() {
             else frame_.stats.coarsenings++;
         }
         for (uint32_t s : closure_set)
-            for (uint32_t c : h_.node(s).children) {
-                const HierarchyNode& child = h_.node(c);
-                if (child.leaf || !child.has_data || !is_active(c)) continue;
+            for (uint32_t c : children(s)) {
+                if (leaf(c) || !has_data(c) || !is_active(c)) continue;
                 double e = proj(c);
                 if (e > tol) {
-                    heap.push_back({e, child.level, c});
+                    heap.push_back({e, level_[c], c});
                     std::push_heap(heap.begin(), heap.end(), less);
                 }
             }
@@ -592,9 +655,20 @@ const CutFrame& CutEngine::update(const ViewParams& view, const Residency& resid
     wanted_.clear();
     room_heap_built_ = false;
 
-    // 1. Residency and exact counts may have changed: recount the cut (memberships do not change).
-    for (size_t i = 0; i < active_.items.size(); ++i) recount(active_.items[i]);
-    for (size_t i = 0; i < frontier_.items.size(); ++i) recount(frontier_.items[i]);
+    // 1. Residency and exact counts may have changed: recount what changed in the cut (all of
+    //    it when the residency cannot tell). Memberships do not change here.
+    changed_.clear();
+    if (&residency != last_residency_) full_refresh_ = true;
+    last_residency_ = &residency;
+    if (!residency.changes_since(residency_cursor_, changed_)) full_refresh_ = true;
+    if (full_refresh_) {
+        for (size_t i = 0; i < active_.items.size(); ++i) recount(active_.items[i]);
+        for (size_t i = 0; i < frontier_.items.size(); ++i) recount(frontier_.items[i]);
+        full_refresh_ = false;
+    } else {
+        for (uint32_t n : changed_)
+            if (n < refined_.size() && (active_.contains(n) || frontier_.contains(n))) recount(n);
+    }
 
     coarsen_phase();     // 2.
     enforce_budgets();   // 3.
@@ -610,7 +684,7 @@ const CutFrame& CutEngine::update(const ViewParams& view, const Residency& resid
     st.refined_nodes = refined_count_;
     double certified = 0;
     for (uint32_t n : active_.items)
-        if (h_.node(n).has_data) certified = std::max(certified, proj(n));
+        if (has_data(n)) certified = std::max(certified, proj(n));
     st.certified_error_px = certified;
     st.over_budget = exceeds();
     frame_.drawn = active_.items;
@@ -629,9 +703,9 @@ std::vector<uint32_t> CutEngine::refined_nodes() const {
 std::vector<uint32_t> CutEngine::pinned() const {
     std::vector<uint32_t> out;
     for (uint32_t n : active_.items)
-        if (h_.node(n).has_data) out.push_back(n);
+        if (has_data(n)) out.push_back(n);
     for (uint32_t n : frontier_.items)
-        if (h_.node(n).has_data) out.push_back(n);
+        if (has_data(n)) out.push_back(n);
     return out;
 }
 

@@ -333,30 +333,35 @@ CATPAQ_RANS_INLINE bool project_oct(double x, double y, double z, int& cu, int& 
 
 // Cumulative barycentric coordinates (a, b, c) of a vertex (fourth entry unused, for alignment).
 using Coord = std::array<int32_t, 4>;
-// Sums of integer cross products (|sum| < 2^45 for any fragment: exact in doubles too).
-using NormalSum = std::array<int64_t, 4>;
+// Sums of integer cross products (|sum| < 2^45 for any fragment: exact in doubles too). Each
+// product component is below 2^19 in magnitude (coordinates are <= 463), so while every vertex has
+// fewer than 4096 triangles (certainly when T < 4096) 32-bit sums cannot overflow; the decoder
+// then uses them (same values, half the memory traffic).
+template <class S>
+using NormalSumT = std::array<S, 4>;
+using NormalSum = NormalSumT<int64_t>;
+constexpr uint32_t kNormalSum32MaxTriangles = 4096;
 
 // Area-weighted normals in (a, b, c) space: sum of the cross products of each vertex's triangles.
-// Each product component is an integer below 2^19 in magnitude (coordinates are <= 463).
-void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSum* acc) {
+template <class S>
+void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSumT<S>* acc) {
     for (size_t t = 0; t < triangles; ++t) {
-        uint32_t i = indices[3 * t], j = indices[3 * t + 1], k = indices[3 * t + 2];
+        const uint32_t i = indices[3 * t], j = indices[3 * t + 1], k = indices[3 * t + 2];
         const Coord si = s[i], sj = s[j], sk = s[k];
-        int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
-        int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
-        int64_t nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
-        for (uint32_t v : {i, j, k}) {
-            acc[v][0] += nx;
-            acc[v][1] += ny;
-            acc[v][2] += nz;
-        }
+        const int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
+        const int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
+        const S n[4] = {S(e1y * e2z - e1z * e2y), S(e1z * e2x - e1x * e2z), S(e1x * e2y - e1y * e2x), 0};
+        for (int c = 0; c < 4; ++c) acc[i][size_t(c)] += n[c];
+        for (int c = 0; c < 4; ++c) acc[j][size_t(c)] += n[c];
+        for (int c = 0; c < 4; ++c) acc[k][size_t(c)] += n[c];
     }
 }
 
 // Predicted normal of a vertex under the geometric predictor; `prev_u/v` is the fallback. M n is
 // exact in doubles (|m| <= 128, |n| < 2^45 for the largest fragments).
-CATPAQ_RANS_INLINE void geometric_prediction(const NormalSum& n, const std::array<int8_t, 9>& m, int prev_u, int prev_v, int& pu,
-                                 int& pv) {
+template <class S>
+CATPAQ_RANS_INLINE void geometric_prediction(const NormalSumT<S>& n, const std::array<int8_t, 9>& m, int prev_u,
+                                             int prev_v, int& pu, int& pv) {
     const double n0 = double(n[0]), n1 = double(n[1]), n2 = double(n[2]);
     double x = double(m[0]) * n0 + double(m[1]) * n1 + double(m[2]) * n2;
     double y = double(m[3]) * n0 + double(m[4]) * n1 + double(m[5]) * n2;
@@ -898,6 +903,7 @@ struct Workspace {
     std::vector<Coord> coords;
     std::vector<int8_t> nu, nv;
     std::vector<NormalSum> acc;
+    std::vector<NormalSumT<int32_t>> acc32;
     std::vector<std::array<uint8_t, 4>> rgb;
     std::array<rans::DecodeTable, kStreamCount> tables;
 };
@@ -1019,27 +1025,30 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
         if (s <= kRight) [[likely]] {
             // NEW, LEFT and RIGHT without branches (they are the bulk and unpredictable); the
             // same edits as Front::add_vertex / left / right.
+            // Selections use masks: the compiler would otherwise branch on them.
             FrontEdge* e = front.e;
             const uint32_t is_new = s == kNew, is_left = s == kLeft, is_right = s == kRight;
+            const uint32_t m_new = 0u - is_new, m_left = 0u - is_left, m_right = 0u - is_right;
             const uint32_t p = ei.prev, n = ei.next;
             const uint32_t vl = e[n].v1, vr = e[p].v0, pp = e[p].prev, nn = e[n].next;
-            v = is_new ? seen : (is_left ? vl : vr);
-            pred[is_new ? seen : V] = Pred{ei.v0, ei.v1, ei.opp};  // slot V: scratch
+            v = (seen & m_new) | (vl & m_left) | (vr & m_right);
+            pred[(seen & m_new) | (V & ~m_new)] = Pred{ei.v0, ei.v1, ei.opp};  // slot V: scratch
             seen += is_new;
             if ((seen > V) | (v == ei.v0) | (v == ei.v1)) [[unlikely]]
                 return FragmentStatus::Corrupt;
-            const uint32_t left_anchor = is_right ? pp : p, right_anchor = is_left ? nn : n;
+            const uint32_t left_anchor = (pp & m_right) | (p & ~m_right);
+            const uint32_t right_anchor = (nn & m_left) | (n & ~m_left);
             const uint32_t f = front.size, last = f + is_new;
             // First new edge: (v0 -> v), or (v -> v1) for RIGHT; second (NEW only): (v -> v1).
-            e[f].v0 = is_right ? v : ei.v0;
-            e[f].v1 = is_right ? ei.v1 : v;
-            e[f].opp = is_right ? ei.v0 : ei.v1;
+            e[f].v0 = (v & m_right) | (ei.v0 & ~m_right);
+            e[f].v1 = (ei.v1 & m_right) | (v & ~m_right);
+            e[f].opp = (ei.v0 & m_right) | (ei.v1 & ~m_right);
             e[f].prev = left_anchor;
-            e[f].next = is_new ? f + 1 : right_anchor;
+            e[f].next = ((f + 1) & m_new) | (right_anchor & ~m_new);
             e[f + 1] = FrontEdge{v, ei.v1, ei.v0, f, right_anchor};  // room reserved by reserve3
             e[left_anchor].next = f;
             e[right_anchor].prev = last;
-            e[is_left ? n : (is_right ? p : i)].prev = kDead;
+            e[(n & m_left) | (p & m_right) | (i & m_new)].prev = kDead;
             e[i].prev = kDead;
             front.size = last + 1;
             tri[0] = ei.v1, tri[1] = ei.v0, tri[2] = v;
@@ -1137,22 +1146,29 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
     rans::Decoder dec = io;
     const rans::TableView tu(ws.tables[kStreamNormU]), tv(ws.tables[kStreamNormV]);
     if (normal_mode == kNormalGeometric) {
-        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
-        accumulate_normals(indices, T, ws.coords.data(), ws.acc.data());
-        const NormalSum* acc = ws.acc.data();
-        int prev_u = 0, prev_v = 0;
-        for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
-            int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
-            const Pred q = pred[v];
-            int pu, pv;
-            geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
-            int qu = std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127);
-            int qv = std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127);
-            blend_normal(q.a != q.c, qu, qv, pu, pv);
-            prev_u = int8_t(uint8_t(pu + ru));
-            prev_v = int8_t(uint8_t(pv + rv));
-            nu[v] = int8_t(prev_u), nv[v] = int8_t(prev_v);
-        });
+        auto run = [&](auto* acc) __attribute__((always_inline)) {
+            accumulate_normals(indices, T, ws.coords.data(), acc);
+            int prev_u = 0, prev_v = 0;
+            for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+                int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
+                const Pred q = pred[v];
+                int pu, pv;
+                geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
+                int qu = std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127);
+                int qv = std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127);
+                blend_normal(q.a != q.c, qu, qv, pu, pv);
+                prev_u = int8_t(uint8_t(pu + ru));
+                prev_v = int8_t(uint8_t(pv + rv));
+                nu[v] = int8_t(prev_u), nv[v] = int8_t(prev_v);
+            });
+        };
+        if (T < kNormalSum32MaxTriangles) {
+            ws.acc32.assign(V, NormalSumT<int32_t>{0, 0, 0, 0});
+            run(ws.acc32.data());
+        } else {
+            ws.acc.assign(V, NormalSum{0, 0, 0, 0});
+            run(ws.acc.data());
+        }
     } else if (normal_mode == kNormalAverage) {
         for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
             const Pred q = pred[v];
@@ -1176,28 +1192,42 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
 }
 
 // Colours: ORs R, G, B into word1.
-void decode_colors(rans::Decoder& io, Workspace& ws, bool parallelogram, bool decorrelate, uint32_t V,
-                   const Pred* pred, PackedVertex* vert) {
+template <bool kParallelogram>
+void decode_colors_with(rans::Decoder& io, Workspace& ws, bool decorrelate, uint32_t V, const Pred* pred,
+                        PackedVertex* vert) {
     grow(ws.rgb, size_t(V) + 1);
     std::array<uint8_t, 4>* rgb = ws.rgb.data();
     rgb[V] = {0, 0, 0, 0};
     rans::Decoder dec = io;
     const rans::TableView tr(ws.tables[kStreamColR]), tg(ws.tables[kStreamColG]), tb(ws.tables[kStreamColB]);
     const int32_t dmask = decorrelate ? -1 : 0;
+    auto predict = [](int a, int b, int c) {
+        if constexpr (kParallelogram)
+            return std::clamp(a + b - c, 0, 255);
+        else
+            return (a + b + 1) >> 1;
+    };
     for_each_item(dec, V, 3, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
         const Pred q = pred[v];
         int32_t rg = dresidual<kFast, 0>(dec, tg);
         int32_t rr = dresidual<kFast, 1>(dec, tr) + (rg & dmask);
         int32_t rb = dresidual<kFast, 2>(dec, tb) + (rg & dmask);
-        int pc[3];
-        for (int c = 0; c < 3; ++c) {
-            int a = rgb[q.a][size_t(c)], b = rgb[q.b][size_t(c)];
-            pc[c] = parallelogram ? std::clamp(a + b - rgb[q.c][size_t(c)], 0, 255) : (a + b + 1) >> 1;
-        }
-        rgb[v] = {uint8_t(pc[0] + rr), uint8_t(pc[1] + rg), uint8_t(pc[2] + rb), 0};
-        vert[v].word1 |= uint32_t(rgb[v][0]) << 8 | uint32_t(rgb[v][1]) << 16 | uint32_t(rgb[v][2]) << 24;
+        const std::array<uint8_t, 4> A = rgb[q.a], B = rgb[q.b], C = rgb[q.c];
+        const uint32_t r = uint8_t(predict(A[0], B[0], C[0]) + rr);
+        const uint32_t g = uint8_t(predict(A[1], B[1], C[1]) + rg);
+        const uint32_t bl = uint8_t(predict(A[2], B[2], C[2]) + rb);
+        rgb[v] = {uint8_t(r), uint8_t(g), uint8_t(bl), 0};
+        vert[v].word1 |= r << 8 | g << 16 | bl << 24;
     });
     io = dec;
+}
+
+void decode_colors(rans::Decoder& io, Workspace& ws, bool parallelogram, bool decorrelate, uint32_t V,
+                   const Pred* pred, PackedVertex* vert) {
+    if (parallelogram)
+        decode_colors_with<true>(io, ws, decorrelate, V, pred, vert);
+    else
+        decode_colors_with<false>(io, ws, decorrelate, V, pred, vert);
 }
 
 FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint32_t T, FragmentMesh& out,

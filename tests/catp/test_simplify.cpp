@@ -172,7 +172,9 @@ double point_triangle_distance(const V3& p, const V3& a, const V3& b, const V3& 
     // Closest point on a triangle (Ericson, Real-Time Collision Detection 5.1.5).
     const V3 ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
     auto dist = [&](const V3& q) { return norm(sub(p, q)); };
-    auto lerp = [](const V3& o, const V3& d, double s) { return V3{o[0] + s * d[0], o[1] + s * d[1], o[2] + s * d[2]}; };
+    auto lerp = [](const V3& o, const V3& d, double s) {
+        return V3{o[0] + s * d[0], o[1] + s * d[1], o[2] + s * d[2]};
+    };
     const double d1 = dot(ab, ap), d2 = dot(ac, ap);
     if (d1 <= 0 && d2 <= 0) return dist(a);
     const V3 bp = sub(p, b);
@@ -225,9 +227,11 @@ TEST(Simplify, SmallClosedMeshesStayClosedManifoldsDownToTheirLimit) {
     // Tetrahedra (irregular, and flat enough to pass the geometric checks), then noisy spheres.
     for (uint64_t seed = 0; seed < 40; ++seed) {
         TestMesh tet;
-        for (int i = 0; i < 4; ++i) tet.positions.push_back({unit_random(seed * 16 + i), unit_random(seed * 16 + i + 4), 0.05 * unit_random(seed * 16 + i + 8)});
+        for (uint64_t i = 0; i < 4; ++i)
+            tet.positions.push_back({unit_random(seed * 16 + i), unit_random(seed * 16 + i + 4),
+                                     0.05 * unit_random(seed * 16 + i + 8)});
         tet.indices = {0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2};
-        // Orient outwards: the signed volume must be positive.
+        // Orient consistently outwards: face (0, 1, 2) must not face vertex 3.
         const V3 n = cross(sub(tet.positions[1], tet.positions[0]), sub(tet.positions[2], tet.positions[0]));
         if (dot(n, sub(tet.positions[3], tet.positions[0])) > 0)
             for (size_t t = 0; t < tet.indices.size(); t += 3) std::swap(tet.indices[t + 1], tet.indices[t + 2]);
@@ -290,7 +294,9 @@ TEST(Simplify, PatchWithLockedBorderRingKeepsExactlyThatBorder) {
 TEST(Simplify, UnlockedBorderSlidesAlongItselfKeepingClosedLoopsAndTheirCount) {
     // A bumpy patch with two square holes: three border loops.
     const auto f = [](double x, double y) { return 0.05 * std::sin(9 * x + 2 * y) + 0.2 * x * y; };
-    const auto hole = [](int i, int j) { return (i >= 10 && i < 18 && j >= 10 && j < 18) || (i >= 30 && i < 36 && j >= 25 && j < 40); };
+    const auto hole = [](int i, int j) {
+        return (i >= 10 && i < 18 && j >= 10 && j < 18) || (i >= 30 && i < 36 && j >= 25 && j < 40);
+    };
     const TestMesh m = grid(48, f, hole);
     const auto in_border = border_edges(m.indices);
     std::set<uint32_t> in_border_vertices;
@@ -305,7 +311,7 @@ TEST(Simplify, UnlockedBorderSlidesAlongItselfKeepingClosedLoopsAndTheirCount) {
     for (const auto& e : out_border) {
         EXPECT_TRUE(next.emplace(e.first, e.second).second) << "two border edges leave " << e.first;
         ++incoming[e.second];
-        EXPECT_TRUE(in_border_vertices.count(e.first)) << "output border vertex " << e.first << " was not on the input border";
+        EXPECT_TRUE(in_border_vertices.count(e.first)) << "border vertex " << e.first << " was not on the input border";
     }
     for (const auto& [v, n] : incoming) EXPECT_EQ(n, 1) << v;
     size_t loops = 0;
@@ -359,7 +365,9 @@ TEST(Simplify, NoNormalFlipsOnBumpyHeightField) {
         EXPECT_LE(r.indices.size() / 3, target);
         size_t flipped = 0, folded = 0;
         for (size_t t = 0; t < r.indices.size(); t += 3) {
-            const V3 &a = m.positions[r.indices[t]], &b = m.positions[r.indices[t + 1]], &c = m.positions[r.indices[t + 2]];
+            const V3& a = m.positions[r.indices[t]];
+            const V3& b = m.positions[r.indices[t + 1]];
+            const V3& c = m.positions[r.indices[t + 2]];
             const V3 n = cross(sub(b, a), sub(c, a));
             // The surface's own area vector over the triangle's footprint (its normal integrated
             // over barycentric samples): a coarse triangle spans bumps, so one point's normal
@@ -403,7 +411,8 @@ TEST(Simplify, FlatPatchSimplifiesAtZeroErrorWithoutZeroAreaTriangles) {
         EXPECT_EQ(sliding.indices.size() / 3, 2u) << "tilt " << tilt << ": the four corners' two triangles";
         EXPECT_LE(sliding.error, eps);
         EXPECT_EQ(bad_triangles(m, sliding.indices), 0u);
-        for (uint32_t c : {0u, 32u, 33u * 32, 33u * 33 - 1}) EXPECT_TRUE(referenced(sliding.indices).count(c)) << "corner " << c;
+        for (uint32_t c : {0u, 32u, 33u * 32, 33u * 33 - 1})
+            EXPECT_TRUE(referenced(sliding.indices).count(c)) << "corner " << c;
         // Without an error limit the corners go too, down to a single triangle's worth.
         const SimplifyResult all = run(m, 0);
         EXPECT_GE(all.indices.size() / 3, 1u);
@@ -603,7 +612,8 @@ TEST(Simplify, RemovedVerticesLieWithinThreeTimesTheReportedErrorOfTheOutput) {
                 double best = INFINITY;
                 for (size_t t = 0; t < r.indices.size(); t += 3)
                     best = std::min(best, point_triangle_distance(m.positions[v], m.positions[r.indices[t]],
-                                                                  m.positions[r.indices[t + 1]], m.positions[r.indices[t + 2]]));
+                                                              m.positions[r.indices[t + 1]],
+                                                              m.positions[r.indices[t + 2]]));
                 worst = std::max(worst, best);
             }
             EXPECT_LE(worst, 3 * r.error) << "seed " << seed << " target " << target << " error " << r.error;

@@ -200,7 +200,7 @@ TEST(CatpCut, TinyToleranceConvergesToTheFinestCutWhichIsCrackFree) {
     EXPECT_EQ(f.stats.holes, 0u);
 }
 
-TEST(CatpCut, LoweringTheToleranceOnlyRefinesAndLowersTheCertifiedError) {
+TEST(CatpCut, LoweringTheToleranceOnlyRefinesDrawsMoreAndLowersTheCertifiedError) {
     CatpFile file(test::sphere_dataset());
     const CatpIndex& index = file.index();
     Hierarchy h = build_catp_hierarchy(index);
@@ -211,6 +211,7 @@ TEST(CatpCut, LoweringTheToleranceOnlyRefinesAndLowersTheCertifiedError) {
     Orbit orbit(index);
     std::set<uint32_t> last;
     double last_error = 1e300;
+    uint64_t last_primitives = 0;
     std::unordered_map<uint64_t, DiamondFragments> decoded;
     for (double tol = 32; tol >= 0.5; tol /= 2) {
         ViewParams v = orbit.view(1, 8, tol);
@@ -219,6 +220,8 @@ TEST(CatpCut, LoweringTheToleranceOnlyRefinesAndLowersTheCertifiedError) {
         std::set<uint32_t> r(rv.begin(), rv.end());
         EXPECT_TRUE(std::includes(r.begin(), r.end(), last.begin(), last.end()));
         EXPECT_LE(f.stats.certified_error_px, last_error);
+        EXPECT_GE(f.stats.primitives, last_primitives) << "tolerance " << tol;
+        last_primitives = f.stats.primitives;
         test::CutTopology topo = test::cut_topology(file, as_refined_set(h, engine), decoded);
         EXPECT_EQ(topo.border_edges, 0u) << "tolerance " << tol;
         last = r;

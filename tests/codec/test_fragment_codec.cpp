@@ -341,6 +341,31 @@ TEST(FragmentCodec, RoundTripIsLosslessOnRandomWordsAndInvalidPositions) {
     }
 }
 
+TEST(FragmentCodec, PositionIndicesBeyondTheGridUseRawPositionsLosslessly) {
+    FragmentMesh m = grid_patch(20);
+    for (size_t i = 0; i < m.vertices.size(); i += 7)  // some indices >= kBaryIndexCount
+        m.vertices[i].word0 = (m.vertices[i].word0 & 0xff000000u) | (kBaryIndexCount + uint32_t(i));
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    ASSERT_EQ(bytes[kCodingOffset], 0) << "smooth normals and colours still compress";
+    EXPECT_EQ(bytes[kModesOffset] & 3, 2) << "position coding";
+}
+
+TEST(FragmentCodec, TinyIncompressibleFragmentsFallBackToStoredCodingWithinTheBound) {
+    std::mt19937_64 rng(17);
+    FragmentMesh m;
+    m.vertices = random_vertices(rng, 4);
+    m.indices = {0, 1, 2, 2, 1, 3};
+    std::vector<uint8_t> bytes = expect_round_trip(m);
+    EXPECT_EQ(bytes[kCodingOffset], 1) << "stored coding";
+    EXPECT_EQ(bytes.size(), fragment_encode_bound(m.vertices.size(), m.triangle_count()));
+    // Larger random content still compresses (connectivity) and never exceeds the bound.
+    m.vertices = random_vertices(rng, 300);
+    m.indices.clear();
+    for (int k = 0; k < 600; ++k) m.indices.push_back(uint32_t(rng() % 300));
+    bytes = expect_round_trip(m);
+    EXPECT_LT(bytes.size(), fragment_encode_bound(m.vertices.size(), m.triangle_count()));
+}
+
 TEST(FragmentCodec, RoundTripIsLosslessOnA200kTriangleMesh) {
     FragmentMesh m = grid_patch(318);  // 200,978 triangles
     ASSERT_GE(m.triangle_count(), 200000u);
@@ -365,6 +390,7 @@ TEST(FragmentCodec, RoundTripIsLosslessOnAHighValenceFanAndStackedDuplicates) {
 
 TEST(FragmentCodec, EveryTruncationIsRejected) {
     std::vector<uint8_t> bytes = encode(small_fragment());
+    ASSERT_EQ(bytes[kCodingOffset], 0);
     FragmentMesh out;
     for (size_t n = 0; n < bytes.size(); ++n) {
         std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(n));  // own allocation: ASan sees overreads
@@ -378,6 +404,7 @@ TEST(FragmentCodec, EveryTruncationIsRejected) {
 
 TEST(FragmentCodec, EverySingleBitFlipIsDetected) {
     std::vector<uint8_t> bytes = encode(small_fragment());
+    ASSERT_EQ(bytes[kCodingOffset], 0);
     FragmentMesh out;
     ASSERT_EQ(fragment_decode(bytes.data(), bytes.size(), out), FragmentStatus::Ok);
     for (size_t at = 0; at < bytes.size(); ++at)

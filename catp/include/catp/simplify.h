@@ -16,17 +16,22 @@
 // planes through each border edge perpendicular to its triangle), accumulated as vertices merge;
 // the cost of u -> v is (Q_u + Q_v)(v) divided by the accumulated weight (area), i.e. a mean
 // squared distance, and its square root is the error in object units.
-// Collapses are performed in passes: candidates (the cheapest target for each removable vertex)
-// are sorted by cost, and the cheapest ones are performed while each vertex takes part in at most
-// one collapse per pass; the error allowed in a pass follows the costs of the pass's candidates,
-// so the error limit rises gradually. The pass schedule does not depend on the target, so
-// a smaller target runs the same collapses as a larger one and then some more: the reported error
-// is monotone in the target.
+// Collapses are performed in passes: candidates (the two cheapest allowed targets of each
+// removable vertex) are sorted by cost, and the cheapest ones are performed while each vertex
+// takes part in at most one collapse per pass; the error allowed in a pass follows the costs of
+// the pass's candidates, so the error limit rises gradually. The pass schedule does not depend on
+// the target, so a smaller target runs the same collapses as a larger one and then some more: the
+// reported error is monotone in the target.
 //
-// A collapse is rejected when it would flip or nearly flip a triangle (its normal turning by more
-// than about 78 degrees), make a triangle of zero area, violate the link condition (create
-// a non-manifold edge or a duplicate triangle), or remove the last triangle of a vertex. Topology
-// is preserved: closed surfaces stay closed, borders stay borders, components never vanish.
+// A collapse is rejected when it would turn a triangle's normal by more than about 78 degrees,
+// make a triangle face more than about 73 degrees away from the input surface its corners stand
+// for (the sum of the input normals merged into them: this stops folds that build up over several
+// collapses), make a triangle of zero area, violate the link condition (create a non-manifold edge
+// or a duplicate triangle), or remove the last triangle of a vertex. Topology is preserved: closed
+// surfaces stay closed, borders stay borders, components never vanish.
+//
+// The error is a mean, not a bound: removed vertices lie up to about twice the reported error
+// from the output surface (measured on noisy spheres; tests/catp/test_simplify.cpp asserts 3x).
 #include <cstddef>
 #include <cstdint>
 #include <limits>
@@ -40,6 +45,7 @@ struct SimplifySettings {
     size_t target_triangles = 0;
     // Never perform a collapse whose error (see SimplifyResult::error) exceeds this, in object
     // units. Simplification stops early, above the target, when no cheaper collapse is left.
+    // Negative or NaN: only free collapses (error 0, e.g. inside flat regions).
     double max_error = std::numeric_limits<double>::infinity();
     // true: vertices on the topological border (edges used by one triangle) are never removed.
     // false: a border vertex may only slide along the border, i.e. collapse onto one of its two
@@ -69,12 +75,16 @@ struct SimplifyResult {
 // - Triangles with a repeated index are dropped, and of duplicated triangles (same three vertices
 //   in either winding) only the first is kept, before anything else; so the output may be smaller
 //   than the input even when the target is not below it. Triangles of zero area with three
-//   distinct vertices are kept (dropping them would open holes). Isolated vertices are ignored.
+//   distinct vertices are kept (dropping them would open holes); a vertex of one is only removed
+//   by a collapse that removes that triangle too. Isolated vertices are ignored.
 // - Empty input gives empty output.
-// - The result is deterministic: the same input gives the same output on every run and machine
-//   (IEEE double arithmetic, no address- or hash-order dependence).
+// - The result is deterministic: the same input gives the same output on every run (and every
+//   machine, given IEEE double arithmetic without FMA contraction, as the project builds): no
+//   address, hash or thread order is involved.
 // - Reentrant and thread-safe: no global state; concurrent calls on different (or the same
-//   read-only) inputs are fine. Memory is O(vertex_count + index_count).
+//   read-only) inputs are fine. Memory: about 200 bytes per referenced vertex plus 12 per index,
+//   in one block per call (a vertex buffer much larger than the mesh is compacted first).
+// - Speed: about 5M input triangles/s on one core for 5k-20k triangles (bench/catp/simplify_bench).
 SimplifyResult simplify_mesh(const double* positions, size_t vertex_count, const uint32_t* indices,
                              size_t index_count, const uint8_t* locked,
                              const SimplifySettings& settings);

@@ -188,6 +188,7 @@ public:
 
     bool resident(uint32_t node) const override;
     NodeBytes bytes(uint32_t node) const override;
+    bool changes_since(uint64_t& cursor, std::vector<uint32_t>& out) const override { return log_.since(cursor, out); }
     const PartDrawCounter& counter() const { return counter_; }
 
     // Stores a decoded node (exact part counts, fragments, and the compressed bytes when a
@@ -211,6 +212,7 @@ private:
     std::unique_ptr<CompressedCache> compressed_;
     std::vector<NodeBytes> bytes_;
     std::vector<uint8_t> resident_;
+    ChangeLog log_;
 };
 
 }  // namespace catpaq

@@ -108,8 +108,8 @@ public:
     uint32_t part_count(uint32_t node, size_t part) const { return counts_[offsets_[node] + part]; }
 
 private:
-    const Hierarchy& hierarchy_;
     std::vector<uint32_t> offsets_;
+    std::vector<uint32_t> parents_;  // creating parent of each part (kNoNode: unconditional)
     std::vector<uint32_t> counts_;
 };
 
@@ -121,15 +121,38 @@ public:
     virtual bool resident(uint32_t node) const = 0;
     // Exact when resident, an estimate otherwise.
     virtual NodeBytes bytes(uint32_t node) const = 0;
+    // Optional change feed, so the engine recounts only what changed instead of the whole cut
+    // each frame: appends the nodes whose residency, bytes or draw counts changed since `cursor`
+    // and advances it. Returns false (cursor still advanced) when it cannot tell; the engine
+    // then recounts everything, which is always correct.
+    virtual bool changes_since(uint64_t& cursor, std::vector<uint32_t>& out) const {
+        (void)cursor;
+        (void)out;
+        return false;
+    }
 };
 
-// A plain table: set_resident() on arrival, set_evicted() when a cache drops the node.
+// A bounded change feed for Residency implementations (a ring of the last `capacity` changes).
+class ChangeLog {
+public:
+    explicit ChangeLog(size_t capacity = 8192) : ring_(capacity) {}
+    void add(uint32_t node) { ring_[size_t(seq_++ % ring_.size())] = node; }
+    bool since(uint64_t& cursor, std::vector<uint32_t>& out) const;
+
+private:
+    std::vector<uint32_t> ring_;
+    uint64_t seq_ = 0;
+};
+
+// A plain table: set_resident() on arrival, set_evicted() when a cache drops the node (exact
+// draw counts given to a PartDrawCounter should come with set_resident()).
 // Non-resident estimate: `bytes_per_primitive` times the node's primitives, for GPU and CPU.
 class ResidencyTable : public Residency {
 public:
     explicit ResidencyTable(const Hierarchy& hierarchy, double bytes_per_primitive = 16.0);
     bool resident(uint32_t node) const override { return resident_[node] != 0; }
     NodeBytes bytes(uint32_t node) const override;
+    bool changes_since(uint64_t& cursor, std::vector<uint32_t>& out) const override { return log_.since(cursor, out); }
     void set_resident(uint32_t node, NodeBytes bytes);
     void set_evicted(uint32_t node);
     size_t resident_count() const { return resident_count_; }
@@ -140,6 +163,7 @@ private:
     std::vector<uint8_t> resident_;
     std::vector<NodeBytes> bytes_;
     size_t resident_count_ = 0;
+    ChangeLog log_;
 };
 
 struct CutBudgets {
@@ -229,6 +253,18 @@ private:
         double priority = -1;
     };
 
+    struct Range {
+        const uint32_t* b;
+        const uint32_t* e;
+        const uint32_t* begin() const { return b; }
+        const uint32_t* end() const { return e; }
+        bool empty() const { return b == e; }
+    };
+    Range parents(uint32_t n) const { return {par_.data() + par_off_[n], par_.data() + par_off_[n + 1]}; }
+    Range children(uint32_t n) const { return {ch_.data() + ch_off_[n], ch_.data() + ch_off_[n + 1]}; }
+    bool has_data(uint32_t n) const { return (flags_[n] & 1) != 0; }
+    bool leaf(uint32_t n) const { return (flags_[n] & 2) != 0; }
+
     bool is_active(uint32_t n) const;
     bool is_frontier(uint32_t n) const { return refined_[n] && refined_children_[n] == 0; }
     bool is_resident(uint32_t n) const;
@@ -249,6 +285,12 @@ private:
     void emit_requests();
 
     const Hierarchy& h_;
+    // The hierarchy in a compact layout for the per-frame loops (no pointer chasing).
+    std::vector<uint32_t> par_off_, par_, ch_off_, ch_;
+    std::vector<std::array<double, 6>> box_;  // min xyz, max xyz
+    std::vector<double> error_;
+    std::vector<uint8_t> flags_;  // bit 0 has data, bit 1 leaf
+    std::vector<uint16_t> level_;
     const DrawCounter& counter_;
     CutBudgets budgets_;
     ViewParams view_;
@@ -268,6 +310,11 @@ private:
     std::vector<uint64_t> proj_frame_;
     std::vector<uint32_t> mark_;  // closure stamps
     uint32_t stamp_ = 0;
+    std::vector<uint32_t> stack_;  // closure scratch
+    const Residency* last_residency_ = nullptr;
+    uint64_t residency_cursor_ = 0;
+    bool full_refresh_ = true;
+    std::vector<uint32_t> changed_;
 
     std::vector<Want> want_;
     std::vector<uint32_t> wanted_;       // nodes with a want this frame
