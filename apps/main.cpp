@@ -18,6 +18,7 @@ struct Command {
 const Command kCommands[] = {
     {"convert", "convert a mesh into a streamable dataset", catpaq::cmd_convert},
     {"info", "print facts about a mesh file", catpaq::cmd_info},
+    {"render", "render a dataset headless (streaming) to PNG frames and statistics", catpaq::cmd_render},
     {"serve", "serve datasets over HTTP (docs/http-api.md)", catpaq::cmd_serve},
     {"verify", "check a dataset's invariants and measure its error", catpaq::cmd_verify},
 };

@@ -1,11 +1,11 @@
 #!/usr/bin/env bash
-# Newcomer command 1: set up, build, and run the main job on the bundled sample:
-# convert the Stanford bunny to CATP, serve it on localhost, render views headless over HTTP,
-# and print where the files are and the key figures.
+# Newcomer command 1: set up, build, and run the main job on the bundled sample: convert the
+# Stanford bunny to CATP, verify it, serve it on localhost, render views headless over HTTP, and
+# print where the files are and the key figures.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 "$root/scripts/setup.sh"
-"$root/scripts/build.sh"
+"$root/scripts/build.sh" --target catpaq
 bin="${BUILD_DIR:-$root/build}/apps/catpaq"
 out="$root/out"
 mkdir -p "$out"
@@ -14,24 +14,36 @@ echo
 echo "== 1. convert data/bunny.ply -> out/bunny.cpq"
 "$bin" convert "$root/data/bunny.ply" -o "$out/bunny.cpq"
 
-if "$bin" --help | grep -q '^  verify'; then
-  echo
-  echo "== 2. verify out/bunny.cpq against the original"
-  "$bin" verify "$out/bunny.cpq" --mesh "$root/data/bunny.ply"
-fi
-
-if "$bin" --help | grep -q '^  serve' && "$bin" --help | grep -q '^  render'; then
-  echo
-  echo "== 3. serve out/ on localhost and render views headless over HTTP"
-  log="$out/serve.log"
-  "$bin" serve --root "$out" --port 0 >"$log" 2>&1 &
-  server=$!
-  trap 'kill $server 2>/dev/null || true' EXIT
-  for _ in $(seq 1 100); do grep -q '^serving' "$log" && break; sleep 0.1; done
-  url=$(grep -o 'http://[^ ]*' "$log" | head -1)
-  echo "server: $url (log: $log)"
-  "$bin" render "${url}api/datasets/bunny" --orbit 8 --size 640x480 --out "$out/frames" --stats "$out/frames/stats.jsonl"
-  echo "frames: $out/frames/ (PNG), statistics: $out/frames/stats.jsonl"
-fi
 echo
-echo "done: outputs in $out"
+echo "== 2. verify out/bunny.cpq against the original"
+"$bin" verify "$out/bunny.cpq" --mesh "$root/data/bunny.ply"
+
+echo
+echo "== 3. serve out/ on localhost"
+log="$out/serve.log"
+"$bin" serve --root "$out" --port 0 >"$log" 2>&1 &
+server=$!
+trap 'kill $server 2>/dev/null || true' EXIT
+for _ in $(seq 1 100); do grep -q '^serving' "$log" && break; sleep 0.1; done
+grep -q '^serving' "$log" || { echo "server did not start:"; cat "$log"; exit 1; }
+url=$(grep -o 'http://[^ ]*' "$log" | head -1)
+echo "server: $url  (catalog: ${url}api/datasets, log: $log)"
+
+echo
+echo "== 4. render 8 views headless over HTTP (streaming, 1.5 px tolerance)"
+rm -rf "$out/frames"
+"$bin" render "${url}api/datasets/bunny" --orbit 8 --size 640x480 --out "$out/frames" \
+  --stats "$out/frames/stats.jsonl" --export-cut "$out/frames/last_cut.ply"
+/usr/bin/python3 - "$out/frames/stats.jsonl" <<'PY'
+import json, sys
+rows = [json.loads(l) for l in open(sys.argv[1])]
+print("frame  triangles  fetched KiB  certified error (px)")
+for r in rows:
+    print(f"{r['frame']:5d} {r['triangles']:10d} {r['bytes_fetched']/1024:12.1f} {r['certified_error_px']:21.2f}")
+PY
+echo
+echo "done:"
+echo "  dataset    $out/bunny.cpq"
+echo "  frames     $out/frames/frame_*.png"
+echo "  statistics $out/frames/stats.jsonl"
+echo "  last cut   $out/frames/last_cut.ply"

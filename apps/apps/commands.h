@@ -6,5 +6,6 @@ int cmd_info(int argc, char** argv);
 int cmd_convert(int argc, char** argv);
 int cmd_verify(int argc, char** argv);
 int cmd_serve(int argc, char** argv);
+int cmd_render(int argc, char** argv);
 
 }  // namespace catpaq

@@ -296,7 +296,8 @@ private:
     void build_adjacency();
     bool has_duplicate_triangles();
     void remove_duplicate_triangles();
-    void classify(const uint8_t* locked);
+    uint8_t fan_kind(const Pair* p, uint32_t k);
+    bool classify(const uint8_t* locked);
     void init_quadrics();
     void collect_candidates();
     bool border_neighbours(uint32_t x, uint32_t& first, uint32_t& last);
@@ -343,11 +344,11 @@ void Simplifier::load(const double* positions, const uint32_t* indices, size_t i
     tri_count_ = w / 3;
     init_positions(positions);
     build_adjacency();
-    if (has_duplicate_triangles()) {
+    if (classify(locked) && has_duplicate_triangles()) {
         remove_duplicate_triangles();
         build_adjacency();
+        classify(locked);
     }
-    classify(locked);
     init_quadrics();
 }
 
@@ -445,41 +446,73 @@ void Simplifier::remove_duplicate_triangles() {
     tri_count_ = w / 3;
 }
 
-void Simplifier::classify(const uint8_t* locked) {
-    std::fill(kind_, kind_ + vertex_count_, kLocked);
-    FanQuery fan(scratch_a_, scratch_b_);
-    for (uint32_t x = 0; x < vertex_count_; ++x) {
-        const uint32_t b0 = start_[x], k = start_[x + 1] - b0;
-        if (k == 0 || (locked && locked[x])) continue;
-        const Pair* p = pairs_ + b0;
-        fan.reset(p, k);
-        // A vertex repeated as a first (second) element means an edge used twice in the same
-        // direction: a non-manifold or inconsistently oriented edge.
-        if (fan.has_repeats()) continue;
-        // Each directed edge x -> a of a pair (a, b) has a twin a -> x iff a is some pair's b.
-        // With no repeats, the fan maps a -> b injectively: one chain (half-disk) or one cycle
-        // (disk) covering all k pairs is manifold; anything else is a bow tie.
+// The shape of a fan, from the pairs (a, b) of its triangles (x, a, b): kInterior for one closed
+// cycle a -> b -> ... of at least 3 triangles (a disk), kBorder for one open chain (a half-disk),
+// kLocked for anything else: an edge used twice in the same direction (a vertex repeated as a
+// first or as a second element: non-manifold or inconsistently oriented), several cycles or
+// chains (a bow tie), two triangles folded onto each other.
+uint8_t Simplifier::fan_kind(const Pair* p, uint32_t k) {
+    if (k <= kLinearFan) {
+        // next[i]: the pair continuing pair i (its a is i's b); in[j]: how many pairs lead to j.
+        int next[kLinearFan];
+        uint32_t in[kLinearFan] = {};
+        for (uint32_t i = 0; i < k; ++i) {
+            next[i] = -1;
+            for (uint32_t j = 0; j < k; ++j)
+                if (p[j].a == p[i].b) {
+                    if (next[i] >= 0) return kLocked;  // two pairs start at the same vertex
+                    next[i] = int(j);
+                }
+            if (next[i] >= 0 && ++in[next[i]] > 1) return kLocked;  // two pairs end at the same vertex
+        }
         uint32_t starts = 0, first = 0;
         for (uint32_t i = 0; i < k; ++i)
-            if (!fan.has_b(p[i].a)) {
-                if (starts++ == 0) first = i;
-            }
-        if (starts > 1) continue;
-        if (starts == 0 && k < 3) continue;  // two triangles folded onto each other
-        uint32_t steps = 1, cur = p[first].b;
-        const uint32_t stop = starts == 0 ? p[first].a : UINT32_MAX;
-        while (cur != stop && steps <= k) {
-            const uint32_t i = fan.find_a(cur);
-            if (i == k) break;
-            cur = p[i].b;
+            if (in[i] == 0 && starts++ == 0) first = i;
+        if (starts > 1) return kLocked;
+        uint32_t steps = 1;
+        int cur = int(first);
+        while (next[cur] >= 0 && next[cur] != int(first) && steps < k) {
+            cur = next[cur];
             ++steps;
         }
-        if (steps != k || (starts == 0 && cur != stop)) continue;
-        if (starts == 0)
-            kind_[x] = kInterior;
-        else if (!settings_.lock_topological_border)
-            kind_[x] = kBorder;
+        if (steps != k) return kLocked;
+        if (starts == 1) return kBorder;
+        return next[cur] == int(first) && k >= 3 ? kInterior : kLocked;
     }
+    FanQuery fan(scratch_a_, scratch_b_);
+    fan.reset(p, k);
+    if (fan.has_repeats()) return kLocked;
+    // Each directed edge x -> a of a pair (a, b) has a twin a -> x iff a is some pair's b.
+    uint32_t starts = 0, first = 0;
+    for (uint32_t i = 0; i < k; ++i)
+        if (!fan.has_b(p[i].a) && starts++ == 0) first = i;
+    if (starts > 1) return kLocked;
+    uint32_t steps = 1, cur = p[first].b;
+    const uint32_t stop = starts == 0 ? p[first].a : UINT32_MAX;
+    while (cur != stop && steps <= k) {
+        const uint32_t i = fan.find_a(cur);
+        if (i == k) break;
+        cur = p[i].b;
+        ++steps;
+    }
+    if (steps != k || (starts == 0 && cur != stop)) return kLocked;
+    return starts == 0 ? kInterior : kBorder;
+}
+
+// Sets every vertex's kind; returns whether some fan is not a disk or half-disk (duplicate
+// triangles always make such fans, so only then is it worth looking for them).
+bool Simplifier::classify(const uint8_t* locked) {
+    bool irregular = false;
+    for (uint32_t x = 0; x < vertex_count_; ++x) {
+        const uint32_t b0 = start_[x], k = start_[x + 1] - b0;
+        kind_[x] = kLocked;
+        if (k == 0) continue;
+        const uint8_t kind = fan_kind(pairs_ + b0, k);
+        irregular |= kind == kLocked;
+        if ((locked && locked[x]) || (kind == kBorder && settings_.lock_topological_border)) continue;
+        kind_[x] = kind;
+    }
+    return irregular;
 }
 
 void Simplifier::init_quadrics() {

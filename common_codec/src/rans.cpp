@@ -144,23 +144,21 @@ TableDesc describe_counts(const uint32_t* counts, int nsym) {
         return desc;
     }
     desc.nsym = last + 1;
-    const double top = std::log2(double(weight_value(kMaxWeightCode)));
+    static const std::array<double, kMaxWeightCode + 1> log_weight = [] {
+        std::array<double, kMaxWeightCode + 1> t{};
+        for (int k = 1; k <= kMaxWeightCode; ++k) t[size_t(k)] = std::log2(double(weight_value(k)));
+        return t;
+    }();
+    const double top = log_weight[kMaxWeightCode];
     for (int i = 0; i <= last; ++i) {
         if (counts[i] == 0) continue;
-        double target = top + std::log2(double(counts[i]) / double(max_count));
+        // The code nearest in the log domain to the count scaled so that the largest gets the top.
+        const double target = top + std::log2(double(counts[i]) / double(max_count));
         int best = 1;
-        double best_err = 1e30;
-        for (int k = 1; k <= kMaxWeightCode; ++k) {
-            double err = std::fabs(std::log2(double(weight_value(k))) - target);
-            if (err < best_err) {
-                best_err = err;
-                best = k;
-            }
-        }
+        for (int k = 2; k <= kMaxWeightCode; ++k)
+            if (std::fabs(log_weight[size_t(k)] - target) < std::fabs(log_weight[size_t(best)] - target)) best = k;
         desc.code[size_t(i)] = uint8_t(best);
     }
-    uint64_t total = 0;
-    for (int i = 0; i < nsym; ++i) total += counts[i];
     // Smallest scale whose cost is within a hair of the best (smaller tables decode faster).
     double costs[kMaxScaleBits + 1];
     double best_cost = 1e30;
@@ -178,7 +176,6 @@ TableDesc describe_counts(const uint32_t* counts, int nsym) {
             break;
         }
     }
-    (void)total;
     return desc;
 }
 

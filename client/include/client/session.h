@@ -1,0 +1,83 @@
+#pragma once
+// A streaming session: one dataset (local path or URL), its hierarchy, the cut engine, the
+// asynchronous fetcher, the decoded-fragment cache and the GPU store, stepped once per frame.
+// Used by `catpaq render` (headless) and the desktop viewer. Only the thread that owns the GL
+// context calls step() and draw(); fetching and decoding run on the fetcher's threads.
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "client/camera.h"
+#include "client/catp_gpu.h"
+#include "client/cut_engine.h"
+#include "client/fetcher.h"
+#include "client/hierarchy.h"
+
+namespace catpaq {
+
+struct SessionSettings {
+    double tolerance_px = 1.5;
+    CutBudgets budgets;               // primitives, GPU and CPU bytes of the cut, requests
+    uint64_t gpu_cache_bytes = 512ull << 20;  // GPU store budget (cut + recently used)
+    HttpSettings http;
+    FetcherSettings fetcher;
+};
+
+// Statistics of one step (what `render --stats` writes per frame).
+struct SessionFrameStats {
+    uint64_t triangles = 0;       // drawn this frame
+    size_t drawn_nodes = 0, refined_nodes = 0, fragments = 0;
+    uint64_t bytes_fetched = 0;   // since the session started (including the prefix)
+    uint64_t requests = 0;        // node transfers since the start
+    size_t pending = 0;           // wanted nodes not resident yet
+    uint64_t gpu_bytes = 0, cpu_bytes = 0;
+    double cut_ms = 0;
+    double certified_error_px = 0;  // largest projected error of any drawn node
+    size_t holes = 0;             // drawn nodes whose data is not resident yet
+};
+
+class StreamingSession {
+public:
+    // Loads the prefix and builds the hierarchy (throws Error). A GL context must be current.
+    StreamingSession(const std::string& location, const SessionSettings& settings);
+    ~StreamingSession();
+
+    const CatpIndex& index() const { return *index_; }
+    const Hierarchy& hierarchy() const { return hierarchy_; }
+    const SessionSettings& settings() const { return settings_; }
+    void set_tolerance(double px) { settings_.tolerance_px = px; }
+
+    // Integrates arrived nodes, updates the cut for the camera and issues requests. Never waits.
+    SessionFrameStats step(const Camera& camera);
+    // True when nothing is being fetched and every drawn node is resident with the cut stable
+    // for the last step's camera.
+    bool converged() const { return converged_; }
+    // Draws the current cut into the bound framebuffer.
+    RenderStats draw(const Camera& camera, const RenderSettings& render);
+    // The (diamond, slot) fragments drawn by the current cut.
+    const std::vector<DrawItem>& items() const { return items_; }
+    // Decoded fragments of a drawn node (nullptr if not resident).
+    const DiamondFragments* fragments(uint64_t key) const;
+
+private:
+    void integrate(std::vector<FetchedNode>& arrived);
+    void evict(uint32_t node);
+
+    SessionSettings settings_;
+    std::unique_ptr<CatpIndex> index_;
+    Hierarchy hierarchy_;
+    std::unique_ptr<PartDrawCounter> counter_;
+    std::unique_ptr<ResidencyTable> residency_;
+    std::unique_ptr<CutEngine> engine_;
+    std::unique_ptr<Fetcher> fetcher_;
+    FragmentStore store_;
+    std::unique_ptr<CatpRenderer> renderer_;
+    std::unordered_map<uint32_t, std::shared_ptr<const DiamondFragments>> decoded_;
+    std::vector<DrawItem> items_;
+    uint64_t prefix_bytes_ = 0;
+    bool converged_ = false;
+};
+
+}  // namespace catpaq
