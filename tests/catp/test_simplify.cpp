@@ -341,6 +341,10 @@ TEST(Simplify, NoDegenerateOrDuplicateTrianglesEvenFromDirtyInput) {
     const SimplifyResult full = run(m, m.triangles());
     EXPECT_EQ(full.indices.size() / 3, clean) << "degenerate and duplicate triangles are dropped first";
     EXPECT_EQ(full.error, 0);
+    const std::vector<uint8_t> all_locked(m.positions.size(), 1);
+    const SimplifyResult frozen = run(m, 0, &all_locked);
+    EXPECT_EQ(frozen.indices, std::vector<uint32_t>(m.indices.begin(), m.indices.begin() + long(3 * clean)))
+        << "with every vertex locked only the dirt goes";
     const SimplifyResult r = run(m, clean / 8);
     EXPECT_LE(r.indices.size() / 3, clean / 8);
     EXPECT_EQ(bad_triangles(m, r.indices), 0u);
