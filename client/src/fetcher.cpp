@@ -283,6 +283,21 @@ void Fetcher::deliver(FetchedNode node) {
 }
 
 void Fetcher::fetch_loop() {
+    while (!stop_) {
+        try {
+            fetch_iterations();
+        } catch (const std::exception&) {
+            // Nothing a source or a decoder throws may end the fetch thread (the render thread
+            // would wait forever): drop what was running and start over after a pause.
+            for (auto& [key, e] : entries_)
+                if (e.state == State::Running) e.state = State::Queued;
+            transfer_key_.clear();
+            std::this_thread::sleep_for(std::chrono::milliseconds(50));
+        }
+    }
+}
+
+void Fetcher::fetch_iterations() {
     std::vector<SourceResult> results;
     std::deque<DecodeDone> decoded;
     while (!stop_) {

@@ -195,7 +195,13 @@ void HttpSource::start_pending() {
             curl_easy_reset(easy);
         } else {
             easy = curl_easy_init();
-            if (!easy) fail("libcurl: cannot create a transfer");
+            if (!easy) {
+                SourceResult res;
+                res.id = r.id;
+                res.error = "libcurl: cannot create a transfer";
+                ready_.push_back(std::move(res));
+                continue;
+            }
         }
         t->easy = easy;
         curl_easy_setopt(easy, CURLOPT_URL, t->url.c_str());

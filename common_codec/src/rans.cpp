@@ -187,7 +187,15 @@ void DecodeTable::build(const FreqTable& f) {
     for (int s = 0; s < f.nsym; ++s) {
         uint32_t freq = f.freq[size_t(s)], start = f.start[size_t(s)];
         uint32_t* out = lut.data() + start;
-        for (uint32_t j = 0; j < freq; ++j) out[j] = freq | (j << 13) | (uint32_t(s) << 25);
+        const uint32_t base = freq | (uint32_t(s) << 25);
+        uint32_t j = 0;
+        for (; j + 4 <= freq; j += 4) {  // unrolled: tables are rebuilt for every fragment
+            out[j] = base | (j << 13);
+            out[j + 1] = base | ((j + 1) << 13);
+            out[j + 2] = base | ((j + 2) << 13);
+            out[j + 3] = base | ((j + 3) << 13);
+        }
+        for (; j < freq; ++j) out[j] = base | (j << 13);
     }
 }
 

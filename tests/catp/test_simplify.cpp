@@ -503,7 +503,7 @@ TEST(Simplify, UnreferencedVerticesChangeNothing) {
     }
 }
 
-TEST(Simplify, EmptyInputAndSingleTriangle) {
+TEST(Simplify, EmptyInputSingleTriangleAndInvalidInput) {
     const SimplifyResult empty = simplify_mesh(nullptr, 0, nullptr, 0, nullptr, SimplifySettings{});
     EXPECT_TRUE(empty.indices.empty());
     EXPECT_EQ(empty.error, 0);
@@ -517,6 +517,8 @@ TEST(Simplify, EmptyInputAndSingleTriangle) {
 
     tri.indices = {0, 0, 1, 2, 1, 2};  // only degenerate triangles
     EXPECT_TRUE(run(tri, 0).indices.empty());
+    tri.indices = {0, 1, 2, 0, 2, 1};  // a two-sided triangle: the second is a duplicate
+    EXPECT_EQ(run(tri, 0).indices, std::vector<uint32_t>({0, 1, 2}));
 
     tri.indices = {0, 1};
     EXPECT_THROW(run(tri, 0), std::invalid_argument);

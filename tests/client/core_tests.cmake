@@ -10,3 +10,9 @@ catpaq_test(client_core_tests
   DEPS client_core catp mesh common_codec base Threads::Threads)
 # crack_check.h (the CATP crack test's welding and border count) lives with the catp tests.
 target_include_directories(client_core_tests PRIVATE ${PROJECT_SOURCE_DIR}/tests/catp)
+# Against the real server too, when it is part of the build.
+if(TARGET server)
+  target_link_libraries(client_core_tests PRIVATE server)
+  target_include_directories(client_core_tests PRIVATE ${PROJECT_SOURCE_DIR}/server/include)
+  target_compile_definitions(client_core_tests PRIVATE CATPAQ_HAVE_SERVER=1)
+endif()

@@ -352,3 +352,47 @@ TEST(Fetcher, SuppliedBytesAreVerifiedAndDecodedWithoutAFetch) {
     EXPECT_TRUE(got[0].ok);
     EXPECT_EQ(*got[0].compressed, d.node_bytes(e));
 }
+
+TEST(HttpSource, APrefixLongerThanTheFirstProbeIsCompletedWithASecondRange) {
+    // 3000 nodes: a 120 KB index, longer than the 64 KiB probe.
+    std::string path = test::scratch_dir() + "/big_index.cpq";
+    {
+        ArchiveWriter writer(path, ArchiveKind::Aqp);
+        std::vector<uint8_t> payload(20, 1);
+        for (uint64_t k = 0; k < 3000; ++k) {
+            ArchiveEntry entry;
+            entry.key = k;
+            entry.level = uint16_t(k / 1000);
+            payload[0] = uint8_t(k);
+            writer.add_node(entry, payload.data(), payload.size());
+        }
+        writer.finish(std::vector<uint8_t>(16, 0));
+    }
+    std::vector<uint8_t> file = test::read_file(path);
+    ArchiveHeader header;
+    ASSERT_EQ(parse_archive_header(file.data(), file.size(), header), "");
+    uint64_t prefix_size = header.index_offset + header.index_size;
+    ASSERT_GT(prefix_size, kPrefixProbeBytes);
+    test::TestHttpServer server(path, "big");
+    server.start();
+    for (int mode = 0; mode < 3; ++mode) {
+        std::unique_ptr<NodeSource> source;
+        if (mode == 0) source = std::make_unique<LocalFileSource>(path);
+        if (mode == 1) source = std::make_unique<HttpSource>(server.base_url());
+        if (mode == 2) source = std::make_unique<HttpSource>(server.file_url());
+        SCOPED_TRACE(source->describe());
+        size_t before = server.requests();
+        std::vector<uint8_t> prefix = fetch_prefix(*source, 1);
+        ASSERT_GE(prefix.size(), prefix_size);
+        EXPECT_TRUE(std::equal(prefix.begin(), prefix.end(), file.begin()));
+        std::vector<ArchiveEntry> entries;
+        EXPECT_EQ(parse_archive_index(header, prefix.data() + header.index_offset, header.index_size, entries), "");
+        EXPECT_EQ(entries.size(), 3000u);
+        size_t requests = server.requests() - before;
+        if (mode == 1) {
+            EXPECT_EQ(requests, 1u);  // the /prefix route: one request
+        } else if (mode == 2) {
+            EXPECT_EQ(requests, 2u);  // the probe, then the rest
+        }
+    }
+}

@@ -5,7 +5,9 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <csignal>
 #include <sys/wait.h>
+#include <unistd.h>
 
 #include "base/atomic_file.h"
 #include "mesh/generators.h"
@@ -152,4 +154,83 @@ TEST(Cli, VerifyRejectsCorruptTruncatedAndForeignFiles) {
     expect_failure("verify " + header.string(), "header.cpq");
 
     expect_failure("verify " + in.string(), "not a catpaq dataset");
+}
+
+namespace {
+
+// A `catpaq serve` subprocess on a free port, stopped (SIGTERM) when destroyed.
+class ServerProcess {
+public:
+    explicit ServerProcess(const fs::path& root) {
+        log_ = scratch() / ("serve_" + std::to_string(counter_++) + ".log");
+        pid_ = fork();
+        if (pid_ == 0) {
+            FILE* out = freopen(log_.c_str(), "w", stdout);
+            (void)out;
+            dup2(fileno(stdout), fileno(stderr));
+            std::string bin = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq";
+            execl(bin.c_str(), bin.c_str(), "serve", "--root", root.c_str(), "--port", "0", (char*)nullptr);
+            _exit(127);
+        }
+        for (int i = 0; i < 200 && url_.empty(); ++i) {
+            usleep(50000);
+            std::string text = read_file(log_.string());
+            auto at = text.find("http://");
+            if (text.find("serving") != std::string::npos && at != std::string::npos)
+                url_ = text.substr(at, text.find_first_of(" \n", at) - at);
+        }
+    }
+    ~ServerProcess() {
+        if (pid_ > 0) {
+            kill(pid_, SIGTERM);
+            int status = 0;
+            waitpid(pid_, &status, 0);
+        }
+    }
+    const std::string& url() const { return url_; }
+
+private:
+    static inline int counter_ = 0;
+    pid_t pid_ = -1;
+    fs::path log_;
+    std::string url_;
+};
+
+}  // namespace
+
+TEST(Cli, RenderOverHttpFromTheServerEqualsRenderFromTheLocalFile) {
+    fs::path dir = scratch() / "served";
+    fs::create_directories(dir);
+    fs::path dataset = dir / "bunny.cpq";
+    ToolRun c = run("convert " + std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply -o " + dataset.string() + " --quiet");
+    ASSERT_EQ(c.status, 0) << c.output;
+    ServerProcess server(dir);
+    ASSERT_FALSE(server.url().empty()) << "server did not start";
+    fs::path local = scratch() / "frames_local", remote = scratch() / "frames_http";
+    ToolRun a = run("render " + dataset.string() + " --orbit 3 --size 200x150 --out " + local.string());
+    ASSERT_EQ(a.status, 0) << a.output;
+    ToolRun b = run("render " + server.url() + "api/datasets/bunny --orbit 3 --size 200x150 --out " + remote.string() +
+                    " --stats " + (remote / "stats.jsonl").string());
+    ASSERT_EQ(b.status, 0) << b.output;
+    for (int i = 0; i < 3; ++i) {
+        char name[32];
+        std::snprintf(name, sizeof name, "frame_%04d.png", i);
+        std::string x = read_file((local / name).string()), y = read_file((remote / name).string());
+        EXPECT_GT(x.size(), 1000u);
+        EXPECT_EQ(x, y) << name << ": the HTTP render differs from the local one";
+    }
+    std::string stats = read_file((remote / "stats.jsonl").string());
+    EXPECT_NE(stats.find("\"certified_error_px\""), std::string::npos);
+    EXPECT_NE(stats.find("\"converged\":true"), std::string::npos);
+}
+
+TEST(Cli, RenderRefusesABadDatasetAndBadOptions) {
+    expect_failure("render " + (scratch() / "absent.cpq").string(), "absent.cpq");
+    expect_failure("render http://127.0.0.1:1/api/datasets/none --orbit 1", "127.0.0.1:1");
+    fs::path in = scratch() / "r.ply", out = scratch() / "r.cpq";
+    write_ply(in.string(), make_sphere(500, 1));
+    ASSERT_EQ(run("convert " + in.string() + " -o " + out.string() + " --quiet").status, 0);
+    expect_failure("render " + out.string() + " --size 10x10", "--size");
+    expect_failure("render " + out.string() + " --background 300,0,0", "--background");
+    expect_failure("render " + out.string() + " --camera-path " + in.string(), "r.ply");
 }

@@ -256,6 +256,7 @@ private:
     };
 
     void fetch_loop();
+    void fetch_iterations();
     void decode_loop();
     uint64_t apply_commands();  // returns the command sequence number it saw
     void dispatch();
