@@ -21,6 +21,7 @@ const Command kCommands[] = {
     {"render", "render a dataset headless (streaming) to PNG frames and statistics", catpaq::cmd_render},
     {"serve", "serve datasets over HTTP (docs/http-api.md)", catpaq::cmd_serve},
     {"verify", "check a dataset's invariants and measure its error", catpaq::cmd_verify},
+    {"view", "open a dataset in a desktop window (orbit, pan, zoom, fly-to)", catpaq::cmd_view},
 };
 
 void usage(FILE* out) {

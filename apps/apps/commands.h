@@ -7,5 +7,6 @@ int cmd_convert(int argc, char** argv);
 int cmd_verify(int argc, char** argv);
 int cmd_serve(int argc, char** argv);
 int cmd_render(int argc, char** argv);
+int cmd_view(int argc, char** argv);
 
 }  // namespace catpaq

@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstring>
 
-#include "catp/distance.h"
 #include "catp/simplify.h"
 #include "common_codec/barycentric.h"
 #include "common_codec/octahedral.h"
@@ -151,19 +150,173 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, Fragm
     }
 }
 
+namespace {
+
+// Closest point on triangle (a, b, c) to p (Ericson, Real-Time Collision Detection 5.1.5);
+// returns the squared distance.
+double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    auto sub = [](const Vec3d& x, const Vec3d& y) { return Vec3d{x[0] - y[0], x[1] - y[1], x[2] - y[2]}; };
+    auto dot = [](const Vec3d& x, const Vec3d& y) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; };
+    auto at = [&](double v, double w) {
+        Vec3d q = {a[0] + v * (b[0] - a[0]) + w * (c[0] - a[0]), a[1] + v * (b[1] - a[1]) + w * (c[1] - a[1]),
+                   a[2] + v * (b[2] - a[2]) + w * (c[2] - a[2])};
+        Vec3d d = sub(p, q);
+        return dot(d, d);
+    };
+    Vec3d ab = sub(b, a), ac = sub(c, a), ap = sub(p, a);
+    double d1 = dot(ab, ap), d2 = dot(ac, ap);
+    if (d1 <= 0 && d2 <= 0) return at(0, 0);
+    Vec3d bp = sub(p, b);
+    double d3 = dot(ab, bp), d4 = dot(ac, bp);
+    if (d3 >= 0 && d4 <= d3) return at(1, 0);
+    double vc = d1 * d4 - d3 * d2;
+    if (vc <= 0 && d1 >= 0 && d3 <= 0) return at(d1 / (d1 - d3), 0);
+    Vec3d cp = sub(p, c);
+    double d5 = dot(ab, cp), d6 = dot(ac, cp);
+    if (d6 >= 0 && d5 <= d6) return at(0, 1);
+    double vb = d5 * d2 - d1 * d6;
+    if (vb <= 0 && d2 >= 0 && d6 <= 0) return at(0, d2 / (d2 - d6));
+    double va = d3 * d6 - d5 * d4;
+    if (va <= 0 && (d4 - d3) >= 0 && (d5 - d6) >= 0) {
+        double w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return at(1 - w, w);
+    }
+    double denom = 1.0 / (va + vb + vc);
+    return at(vb * denom, vc * denom);
+}
+
+// Distance from points to a small triangle mesh through a uniform grid of its triangles' boxes.
+// (CGAL's AABB tree took half of the converter's time here: a diamond has a few thousand
+// triangles and each query lies close to the surface, which a grid answers in a cell or two.)
+class GridDistance {
+public:
+    GridDistance(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices)
+        : positions_(positions), indices_(indices) {
+        size_t triangles = indices.size() / 3;
+        for (int i = 0; i < 3; ++i) {
+            lo_[i] = 1e300;
+            hi_[i] = -1e300;
+        }
+        for (uint32_t v : indices)
+            for (int i = 0; i < 3; ++i) {
+                lo_[i] = std::min(lo_[i], positions[v][i]);
+                hi_[i] = std::max(hi_[i], positions[v][i]);
+            }
+        double extent = std::max({hi_[0] - lo_[0], hi_[1] - lo_[1], hi_[2] - lo_[2], 1e-9});
+        // Cells of about two mean edge lengths (a surface fills few of them, each holding a few
+        // triangles), at most 128 per axis.
+        double edges = 0;
+        for (size_t t = 0; t < triangles; ++t)
+            for (int k = 0; k < 3; ++k) {
+                const Vec3d &a = positions[indices[3 * t + k]], &b = positions[indices[3 * t + (k + 1) % 3]];
+                edges += std::sqrt((a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]));
+            }
+        double mean_edge = triangles ? edges / double(3 * triangles) : extent;
+        cell_ = std::max(extent / 128.0, 2.0 * mean_edge) * 1.0000001;
+        for (int i = 0; i < 3; ++i) dims_[i] = std::max(1, int((hi_[i] - lo_[i]) / cell_) + 1);
+        std::vector<uint32_t> counts(size_t(dims_[0]) * dims_[1] * dims_[2] + 1, 0);
+        auto for_cells = [&](size_t t, auto&& f) {
+            int a[3], b[3];
+            for (int i = 0; i < 3; ++i) {
+                double mn = 1e300, mx = -1e300;
+                for (int k = 0; k < 3; ++k) {
+                    mn = std::min(mn, positions[indices[3 * t + k]][i]);
+                    mx = std::max(mx, positions[indices[3 * t + k]][i]);
+                }
+                a[i] = clamp_cell(i, mn);
+                b[i] = clamp_cell(i, mx);
+            }
+            for (int z = a[2]; z <= b[2]; ++z)
+                for (int y = a[1]; y <= b[1]; ++y)
+                    for (int x = a[0]; x <= b[0]; ++x) f(cell_index(x, y, z));
+        };
+        spheres_.resize(triangles);
+        for (size_t t = 0; t < triangles; ++t) {
+            const Vec3d &a = positions[indices[3 * t]], &b = positions[indices[3 * t + 1]], &c = positions[indices[3 * t + 2]];
+            std::array<double, 4>& sphere = spheres_[t];
+            for (int i = 0; i < 3; ++i) sphere[i] = (a[i] + b[i] + c[i]) / 3.0;
+            sphere[3] = 0;
+            for (const Vec3d* q : {&a, &b, &c}) {
+                double d = std::sqrt(((*q)[0] - sphere[0]) * ((*q)[0] - sphere[0]) + ((*q)[1] - sphere[1]) * ((*q)[1] - sphere[1]) +
+                                     ((*q)[2] - sphere[2]) * ((*q)[2] - sphere[2]));
+                sphere[3] = std::max(sphere[3], d * 1.000001);
+            }
+        }
+        for (size_t t = 0; t < triangles; ++t) for_cells(t, [&](size_t c) { counts[c + 1]++; });
+        for (size_t c = 1; c < counts.size(); ++c) counts[c] += counts[c - 1];
+        start_ = counts;
+        items_.resize(counts.back());
+        for (size_t t = 0; t < triangles; ++t) for_cells(t, [&](size_t c) { items_[counts[c]++] = uint32_t(t); });
+    }
+
+    double distance(const Vec3d& p) const {
+        if (indices_.empty()) return 0.0;
+        int c[3];
+        for (int i = 0; i < 3; ++i) c[i] = clamp_cell(i, p[i]);
+        double best = 1e300;
+        // Rings of cells around p's cell. Every triangle not yet seen before ring r is at least
+        // margin + (r - 1) cells away, margin being p's distance to the faces of its own cell
+        // (0 if p lies outside the grid): stop once the best found is closer than that.
+        double margin = 1e300;
+        for (int i = 0; i < 3; ++i) {
+            double in_cell = p[i] - (lo_[i] + c[i] * cell_);
+            margin = std::min({margin, in_cell, cell_ - in_cell});
+        }
+        margin = std::max(0.0, margin);
+        for (int r = 0; r <= std::max({dims_[0], dims_[1], dims_[2]}); ++r) {
+            if (r > 0 && best < 1e300 && std::sqrt(best) <= margin + double(r - 1) * cell_) break;
+            for (int z = c[2] - r; z <= c[2] + r; ++z)
+                for (int y = c[1] - r; y <= c[1] + r; ++y)
+                    for (int x = c[0] - r; x <= c[0] + r; ++x) {
+                        if (std::max({std::abs(x - c[0]), std::abs(y - c[1]), std::abs(z - c[2])}) != r) continue;
+                        if (x < 0 || y < 0 || z < 0 || x >= dims_[0] || y >= dims_[1] || z >= dims_[2]) continue;
+                        size_t cell = cell_index(x, y, z);
+                        for (uint32_t k = start_[cell]; k < start_[cell + 1]; ++k) {
+                            uint32_t t = items_[k];
+                            // Bounding-sphere lower bound first: most triangles of a cell are
+                            // farther than the best already found.
+                            const std::array<double, 4>& sphere = spheres_[t];
+                            double dx = p[0] - sphere[0], dy = p[1] - sphere[1], dz = p[2] - sphere[2];
+                            double gap = std::sqrt(dx * dx + dy * dy + dz * dz) - sphere[3];
+                            if (gap > 0 && gap * gap >= best) continue;
+                            best = std::min(best, point_triangle_distance2(p, positions_[indices_[3 * t]],
+                                                                           positions_[indices_[3 * t + 1]],
+                                                                           positions_[indices_[3 * t + 2]]));
+                        }
+                    }
+        }
+        return std::sqrt(best);
+    }
+
+private:
+    int clamp_cell(int axis, double v) const { return std::max(0, std::min(dims_[axis] - 1, int((v - lo_[axis]) / cell_))); }
+    size_t cell_index(int x, int y, int z) const { return (size_t(z) * dims_[1] + y) * dims_[0] + x; }
+
+    const std::vector<Vec3d>& positions_;
+    const std::vector<uint32_t>& indices_;
+    double lo_[3], hi_[3], cell_ = 1;
+    int dims_[3] = {1, 1, 1};
+    std::vector<uint32_t> start_, items_;
+    std::vector<std::array<double, 4>> spheres_;  // per triangle: centroid and radius
+};
+
+}  // namespace
+
 // Hausdorff-style distance between the gathered surface and its simplification, both ways:
 // removed vertices to the simplified surface, and the simplified triangles' centroids and edge
-// midpoints to the gathered surface. (The quadric cost of the simplifier is an estimate, not a
-// bound: measured here so the stored errors can be trusted by the cut engine.)
+// midpoints to the gathered surface. (The simplifier's quadric cost is a mean, not a bound:
+// measured here so the stored errors can be trusted by the cut engine.)
 double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified) {
     if (simplified.size() == gathered.indices.size()) return 0.0;
     std::vector<uint8_t> kept(gathered.positions.size(), 0);
     for (uint32_t v : simplified) kept[v] = 1;
-    SurfaceDistance to_simplified(gathered.positions, simplified);
     double error = 0;
-    for (size_t v = 0; v < gathered.positions.size(); ++v)
-        if (!kept[v]) error = std::max(error, to_simplified.distance(gathered.positions[v]));
-    SurfaceDistance to_gathered(gathered.positions, gathered.indices);
+    {
+        GridDistance to_simplified(gathered.positions, simplified);
+        for (size_t v = 0; v < gathered.positions.size(); ++v)
+            if (!kept[v]) error = std::max(error, to_simplified.distance(gathered.positions[v]));
+    }
+    GridDistance to_gathered(gathered.positions, gathered.indices);
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const Vec3d &a = gathered.positions[simplified[i]], &b = gathered.positions[simplified[i + 1]],
                     &c = gathered.positions[simplified[i + 2]];

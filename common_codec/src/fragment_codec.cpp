@@ -64,9 +64,10 @@
 // w3 in [0, 463 - w1 - w2]). The geometric normal predictor sums, per vertex, the (integer)
 // cross products of its triangles in (a, b, c) space, maps the sum by M and projects it to the
 // octahedral code in double arithmetic, rounding half up (vertices with a zero sum take the
-// previous vertex's normal); where a gate vertex's parallelogram prediction agrees within 24 in
-// both coordinates, the average of the two (rounded down) is used. Normal and colour residuals
-// wrap modulo 256.
+// previous vertex's normal). (Averaging it with the neighbours' parallelogram where both agree
+// saves about 0.5 bit per vertex on the bunny but chains every vertex to its predecessors and
+// costs about 7% of the decoding speed, so it is not done.) Normal and colour residuals wrap
+// modulo 256.
 //
 // Residual values: zig-zag mapped z; symbol z for z < 8, otherwise, with k = floor(log2 z),
 // symbol 8 + 2 (k - 3) + (bit k-1 of z) followed by the k - 1 low bits of z in the bit stream.
@@ -333,34 +334,29 @@ CATPAQ_RANS_INLINE bool project_oct(double x, double y, double z, int& cu, int& 
 
 // Cumulative barycentric coordinates (a, b, c) of a vertex (fourth entry unused, for alignment).
 using Coord = std::array<int32_t, 4>;
-// Sums of integer cross products (|sum| < 2^45 for any fragment: exact in doubles too). Each
-// product component is below 2^19 in magnitude (coordinates are <= 463), so while every vertex has
-// fewer than 4096 triangles (certainly when T < 4096) 32-bit sums cannot overflow; the decoder
-// then uses them (same values, half the memory traffic).
-template <class S>
-using NormalSumT = std::array<S, 4>;
-using NormalSum = NormalSumT<int64_t>;
-constexpr uint32_t kNormalSum32MaxTriangles = 4096;
+// Sums of integer cross products: each product component is below 2^19 in magnitude
+// (coordinates are <= 463), so |sum| < 2^42 for any fragment (exact in doubles too).
+using NormalSum = std::array<int64_t, 4>;
 
 // Area-weighted normals in (a, b, c) space: sum of the cross products of each vertex's triangles.
-template <class S>
-void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSumT<S>* acc) {
+void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSum* acc) {
     for (size_t t = 0; t < triangles; ++t) {
-        const uint32_t i = indices[3 * t], j = indices[3 * t + 1], k = indices[3 * t + 2];
+        uint32_t i = indices[3 * t], j = indices[3 * t + 1], k = indices[3 * t + 2];
         const Coord si = s[i], sj = s[j], sk = s[k];
-        const int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
-        const int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
-        const S n[4] = {S(e1y * e2z - e1z * e2y), S(e1z * e2x - e1x * e2z), S(e1x * e2y - e1y * e2x), 0};
-        for (int c = 0; c < 4; ++c) acc[i][size_t(c)] += n[c];
-        for (int c = 0; c < 4; ++c) acc[j][size_t(c)] += n[c];
-        for (int c = 0; c < 4; ++c) acc[k][size_t(c)] += n[c];
+        int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
+        int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
+        int64_t nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+        for (uint32_t v : {i, j, k}) {
+            acc[v][0] += nx;
+            acc[v][1] += ny;
+            acc[v][2] += nz;
+        }
     }
 }
 
 // Predicted normal of a vertex under the geometric predictor; `prev_u/v` is the fallback. M n is
-// exact in doubles (|m| <= 128, |n| < 2^45 for the largest fragments).
-template <class S>
-CATPAQ_RANS_INLINE void geometric_prediction(const NormalSumT<S>& n, const std::array<int8_t, 9>& m, int prev_u,
+// exact in doubles (|m| <= 128 and |n| < 2^42, so |M n| < 2^51).
+CATPAQ_RANS_INLINE void geometric_prediction(const NormalSum& n, const std::array<int8_t, 9>& m, int prev_u,
                                              int prev_v, int& pu, int& pv) {
     const double n0 = double(n[0]), n1 = double(n[1]), n2 = double(n[2]);
     double x = double(m[0]) * n0 + double(m[1]) * n1 + double(m[2]) * n2;
@@ -370,16 +366,6 @@ CATPAQ_RANS_INLINE void geometric_prediction(const NormalSumT<S>& n, const std::
         pu = prev_u;
         pv = prev_v;
     }
-}
-
-// The geometric normal predictor refined by the parallelogram of the neighbours' normals: for a
-// vertex created at a gate, where both agree within kBlendRange (per oct coordinate), their
-// average (rounded down).
-constexpr int kBlendRange = 24;
-CATPAQ_RANS_INLINE void blend_normal(bool gate, int qu, int qv, int& pu, int& pv) {
-    bool blend = gate & (std::abs(pu - qu) < kBlendRange) & (std::abs(pv - qv) < kBlendRange);
-    pu = blend ? (pu + qu) >> 1 : pu;
-    pv = blend ? (pv + qv) >> 1 : pv;
 }
 
 uint16_t read_u16(const uint8_t* p) { return uint16_t(p[0] | (p[1] << 8)); }
@@ -463,9 +449,6 @@ void emit_normals(const EncoderState& st, int mode, const std::vector<NormalSum>
         if (mode == kNormalGeometric) {
             const PackedVertex& prev = st.verts[v == 0 ? V : v - 1];
             geometric_prediction((*acc)[v], m, normal_u(prev), normal_v(prev), pu, pv);
-            int qu = std::clamp(normal_u(st.verts[p.a]) + normal_u(st.verts[p.b]) - normal_u(st.verts[p.c]), -127, 127);
-            int qv = std::clamp(normal_v(st.verts[p.a]) + normal_v(st.verts[p.b]) - normal_v(st.verts[p.c]), -127, 127);
-            blend_normal(p.a != p.c, qu, qv, pu, pv);
         } else if (mode == kNormalAverage) {
             pu = (normal_u(st.verts[p.a]) + normal_u(st.verts[p.b])) >> 1;
             pv = (normal_v(st.verts[p.a]) + normal_v(st.verts[p.b])) >> 1;
@@ -903,7 +886,6 @@ struct Workspace {
     std::vector<Coord> coords;
     std::vector<int8_t> nu, nv;
     std::vector<NormalSum> acc;
-    std::vector<NormalSumT<int32_t>> acc32;
     std::vector<std::array<uint8_t, 4>> rgb;
     std::array<rans::DecodeTable, kStreamCount> tables;
 };
@@ -1146,29 +1128,18 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
     rans::Decoder dec = io;
     const rans::TableView tu(ws.tables[kStreamNormU]), tv(ws.tables[kStreamNormV]);
     if (normal_mode == kNormalGeometric) {
-        auto run = [&](auto* acc) __attribute__((always_inline)) {
-            accumulate_normals(indices, T, ws.coords.data(), acc);
-            int prev_u = 0, prev_v = 0;
-            for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
-                int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
-                const Pred q = pred[v];
-                int pu, pv;
-                geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
-                int qu = std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127);
-                int qv = std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127);
-                blend_normal(q.a != q.c, qu, qv, pu, pv);
-                prev_u = int8_t(uint8_t(pu + ru));
-                prev_v = int8_t(uint8_t(pv + rv));
-                nu[v] = int8_t(prev_u), nv[v] = int8_t(prev_v);
-            });
-        };
-        if (T < kNormalSum32MaxTriangles) {
-            ws.acc32.assign(V, NormalSumT<int32_t>{0, 0, 0, 0});
-            run(ws.acc32.data());
-        } else {
-            ws.acc.assign(V, NormalSum{0, 0, 0, 0});
-            run(ws.acc.data());
-        }
+        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
+        accumulate_normals(indices, T, ws.coords.data(), ws.acc.data());
+        const NormalSum* acc = ws.acc.data();
+        int prev_u = 0, prev_v = 0;
+        for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+            int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
+            int pu, pv;
+            geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
+            prev_u = int8_t(uint8_t(pu + ru));
+            prev_v = int8_t(uint8_t(pv + rv));
+            nu[v] = int8_t(prev_u), nv[v] = int8_t(prev_v);
+        });
     } else if (normal_mode == kNormalAverage) {
         for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
             const Pred q = pred[v];

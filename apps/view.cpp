@@ -1,0 +1,65 @@
+// catpaq view: open a dataset (local path or URL) in a desktop window with streaming, orbit, pan,
+// zoom, fly-to on a picked point and a statistics overlay (client/viewer.h).
+#include <cstdio>
+#include <string>
+
+#include "apps/commands.h"
+#include "base/error.h"
+#include "base/options.h"
+#include "client/viewer.h"
+
+namespace catpaq {
+
+static const char* kViewUsage =
+    "usage: catpaq view DATASET [options]\n"
+    "  DATASET is a local .cpq file, a server URL (http://HOST:PORT/api/datasets/NAME) or the URL\n"
+    "  of a .cpq file on any static web server. Needs a display (X11); without one use\n"
+    "  `catpaq render`.\n"
+    "options:\n"
+    "  --size WxH             window size (default 1280x800)\n"
+    "  --tolerance PX         screen-space error tolerance in pixels (default 1.5)\n"
+    "  --up y|z               the model's up axis for the initial camera (default z)\n"
+    "  --frames N             render N frames, then exit (for tests)\n"
+    "  --screenshot FILE.png  save the last frame (without the overlay); exits after --frames\n"
+    "                         frames, or 120 frames\n"
+    "controls:\n"
+    "  left drag: orbit   right or shift+left drag: pan   wheel: zoom\n"
+    "  double click: fly to the point under the cursor   P or F12: screenshot   H: overlay\n"
+    "  Escape: quit\n";
+
+static void parse_view_size(const std::string& text, int& w, int& h) {
+    if (std::sscanf(text.c_str(), "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 16384 || h > 16384)
+        fail("--size: '%s' is not WIDTHxHEIGHT between 16 and 16384", text.c_str());
+}
+
+int cmd_view(int argc, char** argv) {
+    Options options(argc, argv, kViewUsage);
+    if (options.help()) {
+        std::printf("%s", kViewUsage);
+        return 0;
+    }
+    if (options.positional().size() != 1) fail("expected one dataset (see --help)");
+    ViewerSettings settings;
+    settings.location = options.positional()[0];
+    if (options.has("size")) parse_view_size(options.get("size", ""), settings.width, settings.height);
+    settings.session.tolerance_px = options.number("tolerance", 1.5, 0.05, 1000);
+    std::string up = options.get("up", "z");
+    if (up == "y" || up == "Y") settings.up_axis = 1;
+    else if (up == "z" || up == "Z") settings.up_axis = 2;
+    else fail("--up: '%s' is not y or z", up.c_str());
+    settings.frames = int(options.integer("frames", 0, 1, 1 << 30));
+    settings.screenshot = options.get("screenshot", "");
+    options.finish();
+    if (settings.screenshot.size() && settings.frames == 0) settings.frames = 120;
+    if (settings.frames > 0) settings.vsync = false;  // scripted runs go as fast as they can
+
+    try {
+        DesktopViewer viewer(settings);
+        return viewer.run();
+    } catch (const NoDisplayError& e) {
+        std::fprintf(stderr, "catpaq view: %s\n", e.what());
+        return 1;
+    }
+}
+
+}  // namespace catpaq

@@ -1,0 +1,131 @@
+#pragma once
+// The desktop viewer (`catpaq view`): a GLFW window showing one streaming session.
+//
+// Controls: left drag orbits around the target, right drag (or shift + left drag) pans, the wheel
+// dollies towards the target, a double click flies to the point under the cursor (a ray cast on
+// the CPU against the triangles of the drawn cut, decoded exactly as the vertex shader does),
+// F12 or P saves a screenshot, Escape quits. A Dear ImGui overlay shows the session's statistics
+// and has a tolerance slider, light direction and background colour controls.
+//
+// The camera controller and the ray-triangle test are plain code without GL, testable alone.
+#include <array>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include <glm/glm.hpp>
+
+#include "base/error.h"
+#include "client/camera.h"
+#include "client/session.h"
+
+namespace catpaq {
+
+// An orbit camera: a target, a distance and two angles around the model's up axis.
+class OrbitController {
+public:
+    // up_axis: 1 (y up) or 2 (z up).
+    explicit OrbitController(int up_axis = 2);
+
+    // Frames the box [bmin, bmax]: target at its centre, its bounding sphere filling the view.
+    void frame_box(const glm::dvec3& bmin, const glm::dvec3& bmax, double fov_y_degrees, double aspect);
+
+    // Mouse motion in pixels (x right, y down).
+    void orbit(double dx_px, double dy_px);
+    // Moves the target (and the eye) so the point under the cursor follows it; `height_px` is the
+    // viewport height.
+    void pan(double dx_px, double dy_px, double height_px);
+    // Wheel steps: positive dollies towards the target (the distance shrinks geometrically).
+    void dolly(double steps);
+    // Starts an animation of the target towards `point` over `seconds`; the distance shrinks to
+    // `distance_factor` times the current distance from the eye to the point.
+    void fly_to(const glm::dvec3& point, double seconds = 0.5, double distance_factor = 0.5);
+    bool flying() const { return fly_.has_value(); }
+    // Advances the animation to time `now` (seconds, any clock).
+    void update(double now);
+
+    // The camera for a viewport of the given size (clip planes left unset).
+    Camera camera(int width, int height) const;
+
+    glm::dvec3 target() const { return target_; }
+    double distance() const { return distance_; }
+    double azimuth() const { return azimuth_; }
+    double elevation() const { return elevation_; }
+    void set_distance_limits(double min_distance, double max_distance);
+    double fov_y_degrees = 45;
+
+    // Unit vectors of the model frame: world up, and two horizontal axes.
+    glm::dvec3 up_vector() const { return basis_[2]; }
+    // Direction (unit) from angles around the up axis (radians), in world coordinates.
+    glm::dvec3 direction(double azimuth, double elevation) const;
+
+private:
+    glm::dvec3 eye_offset() const;  // eye - target
+
+    std::array<glm::dvec3, 3> basis_;  // horizontal a, horizontal b, up
+    glm::dvec3 target_{0, 0, 0};
+    double distance_ = 3;
+    double azimuth_ = -1.5707963267948966;  // looking along +b
+    double elevation_ = 0.4363323129985824;  // 25 degrees
+    double min_distance_ = 1e-9, max_distance_ = 1e300;
+    struct Fly {
+        glm::dvec3 from_target, to_target;
+        double from_distance, to_distance;
+        double start = -1, seconds;
+    };
+    std::optional<Fly> fly_;
+};
+
+// A ray: origin plus t * direction (direction need not be unit).
+struct Ray {
+    glm::dvec3 origin{0, 0, 0};
+    glm::dvec3 direction{0, 0, 1};
+};
+
+// The ray from the eye through pixel coordinates (x right, y down; pixel centres at +0.5).
+Ray pixel_ray(const Camera& camera, double px, double py);
+
+// Möller-Trumbore: the parameter t > t_min of the hit with triangle (a, b, c), double-sided.
+std::optional<double> intersect_triangle(const Ray& ray, const glm::dvec3& a, const glm::dvec3& b,
+                                         const glm::dvec3& c, double t_min = 0);
+
+// The nearest hit of the ray with the triangles the session draws (every drawn fragment decoded
+// on the CPU with decode_packed_vertex, as the shader does), in world coordinates.
+std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera& camera, const Ray& ray);
+
+struct ViewerSettings {
+    std::string location;           // dataset: local .cpq path or URL
+    SessionSettings session;
+    int width = 1280, height = 800;
+    int up_axis = 2;                // 1: y up, 2: z up
+    int frames = 0;                 // > 0: render this many frames, then exit
+    std::string screenshot;         // save the last frame here (PNG)
+    bool vsync = true;
+};
+
+// Thrown when no window can be opened (no display): the caller tells the user to render headless.
+class NoDisplayError : public Error {
+public:
+    using Error::Error;
+};
+
+class DesktopViewer {
+public:
+    // Opens the window, makes its context current, loads the dataset. Throws NoDisplayError if
+    // GLFW cannot initialise or create a window, Error for dataset problems.
+    explicit DesktopViewer(const ViewerSettings& settings);
+    ~DesktopViewer();
+    DesktopViewer(const DesktopViewer&) = delete;
+    DesktopViewer& operator=(const DesktopViewer&) = delete;
+
+    // Runs until the window closes, Escape, or the frame limit; returns the exit status.
+    int run();
+
+    struct Impl;
+
+private:
+    std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace catpaq

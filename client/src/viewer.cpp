@@ -1,0 +1,496 @@
+#include "client/viewer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+#include <epoxy/gl.h>
+// epoxy first: GLFW must not include the system GL header.
+#define GLFW_INCLUDE_NONE
+#include <GLFW/glfw3.h>
+#include <backends/imgui_impl_glfw.h>
+#include <backends/imgui_impl_opengl3.h>
+#include <imgui.h>
+
+#include "base/error.h"
+#include "catp/lattice.h"
+#include "client/image.h"
+#include "common_codec/packed_vertex.h"
+
+namespace catpaq {
+
+namespace {
+constexpr double kPi = 3.14159265358979323846;
+constexpr double kMaxElevation = 89.0 * kPi / 180.0;
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+// OrbitController
+
+OrbitController::OrbitController(int up_axis) {
+    if (up_axis == 1)
+        basis_ = {glm::dvec3(0, 0, 1), glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0)};  // z, x, y (z x x = y)
+    else
+        basis_ = {glm::dvec3(1, 0, 0), glm::dvec3(0, 1, 0), glm::dvec3(0, 0, 1)};
+}
+
+glm::dvec3 OrbitController::direction(double azimuth, double elevation) const {
+    return std::cos(elevation) * std::cos(azimuth) * basis_[0] + std::cos(elevation) * std::sin(azimuth) * basis_[1] +
+           std::sin(elevation) * basis_[2];
+}
+
+glm::dvec3 OrbitController::eye_offset() const { return distance_ * direction(azimuth_, elevation_); }
+
+void OrbitController::set_distance_limits(double min_distance, double max_distance) {
+    min_distance_ = std::max(min_distance, 1e-300);
+    max_distance_ = std::max(max_distance, min_distance_);
+    distance_ = std::clamp(distance_, min_distance_, max_distance_);
+}
+
+void OrbitController::frame_box(const glm::dvec3& bmin, const glm::dvec3& bmax, double fov_y, double aspect) {
+    fov_y_degrees = fov_y;
+    target_ = (bmin + bmax) * 0.5;
+    double radius = std::max(glm::length(bmax - bmin) * 0.5, 1e-12);
+    double half_fov = fov_y * kPi / 360.0;
+    double half_fov_x = std::atan(std::tan(half_fov) * aspect);
+    distance_ = radius / std::sin(std::min(half_fov, half_fov_x)) * 1.1;
+    set_distance_limits(radius * 1e-6, radius * 1e3);
+    fly_.reset();
+}
+
+void OrbitController::orbit(double dx_px, double dy_px) {
+    fly_.reset();
+    azimuth_ = std::remainder(azimuth_ - dx_px * 0.006, 2 * kPi);
+    elevation_ = std::clamp(elevation_ + dy_px * 0.006, -kMaxElevation, kMaxElevation);
+}
+
+void OrbitController::pan(double dx_px, double dy_px, double height_px) {
+    fly_.reset();
+    glm::dvec3 forward = -direction(azimuth_, elevation_);
+    glm::dvec3 right = glm::normalize(glm::cross(forward, basis_[2]));
+    glm::dvec3 cam_up = glm::cross(right, forward);
+    double units_per_px = 2.0 * distance_ * std::tan(fov_y_degrees * kPi / 360.0) / std::max(height_px, 1.0);
+    target_ += (-dx_px * right + dy_px * cam_up) * units_per_px;
+}
+
+void OrbitController::dolly(double steps) {
+    fly_.reset();
+    distance_ = std::clamp(distance_ * std::pow(0.85, steps), min_distance_, max_distance_);
+}
+
+void OrbitController::fly_to(const glm::dvec3& point, double seconds, double distance_factor) {
+    glm::dvec3 eye = target_ + eye_offset();
+    Fly f;
+    f.from_target = target_;
+    f.to_target = point;
+    f.from_distance = distance_;
+    f.to_distance = std::clamp(glm::length(point - eye) * distance_factor, min_distance_, max_distance_);
+    f.seconds = std::max(seconds, 1e-6);
+    fly_ = f;
+}
+
+void OrbitController::update(double now) {
+    if (!fly_) return;
+    if (fly_->start < 0) fly_->start = now;
+    double u = std::clamp((now - fly_->start) / fly_->seconds, 0.0, 1.0);
+    double s = u * u * (3 - 2 * u);  // smoothstep
+    target_ = fly_->from_target + (fly_->to_target - fly_->from_target) * s;
+    // Geometric interpolation of the distance: a steady zoom.
+    distance_ = fly_->from_distance * std::pow(fly_->to_distance / fly_->from_distance, s);
+    if (u >= 1) fly_.reset();
+}
+
+Camera OrbitController::camera(int width, int height) const {
+    Camera c;
+    c.target = target_;
+    c.eye = target_ + eye_offset();
+    c.up = basis_[2];
+    c.fov_y_degrees = fov_y_degrees;
+    c.width = std::max(width, 1);
+    c.height = std::max(height, 1);
+    return c;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Picking
+
+Ray pixel_ray(const Camera& camera, double px, double py) {
+    glm::dvec3 forward = camera.forward();
+    glm::dvec3 right = glm::normalize(glm::cross(forward, camera.up));
+    glm::dvec3 cam_up = glm::cross(right, forward);
+    double t = std::tan(camera.fov_y_degrees * kPi / 360.0);
+    double x = (2.0 * px / camera.width - 1.0) * t * camera.aspect();
+    double y = (1.0 - 2.0 * py / camera.height) * t;
+    return {camera.eye, forward + x * right + y * cam_up};
+}
+
+std::optional<double> intersect_triangle(const Ray& ray, const glm::dvec3& a, const glm::dvec3& b,
+                                         const glm::dvec3& c, double t_min) {
+    glm::dvec3 e1 = b - a, e2 = c - a;
+    glm::dvec3 p = glm::cross(ray.direction, e2);
+    double det = glm::dot(e1, p);
+    double scale = glm::length(e1) * glm::length(e2) * glm::length(ray.direction);
+    if (!(std::abs(det) > scale * 1e-14)) return std::nullopt;  // parallel or degenerate
+    double inv = 1.0 / det;
+    glm::dvec3 s = ray.origin - a;
+    double u = glm::dot(s, p) * inv;
+    if (u < 0 || u > 1) return std::nullopt;
+    glm::dvec3 q = glm::cross(s, e1);
+    double v = glm::dot(ray.direction, q) * inv;
+    if (v < 0 || u + v > 1) return std::nullopt;
+    double t = glm::dot(e2, q) * inv;
+    if (!(t > t_min)) return std::nullopt;
+    return t;
+}
+
+std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera& camera, const Ray& ray) {
+    const CatpMeta& meta = session.index().meta();
+    Camera cam = camera;
+    if (!cam.has_clip_planes())
+        cam.fit_clip_planes({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
+                            {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]});
+    FrameTransform transform = frame_transform(cam, meta);
+    // Work relative to the anchor (near the eye) so large coordinates keep their precision.
+    Ray local{ray.origin - transform.anchor_world, ray.direction};
+    double best = std::numeric_limits<double>::infinity();
+    std::vector<glm::dvec3> positions;
+    std::vector<uint8_t> valid;
+    for (const DrawItem& item : session.items()) {
+        const DiamondFragments* f = session.fragments(item.diamond_key);
+        if (!f) continue;
+        const FragmentMesh& frag = f->slots[item.slot];
+        if (frag.indices.empty()) continue;
+        Tetrahedron tet =
+            canonical_tetrahedron(diamond_tetrahedron(diamond_info(DiamondId{item.diamond_key}), item.slot));
+        std::array<LatticePoint, 4> corners = {tet[0], tet[1], tet[2], tet[3]};
+        positions.resize(frag.vertices.size());
+        valid.assign(frag.vertices.size(), 0);
+        for (size_t i = 0; i < frag.vertices.size(); ++i) {
+            DecodedVertex d;
+            if (!decode_packed_vertex(frag.vertices[i], corners, transform.anchor_times_grid, transform.scale, d))
+                continue;
+            positions[i] = glm::dvec3(d.position[0], d.position[1], d.position[2]);
+            valid[i] = 1;
+        }
+        for (size_t i = 0; i + 2 < frag.indices.size(); i += 3) {
+            uint32_t a = frag.indices[i], b = frag.indices[i + 1], c = frag.indices[i + 2];
+            if (a >= positions.size() || b >= positions.size() || c >= positions.size()) continue;
+            if (!valid[a] || !valid[b] || !valid[c]) continue;
+            std::optional<double> t = intersect_triangle(local, positions[a], positions[b], positions[c]);
+            if (t && *t < best) best = *t;
+        }
+    }
+    if (!std::isfinite(best)) return std::nullopt;
+    return ray.origin + best * ray.direction;
+}
+
+// ---------------------------------------------------------------------------------------------
+// DesktopViewer
+
+namespace {
+
+std::string glfw_error_text;
+
+void glfw_error_callback(int code, const char* description) {
+    char buf[512];
+    std::snprintf(buf, sizeof buf, "%s (GLFW error 0x%x)", description ? description : "?", code);
+    glfw_error_text = buf;
+}
+
+std::string human_bytes(uint64_t bytes) {
+    const char* units[] = {"B", "KiB", "MiB", "GiB", "TiB"};
+    double v = double(bytes);
+    int u = 0;
+    while (v >= 1024 && u < 4) {
+        v /= 1024;
+        ++u;
+    }
+    char buf[32];
+    std::snprintf(buf, sizeof buf, u ? "%.1f %s" : "%.0f %s", v, units[u]);
+    return buf;
+}
+
+}  // namespace
+
+struct DesktopViewer::Impl {
+    ViewerSettings settings;
+    bool glfw_initialised = false;
+    GLFWwindow* window = nullptr;
+    bool imgui_glfw = false, imgui_gl = false;
+    std::unique_ptr<StreamingSession> session;
+    OrbitController controller;
+    RenderSettings render;
+    float tolerance = 1.5f;
+    bool headlight = true;
+    float light_azimuth = 45, light_elevation = 45;  // degrees, in the model frame
+    bool show_overlay = true;
+
+    // Input state.
+    enum class Drag { None, Orbit, Pan } drag = Drag::None;
+    double last_x = 0, last_y = 0;
+    double last_click_time = -1, last_click_x = 0, last_click_y = 0;
+    bool pick_pending = false;
+    double pick_x = 0, pick_y = 0;  // window coordinates
+    bool screenshot_requested = false;
+    int screenshot_counter = 0;
+    std::string message;  // last status line (screenshot saved, nothing picked, ...)
+    double message_time = -1;
+
+    Camera last_camera;
+    SessionFrameStats stats;
+    RenderStats render_stats;
+    double frame_ms = 0;
+
+    explicit Impl(const ViewerSettings& s) : settings(s), controller(s.up_axis) {}
+    ~Impl();
+
+    void open();
+    void loop_frame(bool last);
+    void overlay();
+    void save_screenshot(const std::string& path, int width, int height);
+    void set_message(const std::string& m) {
+        message = m;
+        message_time = glfwGetTime();
+        std::fprintf(stderr, "view: %s\n", m.c_str());
+    }
+
+    static Impl& of(GLFWwindow* w) { return *static_cast<Impl*>(glfwGetWindowUserPointer(w)); }
+    static void on_mouse_button(GLFWwindow* w, int button, int action, int mods);
+    static void on_scroll(GLFWwindow* w, double dx, double dy);
+    static void on_key(GLFWwindow* w, int key, int scancode, int action, int mods);
+};
+
+DesktopViewer::Impl::~Impl() {
+    if (window) glfwMakeContextCurrent(window);
+    session.reset();  // GL objects go while the context is current
+    if (imgui_gl) ImGui_ImplOpenGL3_Shutdown();
+    if (imgui_glfw) ImGui_ImplGlfw_Shutdown();
+    if (ImGui::GetCurrentContext()) ImGui::DestroyContext();
+    if (window) glfwDestroyWindow(window);
+    if (glfw_initialised) glfwTerminate();
+}
+
+void DesktopViewer::Impl::on_mouse_button(GLFWwindow* w, int button, int action, int mods) {
+    Impl& v = of(w);
+    double x, y;
+    glfwGetCursorPos(w, &x, &y);
+    if (action == GLFW_RELEASE) {
+        v.drag = Drag::None;
+        return;
+    }
+    if (action != GLFW_PRESS) return;
+    if (ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureMouse) return;
+    v.last_x = x;
+    v.last_y = y;
+    if (button == GLFW_MOUSE_BUTTON_LEFT) {
+        double now = glfwGetTime();
+        if (now - v.last_click_time < 0.35 && std::abs(x - v.last_click_x) < 5 && std::abs(y - v.last_click_y) < 5) {
+            v.pick_pending = true;
+            v.pick_x = x;
+            v.pick_y = y;
+            v.last_click_time = -1;
+            v.drag = Drag::None;
+            return;
+        }
+        v.last_click_time = now;
+        v.last_click_x = x;
+        v.last_click_y = y;
+        v.drag = (mods & GLFW_MOD_SHIFT) ? Drag::Pan : Drag::Orbit;
+    } else if (button == GLFW_MOUSE_BUTTON_RIGHT || button == GLFW_MOUSE_BUTTON_MIDDLE) {
+        v.drag = Drag::Pan;
+    }
+}
+
+void DesktopViewer::Impl::on_scroll(GLFWwindow* w, double, double dy) {
+    if (ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureMouse) return;
+    of(w).controller.dolly(dy);
+}
+
+void DesktopViewer::Impl::on_key(GLFWwindow* w, int key, int, int action, int) {
+    if (action != GLFW_PRESS) return;
+    Impl& v = of(w);
+    if (key == GLFW_KEY_ESCAPE) {
+        glfwSetWindowShouldClose(w, GLFW_TRUE);
+        return;
+    }
+    if (ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureKeyboard) return;
+    if (key == GLFW_KEY_F12 || key == GLFW_KEY_P) v.screenshot_requested = true;
+    if (key == GLFW_KEY_H) v.show_overlay = !v.show_overlay;
+}
+
+void DesktopViewer::Impl::open() {
+    glfwSetErrorCallback(glfw_error_callback);
+    if (!glfwInit())
+        throw NoDisplayError("no display: use `catpaq render` for headless rendering (" + glfw_error_text + ")");
+    glfw_initialised = true;
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MAJOR, 3);
+    glfwWindowHint(GLFW_CONTEXT_VERSION_MINOR, 3);
+    glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
+    glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
+    glfwWindowHint(GLFW_DEPTH_BITS, 24);
+    std::string title = "catpaq view - " + settings.location;
+    window = glfwCreateWindow(settings.width, settings.height, title.c_str(), nullptr, nullptr);
+    if (!window)
+        throw NoDisplayError("cannot open an OpenGL 3.3 window (" + glfw_error_text +
+                             "): use `catpaq render` for headless rendering");
+    glfwMakeContextCurrent(window);
+    glfwSwapInterval(settings.vsync ? 1 : 0);
+    glfwSetWindowUserPointer(window, this);
+    // Our callbacks first: ImGui's (installed next) chain to them.
+    glfwSetMouseButtonCallback(window, on_mouse_button);
+    glfwSetScrollCallback(window, on_scroll);
+    glfwSetKeyCallback(window, on_key);
+
+    session = std::make_unique<StreamingSession>(settings.location, settings.session);
+    tolerance = float(settings.session.tolerance_px);
+    const CatpMeta& meta = session->index().meta();
+    int fbw, fbh;
+    glfwGetFramebufferSize(window, &fbw, &fbh);
+    controller.frame_box({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
+                         {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]}, 45,
+                         double(std::max(fbw, 1)) / double(std::max(fbh, 1)));
+    render.background = {0.12f, 0.13f, 0.15f, 1.0f};
+
+    IMGUI_CHECKVERSION();
+    ImGui::CreateContext();
+    ImGui::GetIO().IniFilename = nullptr;  // no imgui.ini in the working directory
+    ImGui::StyleColorsDark();
+    imgui_glfw = ImGui_ImplGlfw_InitForOpenGL(window, true);
+    imgui_gl = ImGui_ImplOpenGL3_Init("#version 330 core");
+    if (!imgui_glfw || !imgui_gl) fail("cannot initialise the Dear ImGui backends");
+}
+
+void DesktopViewer::Impl::save_screenshot(const std::string& path, int width, int height) {
+    std::vector<uint8_t> pixels(size_t(width) * size_t(height) * 4);
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
+    glReadBuffer(GL_BACK);
+    glPixelStorei(GL_PACK_ALIGNMENT, 1);
+    glReadPixels(0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, pixels.data());
+    // GL rows are bottom-up; PNG rows top-down. The window may have no alpha channel.
+    std::vector<uint8_t> flipped(pixels.size());
+    size_t row = size_t(width) * 4;
+    for (int y = 0; y < height; ++y)
+        std::copy_n(pixels.data() + size_t(height - 1 - y) * row, row, flipped.data() + size_t(y) * row);
+    for (size_t i = 3; i < flipped.size(); i += 4) flipped[i] = 255;
+    write_png(path, width, height, flipped);
+    set_message("saved " + path);
+}
+
+void DesktopViewer::Impl::overlay() {
+    ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
+    ImGui::SetNextWindowBgAlpha(0.75f);
+    if (ImGui::Begin("catpaq", nullptr, ImGuiWindowFlags_AlwaysAutoResize)) {
+        const SessionFrameStats& s = stats;
+        ImGui::Text("triangles      %llu", (unsigned long long)render_stats.triangles);
+        ImGui::Text("fragments      %zu", s.fragments);
+        ImGui::Text("nodes          %zu drawn, %zu refined", s.drawn_nodes, s.refined_nodes);
+        ImGui::Text("fetched        %s in %llu requests", human_bytes(s.bytes_fetched).c_str(),
+                    (unsigned long long)s.requests);
+        ImGui::Text("pending        %zu%s", s.pending, session->converged() ? " (converged)" : "");
+        ImGui::Text("GPU / CPU      %s / %s", human_bytes(s.gpu_bytes).c_str(), human_bytes(s.cpu_bytes).c_str());
+        ImGui::Text("cut            %.2f ms", s.cut_ms);
+        ImGui::Text("frame          %.1f ms", frame_ms);
+        ImGui::Text("certified err  %.3f px", s.certified_error_px);
+        ImGui::Separator();
+        if (ImGui::SliderFloat("tolerance px", &tolerance, 0.25f, 16.0f, "%.2f", ImGuiSliderFlags_Logarithmic))
+            session->set_tolerance(double(tolerance));
+        ImGui::Checkbox("headlight", &headlight);
+        if (!headlight) {
+            ImGui::SliderFloat("light azimuth", &light_azimuth, -180.0f, 180.0f, "%.0f deg");
+            ImGui::SliderFloat("light elevation", &light_elevation, -90.0f, 90.0f, "%.0f deg");
+        }
+        ImGui::ColorEdit3("background", render.background.data());
+        ImGui::Checkbox("wireframe", &render.wireframe);
+        ImGui::Separator();
+        ImGui::TextDisabled("drag: orbit  right/shift drag: pan  wheel: zoom");
+        ImGui::TextDisabled("double click: fly to  P/F12: screenshot  H: hide  Esc: quit");
+        if (message.size() && glfwGetTime() - message_time < 4) ImGui::Text("%s", message.c_str());
+    }
+    ImGui::End();
+}
+
+void DesktopViewer::Impl::loop_frame(bool last) {
+    double frame_start = glfwGetTime();
+    glfwPollEvents();
+    double x, y;
+    glfwGetCursorPos(window, &x, &y);
+    int win_w, win_h, fbw, fbh;
+    glfwGetWindowSize(window, &win_w, &win_h);
+    glfwGetFramebufferSize(window, &fbw, &fbh);
+    if (fbw <= 0 || fbh <= 0) {  // minimised
+        glfwWaitEventsTimeout(0.1);
+        return;
+    }
+    double sx = win_w > 0 ? double(fbw) / win_w : 1.0, sy = win_h > 0 ? double(fbh) / win_h : 1.0;
+    if (drag != Drag::None) {
+        double dx = (x - last_x) * sx, dy = (y - last_y) * sy;
+        if (drag == Drag::Orbit) controller.orbit(dx, dy);
+        else controller.pan(dx, dy, fbh);
+    }
+    last_x = x;
+    last_y = y;
+    if (pick_pending) {
+        pick_pending = false;
+        Ray ray = pixel_ray(last_camera, pick_x * sx, pick_y * sy);
+        if (std::optional<glm::dvec3> hit = pick_cut(*session, last_camera, ray)) {
+            controller.fly_to(*hit);
+            char buf[160];
+            std::snprintf(buf, sizeof buf, "fly to %.6g %.6g %.6g", hit->x, hit->y, hit->z);
+            set_message(buf);
+        } else {
+            set_message("nothing under the cursor");
+        }
+    }
+    controller.update(frame_start);
+
+    Camera camera = controller.camera(fbw, fbh);
+    stats = session->step(camera);
+    last_camera = camera;
+    if (headlight) {
+        render.light_direction = {0, 0, 0};
+    } else {
+        glm::dvec3 d = controller.direction(double(light_azimuth) * kPi / 180.0, double(light_elevation) * kPi / 180.0);
+        render.light_direction = {float(d.x), float(d.y), float(d.z)};
+    }
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+    glViewport(0, 0, fbw, fbh);
+    render_stats = session->draw(camera, render);
+    glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
+
+    if (screenshot_requested) {
+        screenshot_requested = false;
+        char name[64];
+        std::snprintf(name, sizeof name, "catpaq_view_%04d.png", screenshot_counter++);
+        save_screenshot(name, fbw, fbh);
+    }
+    if (last && settings.screenshot.size()) save_screenshot(settings.screenshot, fbw, fbh);
+
+    ImGui_ImplOpenGL3_NewFrame();
+    ImGui_ImplGlfw_NewFrame();
+    ImGui::NewFrame();
+    if (show_overlay) overlay();
+    ImGui::Render();
+    ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
+    glfwSwapBuffers(window);
+    frame_ms = (glfwGetTime() - frame_start) * 1000.0;
+}
+
+DesktopViewer::DesktopViewer(const ViewerSettings& settings) : impl_(std::make_unique<Impl>(settings)) {
+    impl_->open();
+}
+
+DesktopViewer::~DesktopViewer() = default;
+
+int DesktopViewer::run() {
+    Impl& v = *impl_;
+    int limit = v.settings.frames;
+    for (int frame = 0; !glfwWindowShouldClose(v.window); ++frame) {
+        bool last = limit > 0 && frame + 1 >= limit;
+        v.loop_frame(last);
+        if (last) break;
+    }
+    return 0;
+}
+
+}  // namespace catpaq
