@@ -355,30 +355,11 @@ CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, co
             Tetrahedron tet = diamond_tetrahedron(info, key.slot);
             std::vector<ClipPlane> planes = tetrahedron_clip_planes(tet, 0xf);
             FragmentWelder welder(fragments[g]);
-            std::vector<ClipVertex> polygon;
-            std::vector<std::array<int, 3>> tris;
             for (size_t i = group_start[g]; i < group_start[g + 1]; ++i) {
-                uint32_t t = hits[i].triangle;
-                const uint32_t* f = &input.indices[3 * t];
-                std::array<Vec3d, 3> tri = {lattice[f[0]], lattice[f[1]], lattice[f[2]]};
-                clip_triangle(tri, planes, polygon);
-                if (polygon.size() < 3) continue;
-                tris.clear();
-                triangulate_polygon(polygon, tris);
-                uint32_t ids[16];
-                for (size_t k = 0; k < polygon.size() && k < 16; ++k) {
-                    const ClipVertex& cv = polygon[k];
-                    float n[3] = {0, 0, 0};
-                    float c[3] = {0, 0, 0};
-                    for (int j = 0; j < 3; ++j) {
-                        for (int a = 0; a < 3; ++a) {
-                            n[a] += float(cv.weights[j]) * normals[f[j]][a];
-                            c[a] += float(cv.weights[j]) * color_of(f[j])[a];
-                        }
-                    }
-                    ids[k] = welder.add(cv.position, n, c);
-                }
-                for (auto& tr : tris) welder.triangle(ids[tr[0]], ids[tr[1]], ids[tr[2]]);
+                const uint32_t* f = &input.indices[3 * hits[i].triangle];
+                welder.add_clipped({lattice[f[0]], lattice[f[1]], lattice[f[2]]},
+                                   {normals[f[0]], normals[f[1]], normals[f[2]]},
+                                   {color_of(f[0]), color_of(f[1]), color_of(f[2])}, planes);
             }
             progress.add(group_start[g + 1] - group_start[g]);
         });

@@ -1,6 +1,7 @@
 #include "fragment_build.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <cstring>
 
@@ -97,6 +98,34 @@ void FragmentWelder::append(const WorkFragment& other) {
         remap[v] = add(other.positions[v], other.normals[v], other.colors[v]);
     for (size_t i = 0; i + 2 < other.indices.size(); i += 3)
         triangle(remap[other.indices[i]], remap[other.indices[i + 1]], remap[other.indices[i + 2]]);
+}
+
+void FragmentWelder::add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                                 const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes) {
+    clip_triangle(tri, planes, polygon_);
+    if (polygon_.size() < 3) return;
+    pieces_.clear();
+    triangulate_polygon(polygon_, pieces_);
+    uint32_t ids[16];
+    assert(polygon_.size() <= 16);  // a triangle clipped by a tetrahedron has at most 7 corners
+    for (size_t k = 0; k < polygon_.size(); ++k) {
+        const ClipVertex& cv = polygon_[k];
+        int corner = -1;
+        for (int j = 0; j < 3; ++j)
+            if (cv.weights[j] == 1.0) corner = j;
+        if (corner >= 0) {
+            ids[k] = add(cv.position, normals[corner], colors[corner]);
+            continue;
+        }
+        float n[3] = {0, 0, 0}, c[3] = {0, 0, 0};
+        for (int j = 0; j < 3; ++j)
+            for (int a = 0; a < 3; ++a) {
+                n[a] += float(cv.weights[j]) * normals[j][a];
+                c[a] += float(cv.weights[j]) * colors[j][a];
+            }
+        ids[k] = add(cv.position, n, c);
+    }
+    for (auto& piece : pieces_) triangle(ids[piece[0]], ids[piece[1]], ids[piece[2]]);
 }
 
 static ClipPlane face_clip_plane(const LatticePoint& a, const LatticePoint& b, const LatticePoint& c,
@@ -373,38 +402,13 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
         // Faces opposite corners 3 and 2 are (A, B, r0) and (A, B, r1): the interior ones.
         slot_planes[s] = tetrahedron_clip_planes(t, (1u << 2) | (1u << 3));
     }
-    std::vector<ClipVertex> polygon;
-    std::vector<std::array<int, 3>> tris;
     for (size_t i = 0; i + 2 < simplified.indices.size(); i += 3) {
         const uint32_t* f = &simplified.indices[i];
         std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
-        for (int s = 0; s < n; ++s) {
-            if (slot_planes[s].empty()) continue;
-            clip_triangle(tri, slot_planes[s], polygon);
-            if (polygon.size() < 3) continue;
-            tris.clear();
-            triangulate_polygon(polygon, tris);
-            uint32_t ids[16];
-            for (size_t k = 0; k < polygon.size() && k < 16; ++k) {
-                const ClipVertex& cv = polygon[k];
-                // Original vertices keep their attributes exactly; new ones interpolate.
-                int corner = -1;
-                for (int j = 0; j < 3; ++j)
-                    if (cv.weights[j] == 1.0) corner = j;
-                if (corner >= 0) {
-                    ids[k] = welders[s].add(cv.position, gathered.normals[f[corner]], gathered.colors[f[corner]]);
-                    continue;
-                }
-                float nrm[3] = {0, 0, 0}, col[3] = {0, 0, 0};
-                for (int j = 0; j < 3; ++j)
-                    for (int a = 0; a < 3; ++a) {
-                        nrm[a] += float(cv.weights[j]) * gathered.normals[f[j]][a];
-                        col[a] += float(cv.weights[j]) * gathered.colors[f[j]][a];
-                    }
-                ids[k] = welders[s].add(cv.position, nrm, col);
-            }
-            for (auto& tr : tris) welders[s].triangle(ids[tr[0]], ids[tr[1]], ids[tr[2]]);
-        }
+        std::array<Vec3f, 3> normals = {gathered.normals[f[0]], gathered.normals[f[1]], gathered.normals[f[2]]};
+        std::array<Rgb8, 3> colors = {gathered.colors[f[0]], gathered.colors[f[1]], gathered.colors[f[2]]};
+        for (int s = 0; s < n; ++s)
+            if (!slot_planes[s].empty()) welders[s].add_clipped(tri, normals, colors, slot_planes[s]);
     }
     return error;
 }

@@ -37,6 +37,10 @@ public:
     void triangle(uint32_t a, uint32_t b, uint32_t c);
     // Appends a whole fragment (welding its vertices).
     void append(const WorkFragment& other);
+    // Clips triangle `tri` by `planes` and adds the pieces (triangulated without slivers). New
+    // vertices interpolate the corners' normals and colours; the corners keep theirs exactly.
+    void add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                     const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes);
 
 private:
     // Open addressing on vertex indices (a std::unordered_map allocated per insert and was a
@@ -45,6 +49,8 @@ private:
     void grow();
 
     WorkFragment& f_;
+    std::vector<ClipVertex> polygon_;  // scratch for add_clipped
+    std::vector<std::array<int, 3>> pieces_;
     std::vector<uint32_t> table_;  // vertex index + 1, 0 = empty
     size_t mask_ = 0;
 };
