@@ -31,6 +31,8 @@ static const char* kRenderUsage =
     "  --max-triangles N      triangle budget per frame\n"
     "  --gpu-budget SIZE      GPU bytes of the cut (e.g. 256M)\n"
     "  --cpu-budget SIZE      CPU bytes of the cut\n"
+    "  --gpu-cache SIZE       GPU buffer cache, cut plus recently used (default 512M)\n"
+    "  --compressed-cache SIZE  compressed nodes kept to re-decode evicted ones (default 256M)\n"
     "  --no-converge          one streaming step per frame (progressive, like a live view)\n"
     "                         instead of waiting until nothing is pending before each frame\n"
     "  --timeout SECONDS      longest wait for one frame to converge (default 120)\n"
@@ -99,6 +101,8 @@ int cmd_render(int argc, char** argv) {
         settings.budgets.max_primitives = uint64_t(options.integer("max-triangles", 0, 1, int64_t(1) << 40));
     if (options.has("gpu-budget")) settings.budgets.max_gpu_bytes = options.bytes("gpu-budget", 0);
     if (options.has("cpu-budget")) settings.budgets.max_cpu_bytes = options.bytes("cpu-budget", 0);
+    settings.gpu_cache_bytes = options.bytes("gpu-cache", settings.gpu_cache_bytes);
+    settings.compressed_cache_bytes = options.bytes("compressed-cache", settings.compressed_cache_bytes);
     bool converge = !options.flag("no-converge");
     double timeout = options.number("timeout", 120, 0.1, 86400);
     std::string out_dir = options.get("out", "");

@@ -24,6 +24,7 @@ StreamingSession::StreamingSession(const std::string& location, const SessionSet
         if (node != kNoNode) evict(node);
     });
     renderer_ = std::make_unique<CatpRenderer>(store_);
+    compressed_ = std::make_unique<CompressedCache>(settings.compressed_cache_bytes);
 }
 
 StreamingSession::~StreamingSession() {
@@ -41,8 +42,10 @@ void StreamingSession::evict(uint32_t node) {
 
 void StreamingSession::integrate(std::vector<FetchedNode>& arrived) {
     for (FetchedNode& f : arrived) {
+        supplied_.erase(f.key);
         if (!f.ok || !f.fragments || f.node == kNoNode) continue;  // failed: retried if still wanted
         const HierarchyNode& n = hierarchy_.node(f.node);
+        if (f.compressed) compressed_->insert(n.key, f.compressed, f.compressed->size());
         NodeBytes bytes;
         std::vector<uint32_t> counts;
         for (const HierarchyPart& part : n.parts) {
@@ -80,7 +83,16 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
 
     std::vector<FetchRequest> wanted;
     wanted.reserve(frame.requests.size());
-    for (const CutRequest& r : frame.requests) wanted.push_back(FetchRequest::of(hierarchy_.node(r.node)));
+    for (const CutRequest& r : frame.requests) {
+        const HierarchyNode& n = hierarchy_.node(r.node);
+        if (supplied_.count(n.key)) continue;
+        if (const auto* bytes = compressed_->get(n.key)) {  // evicted earlier: decode again, no fetch
+            fetcher_->supply(FetchRequest::of(n), *bytes);
+            supplied_.insert(n.key);
+            continue;
+        }
+        wanted.push_back(FetchRequest::of(n));
+    }
     fetcher_->request(wanted);
 
     // Keep the cut's fragments on the GPU; evict least recently used others past the budget.
@@ -115,7 +127,7 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
     s.requests = fs.transfers;
     s.pending = frame.requests.size();
     s.gpu_bytes = store_.gpu_bytes();
-    s.cpu_bytes = frame.stats.cpu_bytes;
+    s.cpu_bytes = frame.stats.cpu_bytes + compressed_->bytes();
     s.cut_ms = frame.stats.seconds * 1000.0;
     s.certified_error_px = frame.stats.certified_error_px;
     s.holes = frame.stats.holes;

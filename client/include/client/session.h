@@ -7,8 +7,10 @@
 #include <memory>
 #include <string>
 #include <unordered_map>
+#include <unordered_set>
 #include <vector>
 
+#include "client/cache.h"
 #include "client/camera.h"
 #include "client/catp_gpu.h"
 #include "client/cut_engine.h"
@@ -20,7 +22,8 @@ namespace catpaq {
 struct SessionSettings {
     double tolerance_px = 1.5;
     CutBudgets budgets;               // primitives, GPU and CPU bytes of the cut, requests
-    uint64_t gpu_cache_bytes = 512ull << 20;  // GPU store budget (cut + recently used)
+    uint64_t gpu_cache_bytes = 512ull << 20;         // GPU store budget (cut + recently used)
+    uint64_t compressed_cache_bytes = 256ull << 20;  // compressed nodes kept for re-decoding
     HttpSettings http;
     FetcherSettings fetcher;
 };
@@ -75,6 +78,9 @@ private:
     FragmentStore store_;
     std::unique_ptr<CatpRenderer> renderer_;
     std::unordered_map<uint32_t, std::shared_ptr<const DiamondFragments>> decoded_;
+    // Nodes evicted from the GPU and wanted again are decoded from here instead of refetched.
+    std::unique_ptr<CompressedCache> compressed_;
+    std::unordered_set<uint64_t> supplied_;  // handed to the fetcher, not arrived yet
     std::vector<DrawItem> items_;
     uint64_t prefix_bytes_ = 0;
     bool converged_ = false;
