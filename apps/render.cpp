@@ -154,16 +154,19 @@ int cmd_render(int argc, char** argv) {
             std::snprintf(name, sizeof name, "/frame_%04zu.png", i);
             write_png(out_dir + name, camera.width, camera.height, pixels);
         }
+        // While a node on screen has no data yet (a hole), nothing bounds the error: null.
+        char certified[32] = "null";
+        if (s.holes == 0) std::snprintf(certified, sizeof certified, "%.4f", s.certified_error_px);
         char line[1024];
         std::snprintf(line, sizeof line,
                       "{\"frame\":%zu,\"triangles\":%llu,\"fragments\":%zu,\"nodes_drawn\":%zu,\"nodes_refined\":%zu,"
                       "\"bytes_fetched\":%llu,\"requests\":%llu,\"pending\":%zu,\"gpu_bytes\":%llu,\"cpu_bytes\":%llu,"
-                      "\"cut_ms\":%.3f,\"draw_ms\":%.3f,\"frame_ms\":%.3f,\"steps\":%d,\"certified_error_px\":%.4f,"
+                      "\"cut_ms\":%.3f,\"draw_ms\":%.3f,\"frame_ms\":%.3f,\"steps\":%d,\"certified_error_px\":%s,"
                       "\"tolerance_px\":%.3f,\"converged\":%s}\n",
                       i, (unsigned long long)r.triangles, r.draws, s.drawn_nodes, s.refined_nodes,
                       (unsigned long long)s.bytes_fetched, (unsigned long long)s.requests, s.pending,
                       (unsigned long long)s.gpu_bytes, (unsigned long long)s.cpu_bytes, s.cut_ms, draw_ms,
-                      (now_seconds() - frame_start) * 1000.0, steps, s.certified_error_px, settings.tolerance_px,
+                      (now_seconds() - frame_start) * 1000.0, steps, certified, settings.tolerance_px,
                       session.converged() ? "true" : "false");
         stats_text += line;
         if (stats_path.empty()) std::fputs(line, stdout);

@@ -39,7 +39,9 @@ import json, sys
 rows = [json.loads(l) for l in open(sys.argv[1])]
 print("frame  triangles  fetched KiB  certified error (px)")
 for r in rows:
-    print(f"{r['frame']:5d} {r['triangles']:10d} {r['bytes_fetched']/1024:12.1f} {r['certified_error_px']:21.2f}")
+    error = r['certified_error_px']
+    error = 'not yet bounded' if error is None else f'{error:.2f}'
+    print(f"{r['frame']:5d} {r['triangles']:10d} {r['bytes_fetched']/1024:12.1f} {error:>21}")
 PY
 echo
 echo "done:"

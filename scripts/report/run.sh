@@ -1,0 +1,150 @@
+#!/usr/bin/env bash
+# Evaluation report: runs the catpaq tools, keeps their raw output in a temporary directory and
+# lets report.py write docs/RESULTS.md and docs/results/*.png from it.
+#
+# Usage: scripts/report/run.sh [--short]
+#   --short   quick run (under 3 minutes on 2 cores): build bench on 100k triangles only,
+#             render_bench bounded to 60 s (skipped if slower)
+# Environment: BUILD (default <repo>/build), PYTHON (default /usr/bin/python3, needs matplotlib),
+#              KEEP_RAW=1 keeps the raw outputs (path printed at the end).
+set -euo pipefail
+
+MODE=full
+for a in "$@"; do
+    case "$a" in
+        --short) MODE=short ;;
+        -h|--help) sed -n '2,10p' "$0"; exit 0 ;;
+        *) echo "run.sh: unknown option $a" >&2; exit 2 ;;
+    esac
+done
+
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+BUILD="${BUILD:-$ROOT/build}"
+PYTHON="${PYTHON:-/usr/bin/python3}"
+REPORT_PY="$ROOT/scripts/report/report.py"
+WORK="$(mktemp -d /tmp/catpaq-report.XXXXXX)"
+RAW="$WORK/raw"
+mkdir -p "$RAW" "$WORK/root" "$WORK/frames_orbit" "$WORK/frames_zoom"
+SERVER_PID=""
+
+cleanup() {
+    local rc=$?
+    if [[ -n "$SERVER_PID" ]] && kill -0 "$SERVER_PID" 2>/dev/null; then
+        kill "$SERVER_PID" 2>/dev/null || true
+        wait "$SERVER_PID" 2>/dev/null || true
+    fi
+    if [[ "${KEEP_RAW:-0}" == 1 ]]; then
+        echo "raw outputs kept in $WORK" >&2
+    else
+        rm -rf "$WORK"
+    fi
+    exit $rc
+}
+trap cleanup EXIT
+trap 'exit 130' INT TERM
+
+log() { printf '[report %s] %s\n' "$(date +%H:%M:%S)" "$*" >&2; }
+
+need() {  # need TARGET RELATIVE_PATH: build the binary if missing
+    if [[ ! -x "$BUILD/$2" ]]; then
+        log "building missing target $1"
+        cmake --build "$BUILD" --target "$1" >&2
+    fi
+}
+need catpaq apps/catpaq
+need codec_bench bench/codec/codec_bench
+need catp_build_bench bench/catp/catp_build_bench
+need render_bench bench/client/render_bench
+need catp_tests tests/catp/catp_tests
+
+CATPAQ="$BUILD/apps/catpaq"
+BUNNY="$ROOT/data/bunny.ply"
+T0=$(date +%s)
+
+# ---- machine -------------------------------------------------------------------------------
+{
+    echo "mode: $MODE"
+    echo "date: $(date -u '+%Y-%m-%d %H:%M:%S UTC')"
+    echo "cpu: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | sed 's/^ *//')"
+    echo "cores: $(nproc)"
+    echo "kernel: $(uname -sr)"
+    echo "memory: $(awk '/MemTotal/ {printf "%.1f GiB", $2/1048576}' /proc/meminfo)"
+    echo "git: $(git -C "$ROOT" rev-parse --short HEAD 2>/dev/null || echo unknown)$(git -C "$ROOT" diff --quiet 2>/dev/null || echo ' (dirty)')"
+} > "$RAW/machine.txt"
+
+# ---- (1) rate-distortion -------------------------------------------------------------------
+log "convert bunny"
+s=$(date +%s%N)
+"$CATPAQ" convert "$BUNNY" -o "$WORK/root/bunny.cpq" --quiet
+e=$(date +%s%N)
+echo "convert_seconds: $(( (e - s) / 1000000 ))e-3" >> "$RAW/machine.txt"
+stat -c %s "$WORK/root/bunny.cpq" > "$RAW/dataset_size.txt"
+"$CATPAQ" info "$BUNNY" > "$RAW/info.txt"
+
+log "verify --mesh"
+"$CATPAQ" verify "$WORK/root/bunny.cpq" --mesh "$BUNNY" > "$RAW/verify.txt" 2>&1 \
+    || { echo "verify_rc: $?" >> "$RAW/verify.txt"; }
+
+log "codec_bench"
+"$BUILD/bench/codec/codec_bench" > "$RAW/codec_bench.txt" 2>&1 \
+    || echo "codec_bench failed with status $?" >> "$RAW/codec_bench.txt"
+
+# ---- (2) build speed -----------------------------------------------------------------------
+if [[ $MODE == short ]]; then SIZES=100000; else SIZES=100000,1000000,10000000; fi
+log "catp_build_bench --sizes $SIZES"
+"$BUILD/bench/catp/catp_build_bench" --sizes "$SIZES" > "$RAW/build_bench.txt" 2>&1 \
+    || echo "catp_build_bench failed with status $?" >> "$RAW/build_bench.txt"
+
+# ---- hard cases ----------------------------------------------------------------------------
+log "hard cases"
+set +e
+timeout 600 "$BUILD/tests/catp/catp_tests" --gtest_filter='*Hard*' > "$RAW/hard.txt" 2>&1
+echo "$?" > "$RAW/hard_rc.txt"
+set -e
+
+# ---- (3) streaming -------------------------------------------------------------------------
+log "camera paths"
+"$PYTHON" "$REPORT_PY" paths --mesh "$BUNNY" --out "$WORK" > "$RAW/paths.txt"
+
+log "serve"
+"$CATPAQ" serve --root "$WORK/root" --port 0 --log-level warn > "$WORK/serve.log" 2>&1 &
+SERVER_PID=$!
+URL=""
+for _ in $(seq 1 100); do
+    URL=$(grep -o 'http://[0-9.]*:[0-9]*/' "$WORK/serve.log" 2>/dev/null | head -1 || true)
+    [[ -n "$URL" ]] && break
+    kill -0 "$SERVER_PID" 2>/dev/null || { cat "$WORK/serve.log" >&2; echo "server died" >&2; exit 1; }
+    sleep 0.1
+done
+[[ -n "$URL" ]] || { echo "server did not start" >&2; exit 1; }
+grep 'serving' "$WORK/serve.log" > "$RAW/serve.txt"
+curl -fsS "${URL}api/datasets" > "$RAW/datasets.json" || echo '{}' > "$RAW/datasets.json"
+
+for p in orbit zoom; do
+    log "render $p over HTTP ($URL)"
+    "$CATPAQ" render "${URL}api/datasets/bunny" --camera-path "$WORK/path_$p.json" \
+        --size 640x480 --tolerance 1.5 --no-converge \
+        --stats "$RAW/stream_$p.jsonl" --out "$WORK/frames_$p" > "$RAW/render_$p.txt" 2>&1
+done
+kill "$SERVER_PID" 2>/dev/null || true
+wait "$SERVER_PID" 2>/dev/null || true
+SERVER_PID=""
+
+# ---- (4) render throughput -----------------------------------------------------------------
+log "render_bench"
+set +e
+if [[ $MODE == short ]]; then
+    timeout 60 "$BUILD/bench/client/render_bench" > "$RAW/render_bench.txt" 2>&1
+else
+    "$BUILD/bench/client/render_bench" > "$RAW/render_bench.txt" 2>&1
+fi
+echo "$?" > "$RAW/render_bench_rc.txt"
+set -e
+
+T1=$(date +%s)
+echo "total_seconds: $((T1 - T0))" >> "$RAW/machine.txt"
+
+# ---- write the report ----------------------------------------------------------------------
+log "report.py"
+"$PYTHON" "$REPORT_PY" write --raw "$RAW" --work "$WORK" --docs "$ROOT/docs"
+log "done in $((T1 - T0)) s: $ROOT/docs/RESULTS.md"
