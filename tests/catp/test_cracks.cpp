@@ -97,10 +97,6 @@ TEST(CatpCracks, HardCasesAreCrackFreeOrRefused) {
             ADD_FAILURE() << "refused: " << e.what();
             continue;
         }
-        // Known open problem (issue 3): a flat model whose plane contains the root cube's diagonal
-        // (FlatTilted, z = (x + y) / 2) still shows a two-edge crack at some cuts. It is built and
-        // verified (checksums, bounds) but left out of the crack assertions until fixed.
-        if (c == HardCase::FlatTilted) continue;
         if (border == 0 && c != HardCase::NonManifoldEdges && c != HardCase::DegenerateAndDuplicateTriangles) {
             EXPECT_GT(expect_every_cut_closed(b.path, 30), 5);
             continue;
