@@ -26,6 +26,7 @@ static const char* kRenderUsage =
     "options:\n"
     "  --camera-path FILE     JSON camera path (see docs/ARCHITECTURE.md); default: an orbit\n"
     "  --orbit N              frames of the default orbit (default 8)\n"
+    "  --up y|z               the model's up axis, for the default orbit (default z)\n"
     "  --size WxH             image size (default 640x480; overrides the path's)\n"
     "  --tolerance PX         screen-space error tolerance in pixels (default 1.5)\n"
     "  --max-triangles N      triangle budget per frame\n"
@@ -92,6 +93,8 @@ int cmd_render(int argc, char** argv) {
     const std::string location = options.positional()[0];
     std::string path_file = options.get("camera-path", "");
     int orbit = int(options.integer("orbit", 8, 1, 100000));
+    std::string up = options.get("up", "z");
+    if (up != "y" && up != "z") fail("--up: '%s' is not y or z", up.c_str());
     int width = 640, height = 480;
     bool size_given = options.has("size");
     if (size_given) parse_size(options.get("size", ""), width, height);
@@ -115,10 +118,22 @@ int cmd_render(int argc, char** argv) {
     HeadlessGlContext context;
     StreamingSession session(location, settings);
     const CatpMeta& meta = session.index().meta();
-    CameraPath path = path_file.empty()
-                          ? orbit_path({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
-                                       {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]}, orbit, width, height)
-                          : load_camera_path(path_file);
+    CameraPath path;
+    if (!path_file.empty()) {
+        path = load_camera_path(path_file);
+    } else if (up == "z") {
+        path = orbit_path({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
+                          {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]}, orbit, width, height);
+    } else {
+        // A y-up model: orbit the box with y and z exchanged, then exchange them back.
+        path = orbit_path({meta.bounds_min[0], meta.bounds_min[2], meta.bounds_min[1]},
+                          {meta.bounds_max[0], meta.bounds_max[2], meta.bounds_max[1]}, orbit, width, height);
+        for (Camera& c : path.frames) {
+            std::swap(c.eye.y, c.eye.z);
+            std::swap(c.target.y, c.target.z);
+            c.up = {0, 1, 0};
+        }
+    }
     if (out_dir.size()) std::filesystem::create_directories(out_dir);
     std::string stats_text;
     std::unique_ptr<Framebuffer> framebuffer;

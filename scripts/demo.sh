@@ -32,7 +32,7 @@ echo "server: $url  (catalog: ${url}api/datasets, log: $log)"
 echo
 echo "== 4. render 8 views headless over HTTP (streaming, 1.5 px tolerance)"
 rm -rf "$out/frames"
-"$bin" render "${url}api/datasets/bunny" --orbit 8 --size 640x480 --out "$out/frames" \
+"$bin" render "${url}api/datasets/bunny" --orbit 8 --up y --size 640x480 --out "$out/frames" \
   --stats "$out/frames/stats.jsonl" --export-cut "$out/frames/last_cut.ply"
 /usr/bin/python3 - "$out/frames/stats.jsonl" <<'PY'
 import json, sys

@@ -232,6 +232,7 @@ TEST(Cli, RenderRefusesABadDatasetAndBadOptions) {
     ASSERT_EQ(run("convert " + in.string() + " -o " + out.string() + " --quiet").status, 0);
     expect_failure("render " + out.string() + " --size 10x10", "--size");
     expect_failure("render " + out.string() + " --background 300,0,0", "--background");
+    expect_failure("render " + out.string() + " --up x", "--up");
     expect_failure("render " + out.string() + " --camera-path " + in.string(), "r.ply");
 }
 
