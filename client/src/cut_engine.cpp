@@ -425,22 +425,28 @@ void CutEngine::coarsen_phase() {
         // A virtual node is in R only for its refined children's sake: once it has none, it goes.
         double e = has_data(n) ? keep_proj(n) : 0.0;
         if (e >= threshold) continue;
-        if (!is_resident(n)) {
-            // It must be drawn again: fetch it first (only for what the viewer can see).
-            if (in_view(n)) want(n, RequestReason::Coarsen, proj(n));
-            continue;
-        }
-        Totals before = totals_;
-        log.clear();
-        set_refined(n, false, &log);
-        if (!fits(before)) {
-            revert(log, 0);
-            continue;
-        }
-        frame_.stats.coarsenings++;
+        if (!try_coarsen(n, log)) continue;
         for (uint32_t p : parents(n))
             if (is_frontier(p)) work.push_back(p);
     }
+}
+
+// Coarsens frontier node n if its data is resident (it is drawn again) and the budgets still
+// hold; a node that is not resident is requested instead (only if the viewer can see it).
+bool CutEngine::try_coarsen(uint32_t n, std::vector<Op>& log) {
+    if (!is_resident(n)) {
+        if (in_view(n)) want(n, RequestReason::Coarsen, proj(n));
+        return false;
+    }
+    Totals before = totals_;
+    log.clear();
+    set_refined(n, false, &log);
+    if (!fits(before)) {
+        revert(log, 0);
+        return false;
+    }
+    frame_.stats.coarsenings++;
+    return true;
 }
 
 void CutEngine::enforce_budgets() {
@@ -456,18 +462,7 @@ void CutEngine::enforce_budgets() {
         uint32_t n = heap.back().second;
         heap.pop_back();
         if (!is_frontier(n)) continue;
-        if (!is_resident(n)) {
-            if (in_view(n)) want(n, RequestReason::Coarsen, proj(n));
-            continue;
-        }
-        Totals before = totals_;
-        log.clear();
-        set_refined(n, false, &log);
-        if (!fits(before)) {
-            revert(log, 0);
-            continue;
-        }
-        frame_.stats.coarsenings++;
+        if (!try_coarsen(n, log)) continue;
         for (uint32_t p : parents(n))
             if (is_frontier(p)) {
                 heap.push_back({keep_proj(p), p});

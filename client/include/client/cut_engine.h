@@ -279,6 +279,7 @@ private:
     void closure(uint32_t n, std::vector<uint32_t>& out);
     void want(uint32_t n, RequestReason reason, double priority);
     void coarsen_phase();
+    bool try_coarsen(uint32_t n, std::vector<Op>& log);
     void enforce_budgets();
     void refine_phase();
     bool make_room(double limit, std::vector<Op>& log, const Totals& before);
