@@ -20,6 +20,9 @@ static const char* kConvertUsage =
     "  --leaf-triangles N       target triangles per leaf fragment (default 2000)\n"
     "  --leaf-level L           force the leaf level of the diamond hierarchy\n"
     "  --threads N              worker threads (default: all cores)\n"
+    "  --memory SIZE            memory budget, e.g. 512M or 4G (default: half the physical memory);\n"
+    "                           PLY input is streamed, scratch data beyond the budget goes to\n"
+    "                           anonymous files next to the output\n"
     "  --quiet                  no progress bar or report\n";
 
 int cmd_convert(int argc, char** argv) {
@@ -42,28 +45,28 @@ int cmd_convert(int argc, char** argv) {
     settings.leaf_triangles = size_t(options.integer("leaf-triangles", 2000, 50, 1000000));
     settings.leaf_level = int(options.integer("leaf-level", -1, -1, kMaxLevel - 3));
     settings.threads = unsigned(options.integer("threads", 0, 0, 1024));
+    settings.memory_budget = options.bytes("memory", 0);
+    if (options.has("memory") && settings.memory_budget < kMinimumMemoryBudget)
+        fail("--memory: at least %llu MiB are needed", (unsigned long long)(kMinimumMemoryBudget >> 20));
     bool quiet = options.flag("quiet");
     settings.progress = !quiet;
     options.finish();
 
-    double t0 = now_seconds();
-    Mesh mesh = read_mesh(input);
-    double read_seconds = now_seconds() - t0;
-    CatpBuildReport r = build_catp(mesh, output, settings);
+    CatpBuildReport r = build_catp_file(input, output, settings);
     if (quiet) return 0;
-    double total = now_seconds() - t0;
     size_t vertices = 0, triangles = 0;
     for (const CatpLevelStats& l : r.levels) {
         vertices += l.vertices;
         triangles += l.triangles;
     }
-    std::printf("input:      %s: %zu vertices, %zu triangles (read in %.2f s)\n", input.c_str(), r.input_vertices,
-                r.input_triangles, read_seconds);
+    std::printf("input:      %s: %zu vertices, %zu triangles\n", input.c_str(), r.input_vertices, r.input_triangles);
     std::printf("output:     %s: %llu bytes, %zu diamonds, leaf level %d\n", output.c_str(),
                 (unsigned long long)r.file_bytes, r.nodes, r.leaf_level);
-    std::printf("build:      %.2f s, %.0f input triangles/s (with reading: %.0f/s), peak memory %.1f MiB\n", r.seconds,
-                double(r.input_triangles) / r.seconds, double(r.input_triangles) / total,
-                double(r.peak_rss) / (1 << 20));
+    std::printf("build:      %.2f s (reading included), %.0f input triangles/s, peak memory %.1f MiB of a %.0f MiB budget\n",
+                r.seconds, double(r.input_triangles) / r.seconds, double(r.peak_rss) / (1 << 20),
+                double(r.memory_budget) / (1 << 20));
+    std::printf("out of core: %zu blocks at level %d, %.1f MiB of scratch data written to disk\n", r.blocks,
+                r.block_level, double(r.bytes_spilled) / (1 << 20));
     std::printf("phases:     prepare %.2f s, leaves %.2f s, coarsen %.2f s, write %.2f s\n", r.seconds_prepare,
                 r.seconds_leaves, r.seconds_coarsen, r.seconds_write);
     std::printf("size:       %.2f bits per stored vertex over all levels (%zu vertices, %zu triangles)\n",

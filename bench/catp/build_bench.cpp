@@ -1,11 +1,13 @@
-// catp_build_bench: the CATP converter on the bundled bunny and generated scan-like meshes of
-// growing size. Prints input triangles/s, output bytes, bits per vertex and peak memory per
-// build, and, as a machine-independent reference, the same run's throughput of meshoptimizer's
-// simplifier halving the same mesh (one pass, single thread): the ratio says how much slower
-// than "one simplification pass" the whole out-of-core-ready pipeline is.
+// catp_build_bench: the CATP converter, end to end from a PLY file on disk (reading included), on
+// the bundled bunny and generated scan-like meshes of growing size, under a memory budget.
+// Prints input triangles/s, output bytes, bits per vertex, peak memory against the budget and
+// the scratch bytes spilled to disk, and, as a machine-independent reference, the same run's
+// throughput of meshoptimizer's simplifier halving the same mesh (one pass, single thread): the
+// ratio says how much slower than "one simplification pass" the whole pipeline is.
 //
-// usage: catp_build_bench [--sizes 100000,1000000,10000000] [--bunny PATH] [--keep DIR]
-// Each build runs in a child process so its peak memory is its own.
+// usage: catp_build_bench [--sizes 100000,1000000,10000000] [--memory 1G] [--bunny PATH] [--keep DIR]
+// Each step runs in a child process so the build's peak memory is its own: the scan meshes are
+// generated and written as binary PLY first (kept in DIR with --keep, and reused from there).
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -26,16 +28,17 @@ namespace fs = std::filesystem;
 
 struct Result {
     double seconds = 0, triangles_per_second = 0, bits_per_vertex = 0, peak_mib = 0, file_bytes = 0;
-    double meshopt_triangles_per_second = 0;
-    int leaf_level = 0;
+    double meshopt_triangles_per_second = 0, budget_mib = 0, spilled_mib = 0;
+    int leaf_level = 0, block_level = 0;
     size_t stored_vertices = 0;
 };
 
-static Result run_one(const Mesh& mesh, const std::string& output) {
+static Result run_one(const std::string& input, const std::string& output, uint64_t budget) {
     Result r;
     CatpBuildSettings settings;
     settings.progress = false;
-    CatpBuildReport report = build_catp(mesh, output, settings);
+    settings.memory_budget = budget;
+    CatpBuildReport report = build_catp_file(input, output, settings);
     r.seconds = report.seconds;
     r.triangles_per_second = double(report.input_triangles) / report.seconds;
     for (const CatpLevelStats& l : report.levels) r.stored_vertices += l.vertices;
@@ -43,7 +46,12 @@ static Result run_one(const Mesh& mesh, const std::string& output) {
     r.peak_mib = double(report.peak_rss) / (1 << 20);
     r.file_bytes = double(report.file_bytes);
     r.leaf_level = report.leaf_level;
-    // Baseline in the same process: meshopt_simplify to half, float positions.
+    r.block_level = report.block_level;
+    r.budget_mib = double(report.memory_budget) / (1 << 20);
+    r.spilled_mib = double(report.bytes_spilled) / (1 << 20);
+    // Baseline in the same process (after the build, so it does not count in the build's peak):
+    // meshopt_simplify to half, float positions.
+    Mesh mesh = read_mesh(input);
     std::vector<float> positions(mesh.positions.size() * 3);
     for (size_t v = 0; v < mesh.positions.size(); ++v)
         for (int i = 0; i < 3; ++i) positions[3 * v + i] = float(mesh.positions[v][i]);
@@ -55,16 +63,38 @@ static Result run_one(const Mesh& mesh, const std::string& output) {
     return r;
 }
 
+// Writes the generated scan mesh as PLY, in a child so the generator's memory is not ours.
+static bool make_input(const std::string& path, size_t triangles) {
+    if (fs::exists(path)) return true;
+    pid_t pid = fork();
+    if (pid == 0) {
+        try {
+            write_ply(path, make_scan_like(triangles, 1), true);
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "error: %s\n", e.what());
+            _exit(1);
+        }
+        _exit(0);
+    }
+    int status = 0;
+    waitpid(pid, &status, 0);
+    return WIFEXITED(status) && WEXITSTATUS(status) == 0;
+}
+
 // Runs the build in a child so peak memory is measured per build; results come back by pipe.
-static bool run_in_child(const std::string& name, size_t triangles, const std::string& bunny, const std::string& dir,
-                         Result& out) {
+static bool run_in_child(const std::string& input, const std::string& output, uint64_t budget, Result& out) {
     int fds[2];
     if (pipe(fds) != 0) return false;
     pid_t pid = fork();
     if (pid == 0) {
         close(fds[0]);
-        Mesh mesh = name == "bunny" ? read_mesh(bunny) : make_scan_like(triangles, 1);
-        Result r = run_one(mesh, dir + "/" + name + ".cpq");
+        Result r;
+        try {
+            r = run_one(input, output, budget);
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "error: %s\n", e.what());
+            _exit(1);
+        }
         ssize_t written = write(fds[1], &r, sizeof r);
         _exit(written == ssize_t(sizeof r) ? 0 : 1);
     }
@@ -81,6 +111,7 @@ int main(int argc, char** argv) {
     std::string bunny = std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply";
     std::string dir = (fs::temp_directory_path() / ("catp_build_bench_" + std::to_string(getpid()))).string();
     bool keep = false;
+    uint64_t budget = uint64_t(1) << 30;
     for (int i = 1; i + 1 < argc; i += 2) {
         std::string key = argv[i], value = argv[i + 1];
         if (key == "--sizes") {
@@ -91,6 +122,16 @@ int main(int argc, char** argv) {
                 sizes.push_back(std::stoull(value.substr(start, comma - start)));
                 start = comma == std::string::npos ? value.size() : comma + 1;
             }
+        } else if (key == "--memory") {
+            char* end = nullptr;
+            double v = std::strtod(value.c_str(), &end);
+            std::string unit = end ? end : "";
+            double scale = unit == "G" ? double(1 << 30) : unit == "M" ? double(1 << 20) : unit.empty() ? 1.0 : -1.0;
+            if (!(v > 0) || scale < 0) {
+                std::fprintf(stderr, "--memory: '%s' is not a size like 512M or 2G\n", value.c_str());
+                return 2;
+            }
+            budget = uint64_t(v * scale);
         } else if (key == "--bunny") {
             bunny = value;
         } else if (key == "--keep") {
@@ -103,19 +144,23 @@ int main(int argc, char** argv) {
     }
     fs::create_directories(dir);
     std::printf("catp_build_bench on %s (%ld cores)\n", cpu_model().c_str(), sysconf(_SC_NPROCESSORS_ONLN));
-    std::printf("%-12s %11s %8s %12s %11s %10s %10s %14s %10s\n", "input", "triangles", "seconds", "tri/s", "bits/vert",
-                "MiB peak", "leaf lvl", "meshopt tri/s", "ratio");
+    std::printf("memory budget %.0f MiB; builds read binary PLY files (reading included in the time)\n",
+                double(budget) / (1 << 20));
+    std::printf("%-12s %11s %8s %12s %11s %10s %10s %11s %8s %9s %14s %8s\n", "input", "triangles", "seconds", "tri/s",
+                "bits/vert", "MiB peak", "MiB budget", "MiB spilled", "leaf lvl", "block lvl", "meshopt tri/s", "ratio");
     std::vector<std::pair<std::string, size_t>> runs = {{"bunny", 0}};
     for (size_t s : sizes) runs.push_back({"scan" + std::to_string(s), s});
     for (auto& [name, size] : runs) {
         Result r;
-        if (!run_in_child(name, size, bunny, dir, r)) {
+        std::string input = name == "bunny" ? bunny : dir + "/" + name + ".ply";
+        if ((size && !make_input(input, size)) || !run_in_child(input, dir + "/" + name + ".cpq", budget, r)) {
             std::printf("%-12s failed\n", name.c_str());
             continue;
         }
         double triangles = r.triangles_per_second * r.seconds;
-        std::printf("%-12s %11.0f %8.2f %12.0f %11.2f %10.1f %10d %14.0f %10.3f\n", name.c_str(), triangles, r.seconds,
-                    r.triangles_per_second, r.bits_per_vertex, r.peak_mib, r.leaf_level, r.meshopt_triangles_per_second,
+        std::printf("%-12s %11.0f %8.2f %12.0f %11.2f %10.1f %10.0f %11.1f %8d %9d %14.0f %8.3f\n", name.c_str(),
+                    triangles, r.seconds, r.triangles_per_second, r.bits_per_vertex, r.peak_mib, r.budget_mib,
+                    r.spilled_mib, r.leaf_level, r.block_level, r.meshopt_triangles_per_second,
                     r.triangles_per_second / r.meshopt_triangles_per_second);
         std::fflush(stdout);
     }

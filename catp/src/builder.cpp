@@ -15,7 +15,9 @@
 
 #include "base/error.h"
 #include "base/progress.h"
+#include "base/paged_array.h"
 #include "base/sysinfo.h"
+#include "base/temp_file.h"
 #include "catp/format.h"
 #include "catp/simplify.h"
 #include "clip.h"
@@ -23,7 +25,9 @@
 #include "common_codec/exact_predicates.h"
 #include "common_codec/octahedral.h"
 #include "common_codec/packed_vertex.h"
+#include "build_input.h"
 #include "fragment_build.h"
+#include "spill.h"
 
 namespace catpaq {
 
@@ -117,6 +121,28 @@ bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
     return false;
 }
 
+// Calls f(tetrahedron) for every descendant at `level` of `start` (at `start_level`) that the
+// points may overlap, pruning subtrees the points cannot reach.
+template <typename F>
+void descend_overlapping(const Tetrahedron& start, int start_level, const Vec3d* pts, int count, int level, F&& f) {
+    struct Item { Tetrahedron t; int level; };
+    Item stack[64];
+    int top = 0;
+    stack[top++] = {start, start_level};
+    while (top > 0) {
+        Item it = stack[--top];
+        if (separated(it.t, pts, count)) continue;
+        if (it.level == level) {
+            f(it.t);
+            continue;
+        }
+        Tetrahedron a, b;
+        bisect(it.t, a, b);
+        stack[top++] = {a, it.level + 1};
+        stack[top++] = {b, it.level + 1};
+    }
+}
+
 // Calls f(tetrahedron) for every tetrahedron of `level` the points may overlap.
 template <typename F>
 void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&& f) {
@@ -138,54 +164,44 @@ void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&
         for (int32_t y = lo[1]; y <= hi[1]; ++y)
             for (int32_t x = lo[0]; x <= hi[0]; ++x) {
                 LatticePoint corner = {x * side, y * side, z * side};
-                // Descend the cube's tetrahedra, pruning those the points cannot reach.
-                int32_t cs = side;
-                LatticePoint centre = {corner[0] + cs / 2, corner[1] + cs / 2, corner[2] + cs / 2};
+                LatticePoint centre = {corner[0] + side / 2, corner[1] + side / 2, corner[2] + side / 2};
                 DiamondInfo cube = diamond_info(DiamondId::from_centre(centre));
-                struct Item { Tetrahedron t; int level; };
-                Item stack[64];
-                int top = 0;
-                for (int s = 0; s < 6; ++s) stack[top++] = {diamond_tetrahedron(cube, s), 3 * octave};
-                while (top > 0) {
-                    Item it = stack[--top];
-                    if (separated(it.t, pts, count)) continue;
-                    if (it.level == level) {
-                        f(it.t);
-                        continue;
-                    }
-                    Tetrahedron a, b;
-                    bisect(it.t, a, b);
-                    stack[top++] = {a, it.level + 1};
-                    stack[top++] = {b, it.level + 1};
-                }
+                for (int s = 0; s < 6; ++s) descend_overlapping(diamond_tetrahedron(cube, s), 3 * octave, pts, count, level, f);
             }
 }
 
 // ----------------------------------------------------------------------------------------------
-// Choosing the leaf level from the density.
+// Choosing the leaf level (from the density) and the block level (from the memory budget).
 
-// Tracks sample points down the hierarchy one bisection at a time (a point in a tetrahedron is
-// in the child on its side of the splitting plane), counting the distinct tetrahedra hit.
-int choose_leaf_level(const std::vector<Vec3d>& lattice, const std::vector<uint32_t>& indices, size_t target) {
-    size_t triangles = indices.size() / 3;
-    size_t sample = std::min<size_t>(triangles, 50000);
-    size_t stride = std::max<size_t>(1, triangles / sample);
+struct LevelChoice {
+    int leaf_level = 0;
+    int block_level = 0;
+    uint64_t largest_block_estimate = 0;  // triangles
+};
+
+// Tracks sample vertices down the hierarchy one bisection at a time (a point in a tetrahedron is
+// in the child on its side of the splitting plane), counting the tetrahedra hit. The leaf level
+// is the first with about `leaf_target` triangles per occupied tetrahedron; the block level the
+// coarsest (at most the leaf level) whose fullest tetrahedron is estimated to hold at most
+// `block_target` triangles. Vertices sample the surface as well as triangle centroids do (a
+// mesh has about two triangles per vertex), and they are known before the triangles are read.
+LevelChoice choose_levels(const std::vector<Vec3d>& sample, uint64_t triangles, size_t leaf_target, int forced_leaf,
+                          uint64_t block_target) {
     struct Tracked { Vec3d p; Tetrahedron t; };
     std::vector<Tracked> points;
     DiamondInfo root = diamond_info(root_diamond());
-    for (size_t t = 0; t < triangles; t += stride) {
-        Vec3d c{0, 0, 0};
-        for (int k = 0; k < 3; ++k)
-            for (int i = 0; i < 3; ++i) c[i] += lattice[indices[3 * t + k]][i] / 3.0;
+    for (const Vec3d& p : sample)
         for (int s = 0; s < 6; ++s) {
             Tetrahedron tet = diamond_tetrahedron(root, s);
-            if (!separated(tet, &c, 1)) {
-                points.push_back({c, tet});
+            if (!separated(tet, &p, 1)) {
+                points.push_back({p, tet});
                 break;
             }
         }
-    }
-    double scale = double(triangles) / double(std::max<size_t>(1, points.size()));
+    double per_point = double(triangles) / double(std::max<size_t>(1, points.size()));
+    LevelChoice choice;
+    choice.leaf_level = forced_leaf;
+    bool block_found = false;
     std::vector<uint64_t> keys(points.size());
     for (int level = 0; level <= kMaxLevel - 3; ++level) {
         for (size_t i = 0; i < points.size(); ++i) {
@@ -196,29 +212,40 @@ int choose_leaf_level(const std::vector<Vec3d>& lattice, const std::vector<uint3
             keys[i] = h;
         }
         std::sort(keys.begin(), keys.end());
-        size_t distinct = size_t(std::unique(keys.begin(), keys.end()) - keys.begin());
-        double per_tet = scale * double(points.size()) / double(std::max<size_t>(1, distinct));
-        if (per_tet <= double(target) * 1.4142) return level;
+        size_t distinct = 0, largest = 0;
+        for (size_t i = 0, run = 0; i < keys.size(); ++i) {
+            run = (i > 0 && keys[i] == keys[i - 1]) ? run + 1 : 1;
+            if (run == 1) distinct++;
+            largest = std::max(largest, run);
+        }
+        // Triangles crossing block borders are counted in every block they touch: 25% margin.
+        uint64_t largest_estimate = uint64_t(1.25 * per_point * double(largest)) + 1;
+        if (!block_found && largest_estimate <= block_target) {
+            block_found = true;
+            choice.block_level = level;
+            choice.largest_block_estimate = largest_estimate;
+        }
+        bool leaf_here = forced_leaf >= 0 ? level == forced_leaf
+                                          : per_point * double(points.size()) / double(std::max<size_t>(1, distinct)) <=
+                                                double(leaf_target) * 1.4142;
+        if (leaf_here || level == kMaxLevel - 3) {
+            choice.leaf_level = level;
+            if (!block_found) {
+                choice.block_level = level;
+                choice.largest_block_estimate = largest_estimate;
+            }
+            return choice;
+        }
         for (Tracked& tp : points) {
             Tetrahedron a, b;
             bisect(tp.t, a, b);
             tp.t = separated(a, &tp.p, 1) ? b : a;
         }
     }
-    return kMaxLevel - 3;
+    return choice;
 }
 
 // ----------------------------------------------------------------------------------------------
-
-struct SlotKey {
-    uint64_t diamond;
-    int slot;
-    bool operator==(const SlotKey& o) const { return diamond == o.diamond && slot == o.slot; }
-    bool operator<(const SlotKey& o) const { return diamond != o.diamond ? diamond < o.diamond : slot < o.slot; }
-};
-struct SlotKeyHash {
-    size_t operator()(const SlotKey& k) const { return size_t((k.diamond * 0x9E3779B97F4A7C15ull) ^ uint64_t(k.slot)); }
-};
 
 SlotKey slot_key(const Tetrahedron& t) {
     DiamondId id;
@@ -229,14 +256,7 @@ SlotKey slot_key(const Tetrahedron& t) {
     return {id.bits, slot};
 }
 
-struct LevelFragments {
-    std::unordered_map<SlotKey, WorkFragment, SlotKeyHash> fragments;
-    // Error of each diamond's unquantized geometry from the original (lattice units): 0 at the
-    // leaves, the largest child's plus the diamond's own measured simplification error above.
-    // The stored bound adds the diamond's quantization step; both terms grow towards the root,
-    // so stored bounds are monotone.
-    std::unordered_map<uint64_t, double> diamond_error;
-};
+Tetrahedron slot_tetrahedron(const SlotKey& key) { return diamond_tetrahedron(diamond_info(DiamondId{key.diamond}), key.slot); }
 
 double tetrahedron_longest_edge(const Tetrahedron& t) {
     int64_t best = 0;
@@ -245,236 +265,487 @@ double tetrahedron_longest_edge(const Tetrahedron& t) {
     return std::sqrt(double(best));
 }
 
-}  // namespace
+// Per-vertex data as the converter keeps it while reading (40 bytes).
+struct VertexRecord {
+    Vec3d position;  // model units
+    Vec3f normal;
+    Rgb8 color;
+};
 
-// ----------------------------------------------------------------------------------------------
+// How the memory budget is shared. The phases run one after another, so each may use most of
+// it; the shares leave room for the process itself, TBB's workers and the simplifier's working
+// set (a few MiB per worker thread).
+struct BudgetShares {
+    uint64_t vertex_cache, normal_cache, triangle_buffers, fragments_in_memory, block_triangles;
+    explicit BudgetShares(uint64_t budget)
+        : vertex_cache(budget / 5),
+          normal_cache(budget / 5),
+          triangle_buffers(budget * 2 / 5),
+          fragments_in_memory(budget / 5),
+          // A loaded block costs its 128-byte records plus, while clipping, hits and fragments:
+          // about 320 bytes per triangle, measured on scan-like meshes.
+          block_triangles(std::max<uint64_t>(1, budget * 2 / 5 / 320)) {}
+};
 
-CatpBuildReport build_catp(const Mesh& input, const std::string& output_path, const CatpBuildSettings& settings) {
-    double start = now_seconds();
-    CatpBuildReport report;
-    report.input_vertices = input.vertex_count();
-    report.input_triangles = input.triangle_count();
-    if (input.triangle_count() == 0) fail("the mesh has no triangles");
-    std::unique_ptr<tbb::global_control> threads;
-    if (settings.threads > 0)
-        threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings.threads);
+constexpr size_t kChunk = 1 << 16;  // vertices or triangles per read
+constexpr size_t kSampleTarget = 50000;
 
-    Bounds bounds = input.bounds();
-    report.diagonal = bounds.diagonal();
-    Placement place = place_model(bounds);
+// The stages of one build, in order. Each method is one phase; members carry what the later
+// phases need.
+class CatpBuild {
+public:
+    CatpBuild(BuildInput& input, const std::string& output_path, const CatpBuildSettings& settings)
+        : in_(input), output_(output_path), settings_(settings) {}
 
-    // Lattice positions on the snapping grid; attributes.
-    std::vector<Vec3d> lattice(input.vertex_count());
-    tbb::parallel_for(size_t(0), input.vertex_count(), [&](size_t v) {
-        for (int i = 0; i < 3; ++i) lattice[v][i] = snap_to_grid((input.positions[v][i] - place.origin[i]) / place.cell);
-    });
-    std::vector<Vec3f> normals = input.has_normals() ? input.normals : compute_vertex_normals(input);
-    const Rgb8 default_color{180, 180, 180};
-    auto color_of = [&](uint32_t v) { return input.has_colors() ? input.colors[v] : default_color; };
+    CatpBuildReport run();
 
-    int leaf_level = settings.leaf_level >= 0 ? settings.leaf_level
-                                              : choose_leaf_level(lattice, input.indices, settings.leaf_triangles);
-    if (leaf_level > kMaxLevel - 3) fail("leaf level %d is deeper than the lattice allows (%d)", leaf_level, kMaxLevel - 3);
-    report.leaf_level = leaf_level;
+private:
+    void read_vertices();
+    void compute_normals();
+    void bin_triangles();
+    void build_leaves();
+    void write_leaf_nodes();
+    void coarsen_level(int level);
+    void finish_archive();
 
-    report.seconds_prepare = now_seconds() - start;
-    double phase_start = now_seconds();
-    ArchiveWriter archive(output_path, ArchiveKind::Catp);
-    std::vector<CatpLevelStats> stats(leaf_level + 1);
-    for (int l = 0; l <= leaf_level; ++l) stats[l].level = l;
-    std::mutex stats_mutex;
+    void write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
+                    double error, bool leaf);
+    double quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const;
 
-    // Progress: leaf clipping counts input triangles, each coarser level its gathered triangles.
-    Progress progress("catp build", input.triangle_count() * 2, "tri");
-    if (!settings.progress) progress.finish();
+    BuildInput& in_;
+    std::string output_;
+    CatpBuildSettings settings_;
+    CatpBuildReport report_;
+    uint64_t budget_ = 0;
+    std::unique_ptr<BudgetShares> shares_;
+    std::unique_ptr<Progress> progress_;
 
-    // Writes the node of a diamond whose fragments are final.
-    auto write_node = [&](DiamondId id, const DiamondInfo& info, std::array<WorkFragment*, 8>& slots, double error,
-                          bool leaf) {
-        DiamondFragments node;
-        size_t triangles = 0, vertices = 0;
-        for (int s = 0; s < 8; ++s) {
-            if (!slots[s] || slots[s]->indices.empty()) continue;
-            Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, s));
-            quantize_fragment(*slots[s], t, node.slots[s]);
-            if (node.slots[s].indices.empty()) continue;
-            node.slot_mask |= uint8_t(1 << s);
-            triangles += node.slots[s].triangle_count();
-            vertices += node.slots[s].vertices.size();
+    Bounds bounds_;
+    Placement place_{};
+    std::unique_ptr<PagedArray<VertexRecord>> vertices_;
+    std::vector<Vec3d> sample_;  // model units
+    LevelChoice levels_;
+    uint64_t triangles_ = 0;
+    std::unique_ptr<TriangleBins> bins_;
+    std::unique_ptr<ArchiveWriter> archive_;
+    std::vector<CatpLevelStats> stats_;
+    std::mutex stats_mutex_;
+    // The level being coarsened: its fragments, and each diamond's error of the unquantized
+    // geometry from the original (lattice units): 0 at the leaves, above them the largest
+    // child's plus the diamond's own measured simplification error. The stored bound adds the
+    // quantization step; both terms grow towards the root, so stored bounds are monotone.
+    std::unique_ptr<FragmentSpill> fragments_;
+    std::unordered_map<uint64_t, double> diamond_error_;
+    uint64_t bytes_spilled_ = 0;
+    const Rgb8 default_color_{180, 180, 180};
+};
+
+// Pass over the vertices: keeps them (paged), their bounds and a regular sample.
+void CatpBuild::read_vertices() {
+    uint64_t count = in_.vertex_count();
+    if (count == 0) fail("the mesh has no vertices");
+    if (count > uint64_t(UINT32_MAX)) fail("the mesh has %llu vertices; at most 2^32 - 1 are supported", (unsigned long long)count);
+    vertices_ = std::make_unique<PagedArray<VertexRecord>>(count, shares_->vertex_cache, output_);
+    uint64_t stride = std::max<uint64_t>(1, count / kSampleTarget);
+    std::vector<Vec3d> positions;
+    std::vector<Vec3f> normals;
+    std::vector<Rgb8> colors;
+    uint64_t v = 0;
+    for (;;) {
+        positions.clear();
+        normals.clear();
+        colors.clear();
+        size_t n = in_.read_vertices(kChunk, positions, &normals, &colors);
+        if (n == 0) break;
+        for (size_t i = 0; i < n; ++i, ++v) {
+            if (v >= count) fail("'%s': more vertices than declared", in_.name().c_str());
+            VertexRecord& r = vertices_->at_for_write(v);
+            r.position = positions[i];
+            r.normal = normals.empty() ? Vec3f{0, 0, 1} : normals[i];
+            r.color = colors.empty() ? default_color_ : colors[i];
+            bounds_.add(positions[i]);
+            if (v % stride == 0) sample_.push_back(positions[i]);
         }
-        std::vector<uint8_t> bytes = encode_diamond_node(node);
-        ArchiveEntry entry;
-        entry.key = id.bits;
-        entry.level = uint16_t(info.level);
-        entry.flags = uint16_t(node.slot_mask) | (leaf ? kCatpLeafFlag : 0);
-        entry.count = uint32_t(triangles);
-        entry.error = float(error * place.cell);
-        archive.add_node(entry, bytes.data(), bytes.size());
-        std::lock_guard lock(stats_mutex);
-        CatpLevelStats& s = stats[info.level];
-        s.diamonds++;
-        s.fragments += size_t(__builtin_popcount(node.slot_mask));
-        s.triangles += triangles;
-        s.vertices += vertices;
-        s.bytes += bytes.size();
-        s.max_error = std::max(s.max_error, double(entry.error));
-    };
+    }
+    if (v != count) fail("'%s': %llu vertices read, %llu declared", in_.name().c_str(), (unsigned long long)v, (unsigned long long)count);
+}
 
-    // ---- Leaves: clip the input by the leaf tetrahedra.
-    LevelFragments current;
-    {
-        struct Hit { SlotKey key; uint32_t triangle; };
-        tbb::enumerable_thread_specific<std::vector<Hit>> local_hits;
-        size_t triangles = input.triangle_count();
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, triangles, 4096), [&](const tbb::blocked_range<size_t>& r) {
-            auto& hits = local_hits.local();
-            for (size_t t = r.begin(); t != r.end(); ++t) {
-                const uint32_t* f = &input.indices[3 * t];
-                if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) continue;
-                Vec3d pts[3] = {lattice[f[0]], lattice[f[1]], lattice[f[2]]};
-                for_each_overlapping_tetrahedron(pts, 3, leaf_level, [&](const Tetrahedron& tet) {
-                    hits.push_back({slot_key(tet), uint32_t(t)});
-                });
+// Area-weighted vertex normals, as compute_vertex_normals does it (double sums in triangle order,
+// so the result is the same bit for bit), with the sums paged like the vertices.
+void CatpBuild::compute_normals() {
+    uint64_t count = vertices_->size();
+    PagedArray<Vec3d> sums(count, shares_->normal_cache, output_);
+    std::vector<uint32_t> indices;
+    in_.rewind_triangles();
+    for (;;) {
+        indices.clear();
+        size_t n = in_.read_triangles(kChunk, indices);
+        if (n == 0) break;
+        for (size_t t = 0; t < n; ++t) {
+            const uint32_t* f = &indices[3 * t];
+            Vec3d a = vertices_->at(f[0]).position, b = vertices_->at(f[1]).position, c = vertices_->at(f[2]).position;
+            double ux = b[0] - a[0], uy = b[1] - a[1], uz = b[2] - a[2];
+            double vx = c[0] - a[0], vy = c[1] - a[1], vz = c[2] - a[2];
+            Vec3d normal{uy * vz - uz * vy, uz * vx - ux * vz, ux * vy - uy * vx};
+            for (int k = 0; k < 3; ++k) {
+                Vec3d& s = sums.at_for_write(f[k]);
+                for (int i = 0; i < 3; ++i) s[i] += normal[i];
             }
+        }
+        progress_->add(n);
+    }
+    for (uint64_t v = 0; v < count; ++v) {
+        Vec3d s = sums.at(v);
+        double length = std::sqrt(s[0] * s[0] + s[1] * s[1] + s[2] * s[2]);
+        vertices_->at_for_write(v).normal = length > 0 && std::isfinite(length)
+                                                ? Vec3f{float(s[0] / length), float(s[1] / length), float(s[2] / length)}
+                                                : Vec3f{0.0f, 0.0f, 1.0f};
+    }
+    bytes_spilled_ += sums.bytes_spilled();
+}
+
+// Pass over the triangles: resolves corners to lattice positions and attributes and sorts each
+// triangle into every block tetrahedron it may overlap.
+void CatpBuild::bin_triangles() {
+    bins_ = std::make_unique<TriangleBins>(output_, shares_->triangle_buffers);
+    std::vector<uint32_t> indices;
+    std::vector<TriangleRecord> records;
+    struct Hit { uint32_t record; SlotKey block; };
+    tbb::enumerable_thread_specific<std::vector<Hit>> local_hits;
+    std::vector<Hit> hits;
+    in_.rewind_triangles();
+    for (;;) {
+        indices.clear();
+        size_t n = in_.read_triangles(kChunk, indices);
+        if (n == 0) break;
+        records.clear();
+        for (size_t t = 0; t < n; ++t, ++triangles_) {
+            const uint32_t* f = &indices[3 * t];
+            if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) continue;  // no area, nothing to clip
+            TriangleRecord r;
+            std::memset(static_cast<void*>(&r), 0, sizeof r);  // padding too: records are written to disk
+            r.triangle = triangles_;
+            for (int k = 0; k < 3; ++k) {
+                const VertexRecord& v = vertices_->at(f[k]);
+                for (int i = 0; i < 3; ++i) r.positions[k][i] = snap_to_grid((v.position[i] - place_.origin[i]) / place_.cell);
+                r.normals[k] = v.normal;
+                r.colors[k] = v.color;
+            }
+            records.push_back(r);
+        }
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, records.size(), 1024), [&](const tbb::blocked_range<size_t>& range) {
+            auto& out = local_hits.local();
+            for (size_t i = range.begin(); i != range.end(); ++i)
+                for_each_overlapping_tetrahedron(records[i].positions.data(), 3, levels_.block_level,
+                                                 [&](const Tetrahedron& tet) { out.push_back({uint32_t(i), slot_key(tet)}); });
         });
-        std::vector<Hit> hits;
-        for (auto& h : local_hits) hits.insert(hits.end(), h.begin(), h.end());
-        local_hits.clear();
+        hits.clear();
+        for (auto& h : local_hits) {
+            hits.insert(hits.end(), h.begin(), h.end());
+            h.clear();
+        }
+        // Input order within every block, whatever the threads did.
+        std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
+            return a.record < b.record || (a.record == b.record && a.block < b.block);
+        });
+        for (const Hit& h : hits) bins_->add(h.block, records[h.record]);
+        progress_->add(n);
+    }
+    in_.finish();
+    vertices_.reset();  // not needed any more: free the cache before the blocks are loaded
+}
+
+// Clips each block's triangles by its leaf tetrahedra; the leaf fragments go to the spill.
+void CatpBuild::build_leaves() {
+    fragments_ = std::make_unique<FragmentSpill>(output_, shares_->fragments_in_memory);
+    // Blocks in key order, so the work (and the scratch file) is laid out the same every run.
+    std::vector<size_t> order(bins_->block_count());
+    for (size_t b = 0; b < order.size(); ++b) order[b] = b;
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return bins_->block_key(a) < bins_->block_key(b); });
+    std::vector<TriangleRecord> records;
+    struct Hit { SlotKey key; uint32_t record; };
+    tbb::enumerable_thread_specific<std::vector<Hit>> local_hits;
+    std::vector<Hit> hits;
+    for (size_t b : order) {
+        bins_->load(b, records);
+        Tetrahedron block = slot_tetrahedron(bins_->block_key(b));
+        int block_level = levels_.block_level, leaf_level = levels_.leaf_level;
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, records.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+            auto& out = local_hits.local();
+            for (size_t i = r.begin(); i != r.end(); ++i)
+                descend_overlapping(block, block_level, records[i].positions.data(), 3, leaf_level,
+                                    [&](const Tetrahedron& tet) { out.push_back({slot_key(tet), uint32_t(i)}); });
+        });
+        hits.clear();
+        for (auto& h : local_hits) {
+            hits.insert(hits.end(), h.begin(), h.end());
+            h.clear();
+        }
         tbb::parallel_sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
-            return a.key < b.key || (a.key == b.key && a.triangle < b.triangle);
+            return a.key < b.key || (a.key == b.key && a.record < b.record);
         });
         std::vector<size_t> group_start;
         for (size_t i = 0; i < hits.size(); ++i)
             if (i == 0 || !(hits[i].key == hits[i - 1].key)) group_start.push_back(i);
         group_start.push_back(hits.size());
-        size_t groups = group_start.size() - 1;
-        std::vector<WorkFragment> fragments(groups);
-        tbb::parallel_for(size_t(0), groups, [&](size_t g) {
+        tbb::parallel_for(size_t(0), group_start.size() - 1, [&](size_t g) {
             SlotKey key = hits[group_start[g]].key;
-            DiamondInfo info = diamond_info(DiamondId{key.diamond});
-            Tetrahedron tet = diamond_tetrahedron(info, key.slot);
-            std::vector<ClipPlane> planes = tetrahedron_clip_planes(tet, 0xf);
-            FragmentWelder welder(fragments[g]);
+            std::vector<ClipPlane> planes = tetrahedron_clip_planes(slot_tetrahedron(key), 0xf);
+            WorkFragment fragment;
+            FragmentWelder welder(fragment);
             for (size_t i = group_start[g]; i < group_start[g + 1]; ++i) {
-                const uint32_t* f = &input.indices[3 * hits[i].triangle];
-                welder.add_clipped({lattice[f[0]], lattice[f[1]], lattice[f[2]]},
-                                   {normals[f[0]], normals[f[1]], normals[f[2]]},
-                                   {color_of(f[0]), color_of(f[1]), color_of(f[2])}, planes);
+                const TriangleRecord& r = records[hits[i].record];
+                welder.add_clipped(r.positions, r.normals, r.colors, planes);
             }
-            progress.add(group_start[g + 1] - group_start[g]);
+            if (!fragment.indices.empty()) fragments_->put(key, fragment);
         });
-        for (size_t g = 0; g < groups; ++g) {
-            if (fragments[g].indices.empty()) continue;
-            current.fragments.emplace(hits[group_start[g]].key, std::move(fragments[g]));
-        }
+        progress_->add(records.size());
     }
+    bytes_spilled_ += bins_->bytes_spilled();
+    bins_.reset();
+}
 
-    // Leaf diamonds' nodes.
-    auto write_level_nodes = [&](LevelFragments& level, bool leaf) {
-        std::unordered_map<uint64_t, std::array<WorkFragment*, 8>> by_diamond;
-        for (auto& [key, frag] : level.fragments) {
-            auto& slots = by_diamond[key.diamond];
-            slots[key.slot] = &frag;
+double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const {
+    double longest = 0;
+    for (int s = 0; s < 8; ++s)
+        if (slots[s] && !slots[s]->indices.empty())
+            longest = std::max(longest, tetrahedron_longest_edge(diamond_tetrahedron(info, s)));
+    return longest / kBaryGrid;
+}
+
+// Writes the node of a diamond whose fragments are final.
+void CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
+                           double error, bool leaf) {
+    DiamondFragments node;
+    size_t triangles = 0, vertices = 0;
+    for (int s = 0; s < 8; ++s) {
+        if (!slots[s] || slots[s]->indices.empty()) continue;
+        Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, s));
+        quantize_fragment(*slots[s], t, node.slots[s]);
+        if (node.slots[s].indices.empty()) continue;
+        node.slot_mask |= uint8_t(1 << s);
+        triangles += node.slots[s].triangle_count();
+        vertices += node.slots[s].vertices.size();
+    }
+    std::vector<uint8_t> bytes = encode_diamond_node(node);
+    ArchiveEntry entry;
+    entry.key = id.bits;
+    entry.level = uint16_t(info.level);
+    entry.flags = uint16_t(node.slot_mask) | (leaf ? kCatpLeafFlag : 0);
+    entry.count = uint32_t(triangles);
+    entry.error = float(error * place_.cell);
+    archive_->add_node(entry, bytes.data(), bytes.size());
+    std::lock_guard lock(stats_mutex_);
+    CatpLevelStats& s = stats_[info.level];
+    s.diamonds++;
+    s.fragments += size_t(__builtin_popcount(node.slot_mask));
+    s.triangles += triangles;
+    s.vertices += vertices;
+    s.bytes += bytes.size();
+    s.max_error = std::max(s.max_error, double(entry.error));
+}
+
+// Ranges [begin, end) of `refs` (sorted) over which `group_of` is constant.
+template <typename GroupOf>
+std::vector<std::pair<size_t, size_t>> group_runs(const std::vector<SpilledFragment>& refs, GroupOf group_of) {
+    std::vector<std::pair<size_t, size_t>> runs;
+    for (size_t i = 0; i < refs.size();) {
+        size_t j = i + 1;
+        while (j < refs.size() && group_of(refs[j]) == group_of(refs[i])) ++j;
+        runs.push_back({i, j});
+        i = j;
+    }
+    return runs;
+}
+
+void CatpBuild::write_leaf_nodes() {
+    std::vector<SpilledFragment>& refs = fragments_->fragments();
+    std::sort(refs.begin(), refs.end(), [](const SpilledFragment& a, const SpilledFragment& b) { return a.key < b.key; });
+    auto runs = group_runs(refs, [](const SpilledFragment& r) { return r.key.diamond; });
+    for (auto& run : runs) diamond_error_.emplace(refs[run.first].key.diamond, 0.0);
+    tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
+        DiamondId id{refs[runs[i].first].key.diamond};
+        DiamondInfo info = diamond_info(id);
+        std::array<WorkFragment, 8> loaded;
+        std::array<const WorkFragment*, 8> slots{};
+        for (size_t k = runs[i].first; k < runs[i].second; ++k) {
+            fragments_->get(refs[k], loaded[refs[k].key.slot]);
+            slots[refs[k].key.slot] = &loaded[refs[k].key.slot];
         }
-        std::vector<std::pair<uint64_t, std::array<WorkFragment*, 8>>> list(by_diamond.begin(), by_diamond.end());
-        tbb::parallel_for(size_t(0), list.size(), [&](size_t i) {
-            DiamondId id{list[i].first};
-            DiamondInfo info = diamond_info(id);
-            double quant = 0;
-            for (int s = 0; s < 8; ++s)
-                if (list[i].second[s]) quant = std::max(quant, tetrahedron_longest_edge(diamond_tetrahedron(info, s)));
-            quant /= kBaryGrid;
-            write_node(id, info, list[i].second, level.diamond_error.at(id.bits) + quant, leaf);
-        });
-    };
+        write_node(id, info, slots, quantization_step(info, slots), true);
+    });
+}
+
+// One coarsening step: every diamond of `level` is made from the fragments of the finer level
+// whose tetrahedra its refinement created (welded, simplified to about half, clipped into its
+// own tetrahedra); its node is written and its fragments replace the finer level's.
+void CatpBuild::coarsen_level(int level) {
+    std::vector<SpilledFragment>& refs = fragments_->fragments();
+    std::vector<uint64_t> parent_of(refs.size());
     {
-        // Pre-insert keys so the parallel writers only assign existing entries.
-        for (auto& [key, frag] : current.fragments) current.diamond_error.emplace(key.diamond, 0.0);
-        write_level_nodes(current, true);
-    }
-
-    report.seconds_leaves = now_seconds() - phase_start;
-    phase_start = now_seconds();
-    // ---- Coarser levels, bottom-up.
-    for (int level = leaf_level - 1; level >= 0; --level) {
-        // Group the finer fragments by the diamond whose refinement created their tetrahedron.
-        std::unordered_map<uint64_t, std::vector<std::pair<SlotKey, WorkFragment*>>> by_parent;
-        for (auto& [key, frag] : current.fragments) {
-            DiamondInfo child = diamond_info(DiamondId{key.diamond});
-            by_parent[slot_parent(child, key.slot).bits].push_back({key, &frag});
-        }
-        std::vector<uint64_t> parents;
-        for (auto& [p, list] : by_parent) parents.push_back(p);
-        std::sort(parents.begin(), parents.end());
-        LevelFragments next;
-        for (uint64_t p : parents) next.diamond_error.emplace(p, 0.0);
-        std::vector<std::array<WorkFragment, 8>> produced(parents.size());
-        std::vector<double> produced_error(parents.size(), 0.0);
-        tbb::parallel_for(size_t(0), parents.size(), [&](size_t i) {
-            DiamondId id{parents[i]};
-            DiamondInfo info = diamond_info(id);
-            auto& children = by_parent[parents[i]];
-            std::sort(children.begin(), children.end(),
-                      [](const auto& a, const auto& b) { return a.first < b.first; });
-            // Every child with geometry counts, also those whose gathered slots came from other
-            // parents: that keeps the stored errors monotone along every parent-child edge.
-            double child_error = 0;
-            for (DiamondId child : diamond_children(id)) {
-                auto it = current.diamond_error.find(child.bits);
-                if (it != current.diamond_error.end()) child_error = std::max(child_error, it->second);
-            }
-            WorkFragment gathered;
-            {
-                FragmentWelder welder(gathered);
-                for (auto& [key, frag] : children) welder.append(*frag);
-            }
-            size_t gathered_triangles = gathered.indices.size() / 3;
-            double simplify_error = coarsen_diamond(info, gathered, produced[i]);
-            double quant = 0;
-            for (int s = 0; s < 8; ++s)
-                if (!produced[i][s].indices.empty())
-                    quant = std::max(quant, tetrahedron_longest_edge(diamond_tetrahedron(info, s)));
-            quant /= kBaryGrid;
-            // Monotone: a diamond's error bounds its children's plus its own simplification.
-            produced_error[i] = child_error + simplify_error;
-            std::array<WorkFragment*, 8> slots;
-            for (int s = 0; s < 8; ++s) slots[s] = &produced[i][s];
-            write_node(id, info, slots, produced_error[i] + quant, false);
-            progress.add(gathered_triangles / 2);
+        std::vector<std::pair<uint64_t, size_t>> order(refs.size());
+        tbb::parallel_for(size_t(0), refs.size(), [&](size_t i) {
+            DiamondInfo child = diamond_info(DiamondId{refs[i].key.diamond});
+            order[i] = {slot_parent(child, refs[i].key.slot).bits, i};
         });
-        for (size_t i = 0; i < parents.size(); ++i) {
-            next.diamond_error[parents[i]] = produced_error[i];
-            for (int s = 0; s < 8; ++s)
-                if (!produced[i][s].indices.empty())
-                    next.fragments.emplace(SlotKey{parents[i], s}, std::move(produced[i][s]));
+        // Children in key order within a parent: welding order, hence the output, is fixed.
+        std::sort(order.begin(), order.end(), [&](const auto& a, const auto& b) {
+            return a.first != b.first ? a.first < b.first : refs[a.second].key < refs[b.second].key;
+        });
+        std::vector<SpilledFragment> sorted(refs.size());
+        for (size_t i = 0; i < order.size(); ++i) {
+            sorted[i] = refs[order[i].second];
+            parent_of[i] = order[i].first;
         }
-        current = std::move(next);
+        refs = std::move(sorted);
     }
-    progress.finish();
-    report.seconds_coarsen = now_seconds() - phase_start;
-    phase_start = now_seconds();
+    std::vector<std::pair<size_t, size_t>> runs;
+    for (size_t i = 0; i < refs.size();) {
+        size_t j = i + 1;
+        while (j < refs.size() && parent_of[j] == parent_of[i]) ++j;
+        runs.push_back({i, j});
+        i = j;
+    }
+    auto next = std::make_unique<FragmentSpill>(output_, shares_->fragments_in_memory);
+    std::vector<double> produced_error(runs.size(), 0.0);
+    tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
+        DiamondId id{parent_of[runs[i].first]};
+        DiamondInfo info = diamond_info(id);
+        // Every child with geometry counts, also those whose gathered slots came from other
+        // parents: that keeps the stored errors monotone along every parent-child edge.
+        double child_error = 0;
+        for (DiamondId child : diamond_children(id)) {
+            auto it = diamond_error_.find(child.bits);
+            if (it != diamond_error_.end()) child_error = std::max(child_error, it->second);
+        }
+        WorkFragment gathered, child;
+        {
+            FragmentWelder welder(gathered);
+            for (size_t k = runs[i].first; k < runs[i].second; ++k) {
+                fragments_->get(refs[k], child);
+                welder.append(child);
+            }
+        }
+        size_t gathered_triangles = gathered.indices.size() / 3;
+        std::array<WorkFragment, 8> produced;
+        double simplify_error = coarsen_diamond(info, gathered, produced);
+        std::array<const WorkFragment*, 8> slots;
+        for (int s = 0; s < 8; ++s) slots[s] = &produced[s];
+        // Monotone: a diamond's error bounds its children's plus its own simplification.
+        produced_error[i] = child_error + simplify_error;
+        write_node(id, info, slots, produced_error[i] + quantization_step(info, slots), false);
+        for (int s = 0; s < 8; ++s)
+            if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, produced[s]);
+        progress_->add(gathered_triangles / 2);
+    });
+    (void)level;
+    bytes_spilled_ += fragments_->bytes_spilled();
+    fragments_ = std::move(next);
+    diamond_error_.clear();
+    for (size_t i = 0; i < runs.size(); ++i) diamond_error_[parent_of[runs[i].first]] = produced_error[i];
+}
 
+void CatpBuild::finish_archive() {
     CatpMeta meta;
     for (int i = 0; i < 3; ++i) {
-        meta.origin[i] = place.origin[i];
-        meta.bounds_min[i] = bounds.min[i];
-        meta.bounds_max[i] = bounds.max[i];
+        meta.origin[i] = place_.origin[i];
+        meta.bounds_min[i] = bounds_.min[i];
+        meta.bounds_max[i] = bounds_.max[i];
     }
-    meta.cell = place.cell;
-    meta.leaf_level = uint32_t(leaf_level);
-    meta.flags = (input.has_colors() ? 1u : 0u) | (input.has_normals() ? 2u : 0u);
-    meta.input_vertices = input.vertex_count();
-    meta.input_triangles = input.triangle_count();
-    meta.default_rgb = uint32_t(default_color[0]) | (uint32_t(default_color[1]) << 8) | (uint32_t(default_color[2]) << 16);
-    report.file_bytes = archive.finish(encode_catp_meta(meta));
-    report.seconds_write = now_seconds() - phase_start;
-    for (auto& s : stats) {
-        if (s.diamonds) report.nodes += s.diamonds;
-        report.levels.push_back(s);
+    meta.cell = place_.cell;
+    meta.leaf_level = uint32_t(levels_.leaf_level);
+    meta.flags = (in_.has_colors() ? 1u : 0u) | (in_.has_normals() ? 2u : 0u);
+    meta.input_vertices = in_.vertex_count();
+    meta.input_triangles = triangles_;
+    meta.default_rgb = uint32_t(default_color_[0]) | (uint32_t(default_color_[1]) << 8) | (uint32_t(default_color_[2]) << 16);
+    report_.file_bytes = archive_->finish(encode_catp_meta(meta));
+}
+
+CatpBuildReport CatpBuild::run() {
+    double start = now_seconds();
+    std::unique_ptr<tbb::global_control> threads;
+    if (settings_.threads > 0)
+        threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings_.threads);
+    budget_ = settings_.memory_budget ? settings_.memory_budget : default_memory_budget();
+    if (budget_ < kMinimumMemoryBudget)
+        fail("a memory budget of %llu bytes is too small: the converter needs at least %llu MiB",
+             (unsigned long long)budget_, (unsigned long long)(kMinimumMemoryBudget >> 20));
+    shares_ = std::make_unique<BudgetShares>(budget_);
+    report_.memory_budget = budget_;
+    report_.input_vertices = in_.vertex_count();
+    uint64_t estimate = in_.triangle_estimate();
+    bool needs_normals = !in_.has_normals();
+    progress_ = std::make_unique<Progress>("catp build", std::max<uint64_t>(1, estimate) * (needs_normals ? 4 : 3), "tri");
+    if (!settings_.progress) progress_->finish();
+
+    // ---- Prepare: vertices, placement, normals, levels.
+    read_vertices();
+    if (estimate == 0) fail("the mesh has no triangles");
+    report_.diagonal = bounds_.diagonal();
+    place_ = place_model(bounds_);
+    if (needs_normals) compute_normals();
+    for (Vec3d& p : sample_)
+        for (int i = 0; i < 3; ++i) p[i] = (p[i] - place_.origin[i]) / place_.cell;
+    levels_ = choose_levels(sample_, estimate, settings_.leaf_triangles, settings_.leaf_level, shares_->block_triangles);
+    if (levels_.leaf_level > kMaxLevel - 3)
+        fail("leaf level %d is deeper than the lattice allows (%d)", levels_.leaf_level, kMaxLevel - 3);
+    report_.leaf_level = levels_.leaf_level;
+    report_.block_level = levels_.block_level;
+    stats_.resize(size_t(levels_.leaf_level) + 1);
+    for (int l = 0; l <= levels_.leaf_level; ++l) stats_[size_t(l)].level = l;
+    archive_ = std::make_unique<ArchiveWriter>(output_, ArchiveKind::Catp);
+
+    // ---- Triangles into blocks.
+    bin_triangles();
+    if (triangles_ == 0) fail("the mesh has no triangles");
+    report_.input_triangles = triangles_;
+    report_.blocks = bins_->block_count();
+    report_.seconds_prepare = now_seconds() - start;
+
+    // ---- Leaves.
+    double phase = now_seconds();
+    build_leaves();
+    write_leaf_nodes();
+    report_.seconds_leaves = now_seconds() - phase;
+
+    // ---- Coarser levels, bottom-up.
+    phase = now_seconds();
+    for (int level = levels_.leaf_level - 1; level >= 0; --level) coarsen_level(level);
+    bytes_spilled_ += fragments_->bytes_spilled();
+    fragments_.reset();
+    progress_->finish();
+    report_.seconds_coarsen = now_seconds() - phase;
+
+    phase = now_seconds();
+    finish_archive();
+    report_.seconds_write = now_seconds() - phase;
+    for (auto& s : stats_) {
+        if (s.diamonds) report_.nodes += s.diamonds;
+        report_.levels.push_back(s);
     }
-    report.seconds = now_seconds() - start;
-    report.peak_rss = peak_rss_bytes();
-    return report;
+    report_.bytes_spilled = bytes_spilled_;
+    report_.seconds = now_seconds() - start;
+    report_.peak_rss = peak_rss_bytes();
+    return report_;
+}
+
+}  // namespace
+
+uint64_t default_memory_budget() {
+    uint64_t physical = physical_memory_bytes();
+    return physical ? std::max<uint64_t>(kMinimumMemoryBudget, physical / 2) : (uint64_t(4) << 30);
+}
+
+CatpBuildReport build_catp(const Mesh& mesh, const std::string& output_path, const CatpBuildSettings& settings) {
+    if (mesh.triangle_count() == 0) fail("the mesh has no triangles");
+    auto input = mesh_build_input(mesh);
+    return CatpBuild(*input, output_path, settings).run();
+}
+
+CatpBuildReport build_catp_file(const std::string& input_path, const std::string& output_path,
+                                const CatpBuildSettings& settings) {
+    auto input = file_build_input(input_path);
+    return CatpBuild(*input, output_path, settings).run();
 }
 
 }  // namespace catpaq

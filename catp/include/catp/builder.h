@@ -10,6 +10,12 @@
 //    diamond's interior faces into one fragment per tetrahedron. Errors are made monotone.
 // 5. Vertices are quantized to the 64-bit vertex with the face rule, fragments compressed, and the
 //    archive written atomically.
+//
+// Out of core: the input is read as a stream (PLY files are never loaded whole), per-vertex data
+// is paged, triangles are sorted into spatial blocks (tetrahedra of a "block level" chosen so the
+// fullest block fits the memory budget) that are clipped one at a time, and each level's
+// fragments live in memory only up to a share of the budget, the rest in anonymous scratch files
+// next to the output. The output does not depend on the budget (tested: bit-identical files).
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -23,7 +29,12 @@ struct CatpBuildSettings {
     int leaf_level = -1;           // force a leaf level (-1: choose from the density)
     unsigned threads = 0;          // 0: all cores
     bool progress = true;          // progress bar on a terminal
+    uint64_t memory_budget = 0;    // bytes the build may use (0: default_memory_budget())
 };
+
+constexpr uint64_t kMinimumMemoryBudget = uint64_t(4) << 20;
+// Half the machine's physical memory.
+uint64_t default_memory_budget();
 
 struct CatpLevelStats {
     int level = 0;
@@ -42,6 +53,10 @@ struct CatpBuildReport {
     // encoding), and writing the final file.
     double seconds_prepare = 0, seconds_leaves = 0, seconds_coarsen = 0, seconds_write = 0;
     uint64_t peak_rss = 0;
+    uint64_t memory_budget = 0;
+    uint64_t bytes_spilled = 0;  // scratch bytes written to disk (0 when everything fitted)
+    int block_level = 0;         // level of the spatial blocks the leaves were built in
+    size_t blocks = 0;
     double diagonal = 0;                 // world units
     std::vector<CatpLevelStats> levels;  // coarse to fine
 };
@@ -49,5 +64,10 @@ struct CatpBuildReport {
 // Converts `mesh` (validated: finite, indices in range) into a dataset at `output_path`.
 // Throws Error with a clear message for inputs it refuses (no triangles, zero extent).
 CatpBuildReport build_catp(const Mesh& mesh, const std::string& output_path, const CatpBuildSettings& settings);
+
+// Converts a mesh file: PLY is streamed (memory bounded by the budget, not by the input size);
+// OBJ, OFF and STL are read whole first. Throws Error on bad input, naming the file.
+CatpBuildReport build_catp_file(const std::string& input_path, const std::string& output_path,
+                                const CatpBuildSettings& settings);
 
 }  // namespace catpaq

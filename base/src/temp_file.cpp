@@ -1,0 +1,77 @@
+#include "base/temp_file.h"
+
+#include <cerrno>
+#include <cstring>
+#include <fcntl.h>
+#include <unistd.h>
+
+#include "base/error.h"
+
+namespace catpaq {
+
+TempFile::TempFile(const std::string& near_path) {
+    size_t slash = near_path.find_last_of('/');
+    dir_ = slash == std::string::npos ? "." : slash == 0 ? "/" : near_path.substr(0, slash);
+    // O_TMPFILE gives a file that never had a name; mkstemp + unlink is the fallback for file
+    // systems without it.
+    fd_ = ::open(dir_.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);
+    if (fd_ < 0) {
+        std::string pattern = dir_ + "/.catpaq-scratch-XXXXXX";
+        fd_ = ::mkstemp(pattern.data());
+        if (fd_ >= 0) ::unlink(pattern.c_str());
+    }
+    if (fd_ < 0) fail("cannot create a scratch file in '%s': %s", dir_.c_str(), std::strerror(errno));
+}
+
+TempFile::~TempFile() {
+    if (fd_ >= 0) ::close(fd_);
+}
+
+void TempFile::write_at(uint64_t offset, const void* data, size_t size) {
+    const char* p = static_cast<const char*>(data);
+    while (size > 0) {
+        ssize_t n = ::pwrite(fd_, p, size, off_t(offset));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0)
+            fail("cannot write scratch data in '%s': %s", dir_.c_str(), n < 0 ? std::strerror(errno) : "no progress");
+        p += n;
+        offset += uint64_t(n);
+        size -= size_t(n);
+    }
+}
+
+void TempFile::read_at(uint64_t offset, void* data, size_t size) const {
+    char* p = static_cast<char*>(data);
+    while (size > 0) {
+        ssize_t n = ::pread(fd_, p, size, off_t(offset));
+        if (n < 0 && errno == EINTR) continue;
+        if (n <= 0)
+            fail("cannot read scratch data in '%s': %s", dir_.c_str(), n < 0 ? std::strerror(errno) : "file too short");
+        p += n;
+        offset += uint64_t(n);
+        size -= size_t(n);
+    }
+}
+
+void TempFile::read_or_zero(uint64_t offset, void* data, size_t size) const {
+    char* p = static_cast<char*>(data);
+    while (size > 0) {
+        ssize_t n = ::pread(fd_, p, size, off_t(offset));
+        if (n < 0 && errno == EINTR) continue;
+        if (n < 0) fail("cannot read scratch data in '%s': %s", dir_.c_str(), std::strerror(errno));
+        if (n == 0) {
+            std::memset(p, 0, size);
+            return;
+        }
+        p += n;
+        offset += uint64_t(n);
+        size -= size_t(n);
+    }
+}
+
+uint64_t physical_memory_bytes() {
+    long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+    return pages > 0 && page > 0 ? uint64_t(pages) * uint64_t(page) : 0;
+}
+
+}  // namespace catpaq

@@ -1,0 +1,105 @@
+#include "build_input.h"
+
+#include <algorithm>
+#include <cctype>
+
+#include "mesh/io.h"
+
+namespace catpaq {
+
+namespace {
+
+class MeshInput final : public BuildInput {
+public:
+    MeshInput(const Mesh& mesh, std::string name) : mesh_(mesh), name_(std::move(name)) {}
+    // Owns a mesh read from a file in a non-streamable format.
+    MeshInput(Mesh&& owned, std::string name) : owned_(std::move(owned)), mesh_(owned_), name_(std::move(name)) {}
+
+    std::string name() const override { return name_; }
+    uint64_t vertex_count() const override { return mesh_.vertex_count(); }
+    uint64_t triangle_estimate() const override { return mesh_.triangle_count(); }
+    bool has_normals() const override { return mesh_.has_normals(); }
+    bool has_colors() const override { return mesh_.has_colors(); }
+
+    size_t read_vertices(size_t max, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals,
+                         std::vector<Rgb8>* colors) override {
+        size_t n = std::min<size_t>(max, mesh_.vertex_count() - next_vertex_);
+        positions.insert(positions.end(), mesh_.positions.begin() + ptrdiff_t(next_vertex_),
+                         mesh_.positions.begin() + ptrdiff_t(next_vertex_ + n));
+        if (normals && mesh_.has_normals())
+            normals->insert(normals->end(), mesh_.normals.begin() + ptrdiff_t(next_vertex_),
+                            mesh_.normals.begin() + ptrdiff_t(next_vertex_ + n));
+        if (colors && mesh_.has_colors())
+            colors->insert(colors->end(), mesh_.colors.begin() + ptrdiff_t(next_vertex_),
+                           mesh_.colors.begin() + ptrdiff_t(next_vertex_ + n));
+        next_vertex_ += n;
+        return n;
+    }
+    void rewind_triangles() override { next_triangle_ = 0; }
+    size_t read_triangles(size_t max, std::vector<uint32_t>& indices) override {
+        size_t n = std::min<size_t>(max, mesh_.triangle_count() - next_triangle_);
+        indices.insert(indices.end(), mesh_.indices.begin() + ptrdiff_t(3 * next_triangle_),
+                       mesh_.indices.begin() + ptrdiff_t(3 * (next_triangle_ + n)));
+        next_triangle_ += n;
+        return n;
+    }
+    void finish() override {}
+
+private:
+    Mesh owned_;
+    const Mesh& mesh_;
+    std::string name_;
+    size_t next_vertex_ = 0, next_triangle_ = 0;
+};
+
+class PlyInput final : public BuildInput {
+public:
+    explicit PlyInput(std::string path) : path_(std::move(path)), stream_(std::make_unique<PlyStream>(path_)) {}
+
+    std::string name() const override { return path_; }
+    uint64_t vertex_count() const override { return stream_->vertex_count(); }
+    uint64_t triangle_estimate() const override { return stream_->face_count(); }
+    bool has_normals() const override { return stream_->has_normals(); }
+    bool has_colors() const override { return stream_->has_colors(); }
+
+    size_t read_vertices(size_t max, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals,
+                         std::vector<Rgb8>* colors) override {
+        return stream_->read_vertices(max, positions, has_normals() ? normals : nullptr,
+                                      has_colors() ? colors : nullptr);
+    }
+    void rewind_triangles() override {
+        // The first pass continues from the vertices; later passes reopen the file (PlyStream
+        // skips the unread vertices).
+        if (passes_++ > 0) stream_ = std::make_unique<PlyStream>(path_);
+    }
+    size_t read_triangles(size_t max, std::vector<uint32_t>& indices) override {
+        size_t before = indices.size();
+        stream_->read_faces(max, indices);
+        return (indices.size() - before) / 3;
+    }
+    void finish() override { stream_->finish(); }
+
+private:
+    std::string path_;
+    std::unique_ptr<PlyStream> stream_;
+    int passes_ = 0;
+};
+
+bool is_ply(const std::string& path) {
+    std::string ext = path.size() >= 4 ? path.substr(path.size() - 4) : "";
+    std::transform(ext.begin(), ext.end(), ext.begin(), [](unsigned char c) { return char(std::tolower(c)); });
+    return ext == ".ply";
+}
+
+}  // namespace
+
+std::unique_ptr<BuildInput> mesh_build_input(const Mesh& mesh, std::string name) {
+    return std::make_unique<MeshInput>(mesh, std::move(name));
+}
+
+std::unique_ptr<BuildInput> file_build_input(const std::string& path) {
+    if (is_ply(path)) return std::make_unique<PlyInput>(path);
+    return std::make_unique<MeshInput>(read_mesh(path), path);
+}
+
+}  // namespace catpaq

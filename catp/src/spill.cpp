@@ -1,0 +1,142 @@
+#include "spill.h"
+
+#include <cstring>
+
+#include "base/error.h"
+
+namespace catpaq {
+
+// ---- TriangleBins -----------------------------------------------------------------------------
+
+TriangleBins::TriangleBins(const std::string& near_path, uint64_t memory_cap)
+    : near_path_(near_path), memory_cap_(memory_cap) {}
+
+void TriangleBins::add(const SlotKey& block, const TriangleRecord& record) {
+    auto [it, inserted] = index_.emplace(block, uint32_t(keys_.size()));
+    if (inserted) {
+        keys_.push_back(block);
+        counts_.push_back(0);
+        buffers_.emplace_back();
+        chunks_.emplace_back();
+    }
+    uint32_t b = it->second;
+    buffers_[b].push_back(record);
+    counts_[b]++;
+    buffered_ += sizeof(TriangleRecord);
+    if (buffered_ > memory_cap_) flush();
+}
+
+// Writes every buffer out as one chunk of its block: sequential writes of large runs.
+void TriangleBins::flush() {
+    if (!file_) file_ = std::make_unique<TempFile>(near_path_);
+    for (size_t b = 0; b < buffers_.size(); ++b) {
+        std::vector<TriangleRecord>& buffer = buffers_[b];
+        if (buffer.empty()) continue;
+        size_t bytes = buffer.size() * sizeof(TriangleRecord);
+        file_->write_at(file_end_, buffer.data(), bytes);
+        chunks_[b].push_back({file_end_, uint32_t(buffer.size())});
+        file_end_ += bytes;
+        std::vector<TriangleRecord>().swap(buffer);
+    }
+    buffered_ = 0;
+}
+
+void TriangleBins::load(size_t b, std::vector<TriangleRecord>& out) {
+    buffered_ -= buffers_[b].size() * sizeof(TriangleRecord);
+    if (chunks_[b].empty()) {  // all in memory: hand the buffer over, no copy
+        out.swap(buffers_[b]);
+        std::vector<TriangleRecord>().swap(buffers_[b]);
+        return;
+    }
+    out.clear();
+    out.reserve(size_t(counts_[b]));
+    for (auto [offset, count] : chunks_[b]) {
+        size_t at = out.size();
+        out.resize(at + count);
+        file_->read_at(offset, out.data() + at, size_t(count) * sizeof(TriangleRecord));
+    }
+    out.insert(out.end(), buffers_[b].begin(), buffers_[b].end());
+    std::vector<TriangleRecord>().swap(buffers_[b]);
+}
+
+// ---- FragmentSpill ----------------------------------------------------------------------------
+
+namespace {
+
+// Layout: vertex count, index count, positions, normals, colours, indices.
+std::vector<uint8_t> serialize(const WorkFragment& f) {
+    uint32_t nv = uint32_t(f.positions.size()), ni = uint32_t(f.indices.size());
+    size_t bytes = 8 + size_t(nv) * (sizeof(Vec3d) + sizeof(Vec3f) + sizeof(Rgb8)) + size_t(ni) * 4;
+    std::vector<uint8_t> out(bytes);
+    uint8_t* p = out.data();
+    auto put = [&](const void* data, size_t n) {
+        if (n) std::memcpy(p, data, n);
+        p += n;
+    };
+    put(&nv, 4);
+    put(&ni, 4);
+    put(f.positions.data(), nv * sizeof(Vec3d));
+    put(f.normals.data(), nv * sizeof(Vec3f));
+    put(f.colors.data(), nv * sizeof(Rgb8));
+    put(f.indices.data(), ni * 4);
+    return out;
+}
+
+void deserialize(const uint8_t* p, size_t size, WorkFragment& f) {
+    uint32_t nv, ni;
+    if (size < 8) fail("corrupt scratch data: fragment record too short");
+    std::memcpy(&nv, p, 4);
+    std::memcpy(&ni, p + 4, 4);
+    if (size != 8 + size_t(nv) * (sizeof(Vec3d) + sizeof(Vec3f) + sizeof(Rgb8)) + size_t(ni) * 4)
+        fail("corrupt scratch data: fragment record size mismatch");
+    p += 8;
+    auto get = [&](void* data, size_t n) {
+        if (n) std::memcpy(data, p, n);
+        p += n;
+    };
+    f.positions.resize(nv);
+    f.normals.resize(nv);
+    f.colors.resize(nv);
+    f.indices.resize(ni);
+    get(f.positions.data(), nv * sizeof(Vec3d));
+    get(f.normals.data(), nv * sizeof(Vec3f));
+    get(f.colors.data(), nv * sizeof(Rgb8));
+    get(f.indices.data(), ni * 4);
+}
+
+}  // namespace
+
+FragmentSpill::FragmentSpill(const std::string& near_path, uint64_t memory_cap)
+    : near_path_(near_path), memory_cap_(memory_cap) {}
+
+void FragmentSpill::put(const SlotKey& key, const WorkFragment& fragment) {
+    std::vector<uint8_t> bytes = serialize(fragment);
+    SpilledFragment ref;
+    ref.key = key;
+    ref.bytes = uint32_t(bytes.size());
+    std::lock_guard lock(mutex_);
+    if (memory_bytes_ + bytes.size() <= memory_cap_) {
+        memory_bytes_ += bytes.size();
+        ref.memory_index = uint32_t(memory_.size());
+        memory_.push_back(std::move(bytes));
+    } else {
+        if (!file_) file_ = std::make_unique<TempFile>(near_path_);
+        ref.file_offset = int64_t(file_end_);
+        file_->write_at(file_end_, bytes.data(), bytes.size());
+        file_end_ += bytes.size();
+    }
+    index_.push_back(ref);
+}
+
+void FragmentSpill::get(const SpilledFragment& ref, WorkFragment& out) const {
+    if (ref.file_offset < 0) {
+        const std::vector<uint8_t>& bytes = memory_[ref.memory_index];
+        deserialize(bytes.data(), bytes.size(), out);
+        return;
+    }
+    std::vector<uint8_t> bytes(ref.bytes);
+    file_->read_at(uint64_t(ref.file_offset), bytes.data(), bytes.size());
+    deserialize(bytes.data(), bytes.size(), out);
+}
+
+}  // namespace catpaq

@@ -1,0 +1,101 @@
+#pragma once
+// Out-of-core storage of the converter (private to the catp module).
+//
+// - TriangleBins: input triangles (resolved to lattice positions and attributes) sorted into
+//   spatial blocks of the hierarchy, buffered in memory up to a cap, the overflow in a scratch
+//   file. A block is later loaded whole, its triangles in input order.
+// - FragmentSpill: the fragments of one level of the hierarchy, in memory up to a cap, the
+//   overflow in a scratch file; loaded one group (diamond or parent) at a time.
+//
+// Both keep their output identical whatever the caps: only where bytes live changes.
+#include <array>
+#include <atomic>
+#include <cstdint>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <unordered_map>
+#include <vector>
+
+#include "base/temp_file.h"
+#include "fragment_build.h"
+
+namespace catpaq {
+
+// A tetrahedron of the hierarchy as (diamond, slot).
+struct SlotKey {
+    uint64_t diamond = 0;
+    int slot = 0;
+    bool operator==(const SlotKey& o) const { return diamond == o.diamond && slot == o.slot; }
+    bool operator<(const SlotKey& o) const { return diamond != o.diamond ? diamond < o.diamond : slot < o.slot; }
+};
+struct SlotKeyHash {
+    size_t operator()(const SlotKey& k) const { return size_t((k.diamond * 0x9E3779B97F4A7C15ull) ^ uint64_t(k.slot)); }
+};
+
+// One input triangle, self-contained: 128 bytes.
+struct TriangleRecord {
+    uint64_t triangle;                // index in the input (keeps input order within a block)
+    std::array<Vec3d, 3> positions;   // lattice units, on the snapping grid
+    std::array<Vec3f, 3> normals;     // unit
+    std::array<Rgb8, 3> colors;
+};
+
+class TriangleBins {
+public:
+    // memory_cap: bytes of buffered records before the buffers are written out.
+    TriangleBins(const std::string& near_path, uint64_t memory_cap);
+
+    // Appends a triangle to a block (created on first use). Not thread-safe.
+    void add(const SlotKey& block, const TriangleRecord& record);
+    size_t block_count() const { return keys_.size(); }
+    const SlotKey& block_key(size_t b) const { return keys_[b]; }
+    uint64_t block_triangles(size_t b) const { return counts_[b]; }
+    // Loads a block's triangles in the order they were added (and frees its buffer).
+    void load(size_t b, std::vector<TriangleRecord>& out);
+    uint64_t bytes_spilled() const { return file_end_; }
+
+private:
+    void flush();
+
+    std::string near_path_;
+    uint64_t memory_cap_, buffered_ = 0, file_end_ = 0;
+    std::unordered_map<SlotKey, uint32_t, SlotKeyHash> index_;
+    std::vector<SlotKey> keys_;
+    std::vector<uint64_t> counts_;
+    std::vector<std::vector<TriangleRecord>> buffers_;
+    std::vector<std::vector<std::pair<uint64_t, uint32_t>>> chunks_;  // file offset, records
+    std::unique_ptr<TempFile> file_;
+};
+
+struct SpilledFragment {
+    SlotKey key;
+    uint32_t bytes = 0;
+    int64_t file_offset = -1;  // -1: in memory, at memory_index
+    uint32_t memory_index = 0;
+};
+
+class FragmentSpill {
+public:
+    FragmentSpill(const std::string& near_path, uint64_t memory_cap);
+
+    // Stores a fragment. Thread-safe.
+    void put(const SlotKey& key, const WorkFragment& fragment);
+    // The stored fragments, in the order they were put (sort as needed). Not while putting.
+    std::vector<SpilledFragment>& fragments() { return index_; }
+    // Reads one back. Thread-safe once putting is over.
+    void get(const SpilledFragment& ref, WorkFragment& out) const;
+    uint64_t bytes_spilled() const { return file_end_; }
+
+private:
+    std::string near_path_;
+    uint64_t memory_cap_;
+    std::mutex mutex_;
+    std::vector<SpilledFragment> index_;
+    std::vector<std::vector<uint8_t>> memory_;
+    uint64_t memory_bytes_ = 0;
+    uint64_t file_end_ = 0;
+    std::unique_ptr<TempFile> file_;
+};
+
+}  // namespace catpaq

@@ -1,0 +1,154 @@
+// The out-of-core converter: the memory budget changes where data lives, never the dataset;
+// streamed PLY input gives the same dataset as the mesh in memory; bad input leaves nothing.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <map>
+
+#include "base/atomic_file.h"
+#include "base/error.h"
+#include "base/paged_array.h"
+#include "catp/builder.h"
+#include "common_codec/archive.h"
+#include "mesh/generators.h"
+#include "mesh/io.h"
+
+using namespace catpaq;
+namespace fs = std::filesystem;
+
+namespace {
+
+struct TempDir {
+    fs::path path;
+    TempDir() {
+        path = fs::temp_directory_path() / ("catpaq_ooc_" + std::to_string(getpid()) + "_" +
+                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+        fs::remove_all(path);
+        fs::create_directories(path);
+    }
+    ~TempDir() { fs::remove_all(path); }
+    std::string file(const std::string& name) const { return (path / name).string(); }
+};
+
+std::string bytes_of(const std::string& path) { return read_file(path); }
+
+CatpBuildSettings quiet_settings(uint64_t budget = 0) {
+    CatpBuildSettings s;
+    s.progress = false;
+    s.memory_budget = budget;
+    return s;
+}
+
+// Node payloads by key: the geometry, independent of the header's input flags.
+std::map<uint64_t, std::string> node_bytes(const std::string& path) {
+    ArchiveReader archive(path);
+    std::map<uint64_t, std::string> nodes;
+    for (size_t i = 0; i < archive.entries().size(); ++i) {
+        std::string error;
+        const uint8_t* bytes = archive.node(i, &error);
+        EXPECT_NE(bytes, nullptr) << error;
+        if (bytes) nodes[archive.entries()[i].key] = std::string(bytes, bytes + archive.entries()[i].size);
+    }
+    return nodes;
+}
+
+}  // namespace
+
+TEST(CatpOutOfCore, PagedArrayKeepsEveryRecordThroughEvictions) {
+    TempDir dir;
+    const uint64_t n = 100000;
+    // Two pages of 4096 records fit the cache: nearly every access below evicts a page.
+    PagedArray<uint64_t> paged(n, 2 * 4096 * sizeof(uint64_t), dir.file("x"));
+    std::vector<uint64_t> reference(n, 0);
+    uint64_t state = 12345;
+    for (int i = 0; i < 200000; ++i) {
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        uint64_t at = (state >> 17) % n;
+        if (i % 3 == 0) {
+            paged.at_for_write(at) = state;
+            reference[at] = state;
+        } else {
+            ASSERT_EQ(paged.at(at), reference[at]) << "record " << at << " after " << i << " operations";
+        }
+    }
+    for (uint64_t at = 0; at < n; ++at) ASSERT_EQ(paged.at(at), reference[at]);
+    EXPECT_GT(paged.bytes_spilled(), 0u);
+}
+
+TEST(CatpOutOfCore, TheDatasetDoesNotDependOnTheMemoryBudget) {
+    TempDir dir;
+    Mesh mesh = make_scan_like(200000, 3);
+    std::string input = dir.file("scan.ply");
+    write_ply(input, mesh, true);
+    CatpBuildReport roomy = build_catp_file(input, dir.file("roomy.cpq"), quiet_settings());
+    // 4 MiB: the vertices (100k x 40 bytes) are paged, the triangles spilled in many blocks,
+    // and most fragments go through scratch files.
+    CatpBuildReport tight = build_catp_file(input, dir.file("tight.cpq"), quiet_settings(kMinimumMemoryBudget));
+    EXPECT_EQ(roomy.bytes_spilled, 0u);
+    EXPECT_GT(tight.bytes_spilled, 20u << 20) << "the tight build should have spilled its triangles";
+    EXPECT_GT(tight.blocks, roomy.blocks);
+    EXPECT_GT(tight.block_level, roomy.block_level);
+    EXPECT_EQ(bytes_of(dir.file("roomy.cpq")), bytes_of(dir.file("tight.cpq")));
+    // Nothing is left in the directory but the inputs and outputs (scratch files are anonymous).
+    size_t files = 0;
+    for (auto& entry : fs::directory_iterator(dir.path)) {
+        (void)entry;
+        files++;
+    }
+    EXPECT_EQ(files, 3u);
+}
+
+TEST(CatpOutOfCore, StreamedPlyGivesTheDatasetOfTheMeshInMemory) {
+    TempDir dir;
+    Mesh mesh = make_sphere(30000, 2);
+    std::string input = dir.file("sphere.ply");
+    write_ply(input, mesh, true);
+    build_catp(read_mesh(input), dir.file("memory.cpq"), quiet_settings());
+    build_catp_file(input, dir.file("streamed.cpq"), quiet_settings(kMinimumMemoryBudget));
+    EXPECT_EQ(bytes_of(dir.file("memory.cpq")), bytes_of(dir.file("streamed.cpq")));
+}
+
+TEST(CatpOutOfCore, NormalsComputedWhileStreamingEqualComputeVertexNormals) {
+    TempDir dir;
+    Mesh mesh = make_torus(30000, 4);
+    mesh.normals.clear();
+    std::string input = dir.file("torus.ply");
+    write_ply(input, mesh, true);
+    // Streamed, normals computed by the converter from the file (with paged sums)...
+    build_catp_file(input, dir.file("streamed.cpq"), quiet_settings(kMinimumMemoryBudget));
+    // ... and in memory with the mesh module's normals.
+    Mesh with_normals = read_mesh(input);
+    with_normals.normals = compute_vertex_normals(with_normals);
+    build_catp(with_normals, dir.file("memory.cpq"), quiet_settings());
+    EXPECT_EQ(node_bytes(dir.file("streamed.cpq")), node_bytes(dir.file("memory.cpq")));
+}
+
+TEST(CatpOutOfCore, TruncatedPlyIsRefusedAndLeavesNothingBehind) {
+    TempDir dir;
+    Mesh mesh = make_sphere(20000, 1);
+    std::string input = dir.file("sphere.ply");
+    write_ply(input, mesh, true);
+    std::string full = bytes_of(input);
+    write_file_atomic(input, full.data(), full.size() - 1000);  // cut inside the face list
+    std::string output = dir.file("out.cpq");
+    try {
+        build_catp_file(input, output, quiet_settings(kMinimumMemoryBudget));
+        FAIL() << "a truncated file was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("sphere.ply"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(fs::exists(output));
+    size_t files = 0;
+    for (auto& entry : fs::directory_iterator(dir.path)) {
+        (void)entry;
+        files++;
+    }
+    EXPECT_EQ(files, 1u) << "only the input may remain";
+}
+
+TEST(CatpOutOfCore, BudgetsBelowTheMinimumAreRefused) {
+    TempDir dir;
+    Mesh mesh = make_sphere(2000, 1);
+    EXPECT_THROW(build_catp(mesh, dir.file("x.cpq"), quiet_settings(kMinimumMemoryBudget - 1)), Error);
+    EXPECT_FALSE(fs::exists(dir.file("x.cpq")));
+}
