@@ -143,22 +143,49 @@ void descend_overlapping(const Tetrahedron& start, int start_level, const Vec3d*
     }
 }
 
-// Calls f(tetrahedron) for every tetrahedron of `level` the points may overlap.
-template <typename F>
-void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&& f) {
-    int octave = level / 3;
-    int32_t side = kLatticeSize >> octave;
-    int32_t lo[3], hi[3];
+// Index range of the cubes of side `side` that the points' bounding box may touch. ceil - 1, not
+// floor: geometry exactly on a cube boundary plane belongs to both cubes (a triangle lying in that
+// plane is kept by exactly one of them, by the coplanar rule).
+void cube_range(const Vec3d* pts, int count, int32_t side, int32_t lo[3], int32_t hi[3]) {
     for (int i = 0; i < 3; ++i) {
         double mn = pts[0][i], mx = pts[0][i];
         for (int k = 1; k < count; ++k) {
             mn = std::min(mn, pts[k][i]);
             mx = std::max(mx, pts[k][i]);
         }
-        // ceil - 1, not floor: geometry exactly on a cube boundary plane belongs to both cubes (a
-        // triangle lying in that plane is kept by exactly one of them, by the coplanar rule).
         lo[i] = std::max(0, int32_t(std::ceil(mn / side)) - 1);
         hi[i] = std::min((kLatticeSize / side) - 1, int32_t(std::floor(mx / side)));
+    }
+}
+
+// A block: one cube of the lattice at octave `octave` (side 2^20 >> octave), by integer index.
+struct BlockCube {
+    int octave = 0;
+    int32_t index[3] = {0, 0, 0};
+    uint64_t key() const { return uint64_t(index[0]) | (uint64_t(index[1]) << 21) | (uint64_t(index[2]) << 42); }
+    static BlockCube from_key(int octave, uint64_t key) {
+        BlockCube b;
+        b.octave = octave;
+        for (int i = 0; i < 3; ++i) b.index[i] = int32_t((key >> (21 * i)) & 0x1fffff);
+        return b;
+    }
+};
+
+// Calls f(tetrahedron) for every tetrahedron of `level` the points may overlap, optionally only
+// those inside the block cube `within` (its octave at most level / 3). Tetrahedra of level 3k
+// and below tile the cubes of octave k, so the search starts at the cubes of the level's octave.
+template <typename F>
+void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&& f, const BlockCube* within = nullptr) {
+    int octave = level / 3;
+    int32_t side = kLatticeSize >> octave;
+    int32_t lo[3], hi[3];
+    cube_range(pts, count, side, lo, hi);
+    if (within) {
+        int32_t per_block = int32_t(1) << (octave - within->octave);
+        for (int i = 0; i < 3; ++i) {
+            lo[i] = std::max(lo[i], within->index[i] * per_block);
+            hi[i] = std::min(hi[i], within->index[i] * per_block + per_block - 1);
+        }
     }
     for (int32_t z = lo[2]; z <= hi[2]; ++z)
         for (int32_t y = lo[1]; y <= hi[1]; ++y)
@@ -175,18 +202,16 @@ void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&
 
 struct LevelChoice {
     int leaf_level = 0;
-    int block_level = 0;
+    int block_octave = 0;                 // blocks are the cubes of this octave (level 3 x octave)
     uint64_t largest_block_estimate = 0;  // triangles
 };
 
-// Tracks sample vertices down the hierarchy one bisection at a time (a point in a tetrahedron is
-// in the child on its side of the splitting plane), counting the tetrahedra hit. The leaf level
-// is the first with about `leaf_target` triangles per occupied tetrahedron; the block level the
-// coarsest (at most the leaf level) whose fullest tetrahedron is estimated to hold at most
-// `block_target` triangles. Vertices sample the surface as well as triangle centroids do (a
-// mesh has about two triangles per vertex), and they are known before the triangles are read.
-LevelChoice choose_levels(const std::vector<Vec3d>& sample, uint64_t triangles, size_t leaf_target, int forced_leaf,
-                          uint64_t block_target) {
+// The leaf level: sample vertices are tracked down the hierarchy one bisection at a time (a point
+// in a tetrahedron is in the child on its side of the splitting plane), counting the tetrahedra
+// hit; the leaf level is the first with about `leaf_target` triangles per occupied tetrahedron.
+// Vertices sample the surface as well as triangle centroids do (a mesh has about two triangles
+// per vertex), and they are known before the triangles are read.
+int choose_leaf_level(const std::vector<Vec3d>& sample, uint64_t triangles, size_t leaf_target) {
     struct Tracked { Vec3d p; Tetrahedron t; };
     std::vector<Tracked> points;
     DiamondInfo root = diamond_info(root_diamond());
@@ -199,11 +224,8 @@ LevelChoice choose_levels(const std::vector<Vec3d>& sample, uint64_t triangles, 
             }
         }
     double per_point = double(triangles) / double(std::max<size_t>(1, points.size()));
-    LevelChoice choice;
-    choice.leaf_level = forced_leaf;
-    bool block_found = false;
     std::vector<uint64_t> keys(points.size());
-    for (int level = 0; level <= kMaxLevel - 3; ++level) {
+    for (int level = 0; level < kMaxLevel - 3; ++level) {
         for (size_t i = 0; i < points.size(); ++i) {
             Tetrahedron k = canonical_tetrahedron(points[i].t);
             uint64_t h = 1469598103934665603ull;
@@ -212,35 +234,43 @@ LevelChoice choose_levels(const std::vector<Vec3d>& sample, uint64_t triangles, 
             keys[i] = h;
         }
         std::sort(keys.begin(), keys.end());
-        size_t distinct = 0, largest = 0;
-        for (size_t i = 0, run = 0; i < keys.size(); ++i) {
-            run = (i > 0 && keys[i] == keys[i - 1]) ? run + 1 : 1;
-            if (run == 1) distinct++;
-            largest = std::max(largest, run);
-        }
-        // Triangles crossing block borders are counted in every block they touch: 25% margin.
-        uint64_t largest_estimate = uint64_t(1.25 * per_point * double(largest)) + 1;
-        if (!block_found && largest_estimate <= block_target) {
-            block_found = true;
-            choice.block_level = level;
-            choice.largest_block_estimate = largest_estimate;
-        }
-        bool leaf_here = forced_leaf >= 0 ? level == forced_leaf
-                                          : per_point * double(points.size()) / double(std::max<size_t>(1, distinct)) <=
-                                                double(leaf_target) * 1.4142;
-        if (leaf_here || level == kMaxLevel - 3) {
-            choice.leaf_level = level;
-            if (!block_found) {
-                choice.block_level = level;
-                choice.largest_block_estimate = largest_estimate;
-            }
-            return choice;
-        }
+        size_t distinct = size_t(std::unique(keys.begin(), keys.end()) - keys.begin());
+        if (per_point * double(points.size()) / double(std::max<size_t>(1, distinct)) <= double(leaf_target) * 1.4142)
+            return level;
         for (Tracked& tp : points) {
             Tetrahedron a, b;
             bisect(tp.t, a, b);
             tp.t = separated(a, &tp.p, 1) ? b : a;
         }
+    }
+    return kMaxLevel - 3;
+}
+
+// The block octave: the coarsest (at most the leaf level's) whose fullest cube is estimated to
+// hold at most `block_target` triangles.
+LevelChoice choose_block_octave(const std::vector<Vec3d>& sample, uint64_t triangles, int leaf_level,
+                                uint64_t block_target) {
+    LevelChoice choice;
+    choice.leaf_level = leaf_level;
+    double per_point = double(triangles) / double(std::max<size_t>(1, sample.size()));
+    std::vector<uint64_t> keys(sample.size());
+    for (int octave = 0; octave <= leaf_level / 3; ++octave) {
+        int32_t side = kLatticeSize >> octave;
+        for (size_t i = 0; i < sample.size(); ++i) {
+            BlockCube c;
+            for (int k = 0; k < 3; ++k) c.index[k] = std::clamp(int32_t(sample[i][k] / side), 0, (kLatticeSize / side) - 1);
+            keys[i] = c.key();
+        }
+        std::sort(keys.begin(), keys.end());
+        size_t largest = 0;
+        for (size_t i = 0, run = 0; i < keys.size(); ++i) {
+            run = (i > 0 && keys[i] == keys[i - 1]) ? run + 1 : 1;
+            largest = std::max(largest, run);
+        }
+        // Triangles crossing block borders are counted in every block they touch: 25% margin.
+        choice.block_octave = octave;
+        choice.largest_block_estimate = uint64_t(1.25 * per_point * double(largest)) + 1;
+        if (choice.largest_block_estimate <= block_target) break;
     }
     return choice;
 }
@@ -410,9 +440,10 @@ void CatpBuild::bin_triangles() {
     bins_ = std::make_unique<TriangleBins>(output_, shares_->triangle_buffers);
     std::vector<uint32_t> indices;
     std::vector<TriangleRecord> records;
-    struct Hit { uint32_t record; SlotKey block; };
+    struct Hit { uint32_t record; uint64_t block; };
     tbb::enumerable_thread_specific<std::vector<Hit>> local_hits;
     std::vector<Hit> hits;
+    const int32_t side = kLatticeSize >> levels_.block_octave;
     in_.rewind_triangles();
     for (;;) {
         indices.clear();
@@ -435,9 +466,15 @@ void CatpBuild::bin_triangles() {
         }
         tbb::parallel_for(tbb::blocked_range<size_t>(0, records.size(), 1024), [&](const tbb::blocked_range<size_t>& range) {
             auto& out = local_hits.local();
-            for (size_t i = range.begin(); i != range.end(); ++i)
-                for_each_overlapping_tetrahedron(records[i].positions.data(), 3, levels_.block_level,
-                                                 [&](const Tetrahedron& tet) { out.push_back({uint32_t(i), slot_key(tet)}); });
+            BlockCube cube;
+            for (size_t i = range.begin(); i != range.end(); ++i) {
+                int32_t lo[3], hi[3];
+                cube_range(records[i].positions.data(), 3, side, lo, hi);
+                for (cube.index[2] = lo[2]; cube.index[2] <= hi[2]; ++cube.index[2])
+                    for (cube.index[1] = lo[1]; cube.index[1] <= hi[1]; ++cube.index[1])
+                        for (cube.index[0] = lo[0]; cube.index[0] <= hi[0]; ++cube.index[0])
+                            out.push_back({uint32_t(i), cube.key()});
+            }
         });
         hits.clear();
         for (auto& h : local_hits) {
@@ -468,13 +505,14 @@ void CatpBuild::build_leaves() {
     std::vector<Hit> hits;
     for (size_t b : order) {
         bins_->load(b, records);
-        Tetrahedron block = slot_tetrahedron(bins_->block_key(b));
-        int block_level = levels_.block_level, leaf_level = levels_.leaf_level;
+        BlockCube block = BlockCube::from_key(levels_.block_octave, bins_->block_key(b));
+        int leaf_level = levels_.leaf_level;
         tbb::parallel_for(tbb::blocked_range<size_t>(0, records.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
             auto& out = local_hits.local();
             for (size_t i = r.begin(); i != r.end(); ++i)
-                descend_overlapping(block, block_level, records[i].positions.data(), 3, leaf_level,
-                                    [&](const Tetrahedron& tet) { out.push_back({slot_key(tet), uint32_t(i)}); });
+                for_each_overlapping_tetrahedron(
+                    records[i].positions.data(), 3, leaf_level,
+                    [&](const Tetrahedron& tet) { out.push_back({slot_key(tet), uint32_t(i)}); }, &block);
         });
         hits.clear();
         for (auto& h : local_hits) {
@@ -686,11 +724,12 @@ CatpBuildReport CatpBuild::run() {
     if (needs_normals) compute_normals();
     for (Vec3d& p : sample_)
         for (int i = 0; i < 3; ++i) p[i] = (p[i] - place_.origin[i]) / place_.cell;
-    levels_ = choose_levels(sample_, estimate, settings_.leaf_triangles, settings_.leaf_level, shares_->block_triangles);
-    if (levels_.leaf_level > kMaxLevel - 3)
-        fail("leaf level %d is deeper than the lattice allows (%d)", levels_.leaf_level, kMaxLevel - 3);
+    int leaf_level = settings_.leaf_level >= 0 ? settings_.leaf_level
+                                               : choose_leaf_level(sample_, estimate, settings_.leaf_triangles);
+    if (leaf_level > kMaxLevel - 3) fail("leaf level %d is deeper than the lattice allows (%d)", leaf_level, kMaxLevel - 3);
+    levels_ = choose_block_octave(sample_, estimate, leaf_level, shares_->block_triangles);
     report_.leaf_level = levels_.leaf_level;
-    report_.block_level = levels_.block_level;
+    report_.block_level = 3 * levels_.block_octave;
     stats_.resize(size_t(levels_.leaf_level) + 1);
     for (int l = 0; l <= levels_.leaf_level; ++l) stats_[size_t(l)].level = l;
     archive_ = std::make_unique<ArchiveWriter>(output_, ArchiveKind::Catp);

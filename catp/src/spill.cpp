@@ -11,7 +11,7 @@ namespace catpaq {
 TriangleBins::TriangleBins(const std::string& near_path, uint64_t memory_cap)
     : near_path_(near_path), memory_cap_(memory_cap) {}
 
-void TriangleBins::add(const SlotKey& block, const TriangleRecord& record) {
+void TriangleBins::add(uint64_t block, const TriangleRecord& record) {
     auto [it, inserted] = index_.emplace(block, uint32_t(keys_.size()));
     if (inserted) {
         keys_.push_back(block);

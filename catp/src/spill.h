@@ -2,7 +2,7 @@
 // Out-of-core storage of the converter (private to the catp module).
 //
 // - TriangleBins: input triangles (resolved to lattice positions and attributes) sorted into
-//   spatial blocks of the hierarchy, buffered in memory up to a cap, the overflow in a scratch
+//   spatial blocks (cubes of the lattice, named by a 64-bit key), buffered in memory up to a cap, the overflow in a scratch
 //   file. A block is later loaded whole, its triangles in input order.
 // - FragmentSpill: the fragments of one level of the hierarchy, in memory up to a cap, the
 //   overflow in a scratch file; loaded one group (diamond or parent) at a time.
@@ -47,9 +47,9 @@ public:
     TriangleBins(const std::string& near_path, uint64_t memory_cap);
 
     // Appends a triangle to a block (created on first use). Not thread-safe.
-    void add(const SlotKey& block, const TriangleRecord& record);
+    void add(uint64_t block, const TriangleRecord& record);
     size_t block_count() const { return keys_.size(); }
-    const SlotKey& block_key(size_t b) const { return keys_[b]; }
+    uint64_t block_key(size_t b) const { return keys_[b]; }
     uint64_t block_triangles(size_t b) const { return counts_[b]; }
     // Loads a block's triangles in the order they were added (and frees its buffer).
     void load(size_t b, std::vector<TriangleRecord>& out);
@@ -60,8 +60,8 @@ private:
 
     std::string near_path_;
     uint64_t memory_cap_, buffered_ = 0, file_end_ = 0;
-    std::unordered_map<SlotKey, uint32_t, SlotKeyHash> index_;
-    std::vector<SlotKey> keys_;
+    std::unordered_map<uint64_t, uint32_t> index_;
+    std::vector<uint64_t> keys_;
     std::vector<uint64_t> counts_;
     std::vector<std::vector<TriangleRecord>> buffers_;
     std::vector<std::vector<std::pair<uint64_t, uint32_t>>> chunks_;  // file offset, records
