@@ -45,9 +45,19 @@ int cmd_convert(int argc, char** argv) {
     settings.leaf_triangles = size_t(options.integer("leaf-triangles", 2000, 50, 1000000));
     settings.leaf_level = int(options.integer("leaf-level", -1, -1, kMaxLevel - 3));
     settings.threads = unsigned(options.integer("threads", 0, 0, 1024));
-    settings.memory_budget = options.bytes("memory", 0);
-    if (options.has("memory") && settings.memory_budget < kMinimumMemoryBudget)
-        fail("--memory: at least %llu MiB are needed", (unsigned long long)(kMinimumMemoryBudget >> 20));
+    // --memory bounds the whole process: the program's own code and libraries come first.
+    uint64_t own = current_rss_bytes();
+    if (options.has("memory")) {
+        uint64_t process_budget = options.bytes("memory", 0);
+        uint64_t needed = own + minimum_memory_budget(settings.threads);
+        if (process_budget < needed)
+            fail("--memory: at least %llu MiB are needed (%llu MiB for the converter's data and threads, %llu MiB "
+                 "for the program itself)",
+                 (unsigned long long)((needed + (1 << 20) - 1) >> 20),
+                 (unsigned long long)(minimum_memory_budget(settings.threads) >> 20),
+                 (unsigned long long)(own >> 20));
+        settings.memory_budget = process_budget - own;
+    }
     bool quiet = options.flag("quiet");
     settings.progress = !quiet;
     options.finish();
@@ -62,9 +72,10 @@ int cmd_convert(int argc, char** argv) {
     std::printf("input:      %s: %zu vertices, %zu triangles\n", input.c_str(), r.input_vertices, r.input_triangles);
     std::printf("output:     %s: %llu bytes, %zu diamonds, leaf level %d\n", output.c_str(),
                 (unsigned long long)r.file_bytes, r.nodes, r.leaf_level);
+    uint64_t process_budget = r.memory_budget + own;
     std::printf("build:      %.2f s (reading included), %.0f input triangles/s, peak memory %.1f MiB of a %.0f MiB budget\n",
                 r.seconds, double(r.input_triangles) / r.seconds, double(r.peak_rss) / (1 << 20),
-                double(r.memory_budget) / (1 << 20));
+                double(process_budget) / (1 << 20));
     std::printf("out of core: %zu blocks at level %d, %.1f MiB of scratch data written to disk\n", r.blocks,
                 r.block_level, double(r.bytes_spilled) / (1 << 20));
     std::printf("phases:     prepare %.2f s, leaves %.2f s, coarsen %.2f s, write %.2f s\n", r.seconds_prepare,

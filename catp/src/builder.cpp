@@ -5,11 +5,13 @@
 #include <atomic>
 #include <cmath>
 #include <cstring>
+#include <malloc.h>
 #include <mutex>
 #include <unordered_map>
 
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/global_control.h>
+#include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 
@@ -302,6 +304,15 @@ struct VertexRecord {
     Rgb8 color;
 };
 
+// Gives freed heap memory back to the system between phases. glibc keeps freed blocks in its
+// per-thread arenas; without this the resident size only grows, and a later phase's peak adds
+// to an earlier phase's leftovers (measured: 89 MiB instead of 64 on a 1M-triangle build).
+void return_free_memory() { malloc_trim(0); }
+
+unsigned worker_threads(unsigned requested) {
+    return requested ? requested : unsigned(std::max(1, tbb::info::default_concurrency()));
+}
+
 // How the memory budget is shared. The phases run one after another, so each may use most of
 // it; the shares leave room for the process itself, TBB's workers and the simplifier's working
 // set (a few MiB per worker thread).
@@ -490,6 +501,7 @@ void CatpBuild::bin_triangles() {
     }
     in_.finish();
     vertices_.reset();  // not needed any more: free the cache before the blocks are loaded
+    return_free_memory();
 }
 
 // Clips each block's triangles by its leaf tetrahedra; the leaf fragments go to the spill.
@@ -541,6 +553,7 @@ void CatpBuild::build_leaves() {
     }
     bytes_spilled_ += bins_->bytes_spilled();
     bins_.reset();
+    return_free_memory();
 }
 
 double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const {
@@ -679,6 +692,7 @@ void CatpBuild::coarsen_level(int level) {
     (void)level;
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_ = std::move(next);
+    return_free_memory();
     diamond_error_.clear();
     for (size_t i = 0; i < runs.size(); ++i) diamond_error_[parent_of[runs[i].first]] = produced_error[i];
 }
@@ -705,10 +719,11 @@ CatpBuildReport CatpBuild::run() {
     if (settings_.threads > 0)
         threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings_.threads);
     budget_ = settings_.memory_budget ? settings_.memory_budget : default_memory_budget();
-    if (budget_ < kMinimumMemoryBudget)
-        fail("a memory budget of %llu bytes is too small: the converter needs at least %llu MiB",
-             (unsigned long long)budget_, (unsigned long long)(kMinimumMemoryBudget >> 20));
-    shares_ = std::make_unique<BudgetShares>(budget_);
+    uint64_t minimum = minimum_memory_budget(settings_.threads);
+    if (budget_ < minimum)
+        fail("a memory budget of %.1f MiB is too small: with %u worker threads the converter needs at least %llu MiB",
+             double(budget_) / (1 << 20), worker_threads(settings_.threads), (unsigned long long)(minimum >> 20));
+    shares_ = std::make_unique<BudgetShares>(budget_ - (minimum - kMinimumDataMemory));
     report_.memory_budget = budget_;
     report_.input_vertices = in_.vertex_count();
     uint64_t estimate = in_.triangle_estimate();
@@ -770,9 +785,13 @@ CatpBuildReport CatpBuild::run() {
 
 }  // namespace
 
+uint64_t minimum_memory_budget(unsigned threads) {
+    return kMinimumDataMemory + kMemoryPerThread * worker_threads(threads);
+}
+
 uint64_t default_memory_budget() {
     uint64_t physical = physical_memory_bytes();
-    return physical ? std::max<uint64_t>(kMinimumMemoryBudget, physical / 2) : (uint64_t(4) << 30);
+    return std::max<uint64_t>(minimum_memory_budget(), physical ? physical / 2 : (uint64_t(4) << 30));
 }
 
 CatpBuildReport build_catp(const Mesh& mesh, const std::string& output_path, const CatpBuildSettings& settings) {

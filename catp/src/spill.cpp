@@ -20,9 +20,12 @@ void TriangleBins::add(uint64_t block, const TriangleRecord& record) {
         chunks_.emplace_back();
     }
     uint32_t b = it->second;
-    buffers_[b].push_back(record);
+    std::vector<TriangleRecord>& buffer = buffers_[b];
+    // Count capacity, not size: a growing vector holds up to twice what it stores.
+    size_t capacity = buffer.capacity();
+    buffer.push_back(record);
     counts_[b]++;
-    buffered_ += sizeof(TriangleRecord);
+    buffered_ += (buffer.capacity() - capacity) * sizeof(TriangleRecord);
     if (buffered_ > memory_cap_) flush();
 }
 
@@ -42,7 +45,7 @@ void TriangleBins::flush() {
 }
 
 void TriangleBins::load(size_t b, std::vector<TriangleRecord>& out) {
-    buffered_ -= buffers_[b].size() * sizeof(TriangleRecord);
+    buffered_ -= buffers_[b].capacity() * sizeof(TriangleRecord);
     if (chunks_[b].empty()) {  // all in memory: hand the buffer over, no copy
         out.swap(buffers_[b]);
         std::vector<TriangleRecord>().swap(buffers_[b]);

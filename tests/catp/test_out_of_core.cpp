@@ -81,9 +81,9 @@ TEST(CatpOutOfCore, TheDatasetDoesNotDependOnTheMemoryBudget) {
     std::string input = dir.file("scan.ply");
     write_ply(input, mesh, true);
     CatpBuildReport roomy = build_catp_file(input, dir.file("roomy.cpq"), quiet_settings());
-    // 4 MiB: the vertices (100k x 40 bytes) are paged, the triangles spilled in many blocks,
-    // and most fragments go through scratch files.
-    CatpBuildReport tight = build_catp_file(input, dir.file("tight.cpq"), quiet_settings(kMinimumMemoryBudget));
+    // The smallest budget (4 MiB of data): the vertices (100k x 40 bytes) are paged, the
+    // triangles spilled in many blocks, and most fragments go through scratch files.
+    CatpBuildReport tight = build_catp_file(input, dir.file("tight.cpq"), quiet_settings(minimum_memory_budget()));
     EXPECT_EQ(roomy.bytes_spilled, 0u);
     EXPECT_GT(tight.bytes_spilled, 20u << 20) << "the tight build should have spilled its triangles";
     EXPECT_GT(tight.blocks, roomy.blocks);
@@ -104,7 +104,7 @@ TEST(CatpOutOfCore, StreamedPlyGivesTheDatasetOfTheMeshInMemory) {
     std::string input = dir.file("sphere.ply");
     write_ply(input, mesh, true);
     build_catp(read_mesh(input), dir.file("memory.cpq"), quiet_settings());
-    build_catp_file(input, dir.file("streamed.cpq"), quiet_settings(kMinimumMemoryBudget));
+    build_catp_file(input, dir.file("streamed.cpq"), quiet_settings(minimum_memory_budget()));
     EXPECT_EQ(bytes_of(dir.file("memory.cpq")), bytes_of(dir.file("streamed.cpq")));
 }
 
@@ -115,7 +115,7 @@ TEST(CatpOutOfCore, NormalsComputedWhileStreamingEqualComputeVertexNormals) {
     std::string input = dir.file("torus.ply");
     write_ply(input, mesh, true);
     // Streamed, normals computed by the converter from the file (with paged sums)...
-    build_catp_file(input, dir.file("streamed.cpq"), quiet_settings(kMinimumMemoryBudget));
+    build_catp_file(input, dir.file("streamed.cpq"), quiet_settings(minimum_memory_budget()));
     // ... and in memory with the mesh module's normals.
     Mesh with_normals = read_mesh(input);
     with_normals.normals = compute_vertex_normals(with_normals);
@@ -132,7 +132,7 @@ TEST(CatpOutOfCore, TruncatedPlyIsRefusedAndLeavesNothingBehind) {
     write_file_atomic(input, full.data(), full.size() - 1000);  // cut inside the face list
     std::string output = dir.file("out.cpq");
     try {
-        build_catp_file(input, output, quiet_settings(kMinimumMemoryBudget));
+        build_catp_file(input, output, quiet_settings(minimum_memory_budget()));
         FAIL() << "a truncated file was accepted";
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("sphere.ply"), std::string::npos) << e.what();
@@ -149,6 +149,6 @@ TEST(CatpOutOfCore, TruncatedPlyIsRefusedAndLeavesNothingBehind) {
 TEST(CatpOutOfCore, BudgetsBelowTheMinimumAreRefused) {
     TempDir dir;
     Mesh mesh = make_sphere(2000, 1);
-    EXPECT_THROW(build_catp(mesh, dir.file("x.cpq"), quiet_settings(kMinimumMemoryBudget - 1)), Error);
+    EXPECT_THROW(build_catp(mesh, dir.file("x.cpq"), quiet_settings(minimum_memory_budget() - 1)), Error);
     EXPECT_FALSE(fs::exists(dir.file("x.cpq")));
 }

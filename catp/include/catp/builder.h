@@ -29,10 +29,18 @@ struct CatpBuildSettings {
     int leaf_level = -1;           // force a leaf level (-1: choose from the density)
     unsigned threads = 0;          // 0: all cores
     bool progress = true;          // progress bar on a terminal
-    uint64_t memory_budget = 0;    // bytes the build may use (0: default_memory_budget())
+    // Working memory the build may use, in bytes (0: default_memory_budget()). It covers the
+    // converter's data and worker threads, not the process's code and libraries (`catpaq convert
+    // --memory` subtracts those, so there the budget bounds the whole process).
+    uint64_t memory_budget = 0;
 };
 
-constexpr uint64_t kMinimumMemoryBudget = uint64_t(4) << 20;
+// Working memory the converter reserves per worker thread (the simplifier's working set on one
+// diamond) and needs at least beyond that.
+constexpr uint64_t kMemoryPerThread = uint64_t(8) << 20;
+constexpr uint64_t kMinimumDataMemory = uint64_t(4) << 20;
+// The smallest budget for `threads` workers (0: as many as cores).
+uint64_t minimum_memory_budget(unsigned threads = 0);
 // Half the machine's physical memory.
 uint64_t default_memory_budget();
 
