@@ -759,6 +759,8 @@ CatpBuildReport CatpBuild::run() {
     // ---- Leaves.
     double phase = now_seconds();
     build_leaves();
+    if (fragments_->fragments().empty())
+        fail("none of the %llu triangles has an area: nothing to build", (unsigned long long)triangles_);
     write_leaf_nodes();
     report_.seconds_leaves = now_seconds() - phase;
 

@@ -152,3 +152,17 @@ TEST(CatpOutOfCore, BudgetsBelowTheMinimumAreRefused) {
     EXPECT_THROW(build_catp(mesh, dir.file("x.cpq"), quiet_settings(minimum_memory_budget() - 1)), Error);
     EXPECT_FALSE(fs::exists(dir.file("x.cpq")));
 }
+
+TEST(CatpOutOfCore, AMeshOfOnlyDegenerateTrianglesIsRefused) {
+    TempDir dir;
+    Mesh mesh;
+    mesh.positions = {{0, 0, 0}, {1, 0, 0}, {2, 0, 0}, {0, 1, 0}};
+    mesh.indices = {0, 1, 2, 0, 0, 3, 1, 1, 1};  // collinear, repeated index, a point
+    try {
+        build_catp(mesh, dir.file("x.cpq"), quiet_settings());
+        FAIL() << "a mesh without area was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("has an area"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(fs::exists(dir.file("x.cpq")));
+}
