@@ -12,45 +12,48 @@ TriangleBins::TriangleBins(const std::string& near_path, uint64_t memory_cap)
     : near_path_(near_path), memory_cap_(memory_cap) {}
 
 void TriangleBins::add(uint64_t block, const TriangleRecord& record) {
-    auto [it, inserted] = index_.emplace(block, uint32_t(keys_.size()));
-    if (inserted) {
-        keys_.push_back(block);
-        counts_.push_back(0);
-        buffers_.emplace_back();
-        chunks_.emplace_back();
+    // Consecutive triangles mostly go to the same block: skip the hash lookup then.
+    size_t b = last_block_;
+    if (b == SIZE_MAX || keys_[b] != block) {
+        auto it = index_.find(block);
+        if (it == index_.end()) {
+            it = index_.emplace(block, uint32_t(keys_.size())).first;
+            keys_.push_back(block);
+            counts_.push_back(0);
+            buffers_.emplace_back();
+            last_fill_.push_back(kChunkRecords);
+            chunks_.emplace_back();
+        }
+        b = last_block_ = it->second;
     }
-    uint32_t b = it->second;
-    std::vector<TriangleRecord>& buffer = buffers_[b];
-    // Count capacity, not size: a growing vector holds up to twice what it stores.
-    size_t capacity = buffer.capacity();
-    buffer.push_back(record);
+    if (last_fill_[b] == kChunkRecords) {
+        buffers_[b].emplace_back(new TriangleRecord[kChunkRecords]);
+        last_fill_[b] = 0;
+        buffered_ += kChunkRecords * sizeof(TriangleRecord);
+    }
+    buffers_[b].back()[last_fill_[b]++] = record;
     counts_[b]++;
-    buffered_ += (buffer.capacity() - capacity) * sizeof(TriangleRecord);
     if (buffered_ > memory_cap_) flush();
 }
 
-// Writes every buffer out as one chunk of its block: sequential writes of large runs.
+// Writes every buffer out as one run of its block: sequential writes of large runs.
 void TriangleBins::flush() {
     if (!file_) file_ = std::make_unique<TempFile>(near_path_);
     for (size_t b = 0; b < buffers_.size(); ++b) {
-        std::vector<TriangleRecord>& buffer = buffers_[b];
-        if (buffer.empty()) continue;
-        size_t bytes = buffer.size() * sizeof(TriangleRecord);
-        file_->write_at(file_end_, buffer.data(), bytes);
-        chunks_[b].push_back({file_end_, uint32_t(buffer.size())});
-        file_end_ += bytes;
-        std::vector<TriangleRecord>().swap(buffer);
+        auto& chunks = buffers_[b];
+        for (size_t c = 0; c < chunks.size(); ++c) {
+            size_t n = c + 1 == chunks.size() ? last_fill_[b] : kChunkRecords;
+            file_->write_at(file_end_, chunks[c].get(), n * sizeof(TriangleRecord));
+            chunks_[b].push_back({file_end_, uint32_t(n)});
+            file_end_ += n * sizeof(TriangleRecord);
+        }
+        chunks.clear();
+        last_fill_[b] = kChunkRecords;
     }
     buffered_ = 0;
 }
 
 void TriangleBins::load(size_t b, std::vector<TriangleRecord>& out) {
-    buffered_ -= buffers_[b].capacity() * sizeof(TriangleRecord);
-    if (chunks_[b].empty()) {  // all in memory: hand the buffer over, no copy
-        out.swap(buffers_[b]);
-        std::vector<TriangleRecord>().swap(buffers_[b]);
-        return;
-    }
     out.clear();
     out.reserve(size_t(counts_[b]));
     for (auto [offset, count] : chunks_[b]) {
@@ -58,8 +61,14 @@ void TriangleBins::load(size_t b, std::vector<TriangleRecord>& out) {
         out.resize(at + count);
         file_->read_at(offset, out.data() + at, size_t(count) * sizeof(TriangleRecord));
     }
-    out.insert(out.end(), buffers_[b].begin(), buffers_[b].end());
-    std::vector<TriangleRecord>().swap(buffers_[b]);
+    auto& chunks = buffers_[b];
+    for (size_t c = 0; c < chunks.size(); ++c) {
+        size_t n = c + 1 == chunks.size() ? last_fill_[b] : kChunkRecords;
+        out.insert(out.end(), chunks[c].get(), chunks[c].get() + n);
+    }
+    buffered_ -= chunks.size() * kChunkRecords * sizeof(TriangleRecord);
+    chunks.clear();
+    chunks.shrink_to_fit();
 }
 
 // ---- FragmentSpill ----------------------------------------------------------------------------
