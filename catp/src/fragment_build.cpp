@@ -435,6 +435,58 @@ double measured_simplification_error(const WorkFragment& gathered, const std::ve
     return error;
 }
 
+namespace {
+
+// The side (plane_side times the plane's sign) of every referenced vertex for each clip plane of
+// each slot, and from them the fate of a triangle in a slot, decided exactly as clip_triangle
+// decides it: clip_triangle tests the planes in order, and while the triangle is still whole, a
+// plane with every corner strictly inside leaves it whole, one with no corner inside and some
+// strictly outside drops it. Anything else (a real cut, a corner on a plane) goes to
+// clip_triangle itself.
+class SlotSides {
+public:
+    enum Fate { kOutside, kInside, kCut };
+
+    SlotSides(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices,
+              const std::vector<std::vector<ClipPlane>>& slot_planes)
+        : slot_planes_(slot_planes), stride_(0) {
+        for (size_t s = 0; s < slot_planes.size(); ++s) {
+            first_.push_back(stride_);
+            stride_ += slot_planes[s].size();
+        }
+        sides_.assign(positions.size() * stride_, 0);
+        std::vector<uint8_t> seen(positions.size(), 0);
+        for (uint32_t v : indices) {
+            if (seen[v]) continue;
+            seen[v] = 1;
+            int8_t* out = &sides_[size_t(v) * stride_];
+            for (size_t s = 0; s < slot_planes.size(); ++s)
+                for (const ClipPlane& cp : slot_planes[s]) *out++ = int8_t(plane_side(cp.plane, positions[v]) * cp.sign);
+        }
+    }
+
+    Fate classify(const uint32_t* corners, int slot) const {
+        const size_t planes = slot_planes_[slot].size();
+        const int8_t* a = &sides_[size_t(corners[0]) * stride_ + first_[slot]];
+        const int8_t* b = &sides_[size_t(corners[1]) * stride_ + first_[slot]];
+        const int8_t* c = &sides_[size_t(corners[2]) * stride_ + first_[slot]];
+        for (size_t k = 0; k < planes; ++k) {
+            if (a[k] > 0 && b[k] > 0 && c[k] > 0) continue;
+            if (a[k] <= 0 && b[k] <= 0 && c[k] <= 0 && (a[k] < 0 || b[k] < 0 || c[k] < 0)) return kOutside;
+            return kCut;
+        }
+        return kInside;
+    }
+
+private:
+    const std::vector<std::vector<ClipPlane>>& slot_planes_;
+    size_t stride_;
+    std::vector<size_t> first_;
+    std::vector<int8_t> sides_;
+};
+
+}  // namespace
+
 double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
     for (auto& f : out) f = WorkFragment{};
     uint8_t slots = existing_slots(d);
@@ -479,13 +531,25 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
         // Faces opposite corners 3 and 2 are (A, B, r0) and (A, B, r1): the interior ones.
         slot_planes[s] = tetrahedron_clip_planes(t, (1u << 2) | (1u << 3));
     }
+    // Which side of each slot plane every vertex lies on, decided once per vertex (exactly as
+    // clip_triangle would decide it for the same point): most triangles lie inside one slot and
+    // outside the others, and those need no clipping. (Clipping every simplified triangle by
+    // every slot was measured at about a third of the coarsening's clipping time.)
+    SlotSides sides(gathered.positions, simplified.indices, slot_planes);
+    static const std::vector<ClipPlane> kNoPlanes;
     for (size_t i = 0; i + 2 < simplified.indices.size(); i += 3) {
         const uint32_t* f = &simplified.indices[i];
         std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
         std::array<Vec3f, 3> normals = {gathered.normals[f[0]], gathered.normals[f[1]], gathered.normals[f[2]]};
         std::array<Rgb8, 3> colors = {gathered.colors[f[0]], gathered.colors[f[1]], gathered.colors[f[2]]};
-        for (int s = 0; s < n; ++s)
-            if (!slot_planes[s].empty()) welders[s].add_clipped(tri, normals, colors, slot_planes[s]);
+        for (int s = 0; s < n; ++s) {
+            if (slot_planes[s].empty()) continue;
+            switch (sides.classify(f, s)) {
+                case SlotSides::kOutside: break;
+                case SlotSides::kInside: welders[s].add_clipped(tri, normals, colors, kNoPlanes); break;
+                case SlotSides::kCut: welders[s].add_clipped(tri, normals, colors, slot_planes[s]); break;
+            }
+        }
     }
     return error;
 }
