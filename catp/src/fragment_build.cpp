@@ -224,27 +224,50 @@ double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, 
 // (1M-triangle scan, perf): most points lie on or very near the surface, and the triangle
 // containing their projection comes up among the first few of their cell.
 class GridDistance {
+    struct Tri {
+        Tri() {}  // left uninitialized: every field is written before use
+        Vec3d p[3];
+        Vec3d centre;
+        double radius;
+        Vec3d normal;   // unit, or zero for a degenerate triangle
+        double offset;  // normal . centre
+    };
+    struct Range {
+        Range() {}  // left uninitialized, as Tri
+        int v[6];   // first and last cell per axis
+    };
+
 public:
-    GridDistance(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices) {
+    // Arrays of a grid, which the next grid may reuse (the two grids of one measurement share
+    // them); the per-triangle arrays are not zero-filled.
+    struct Storage {
+        std::vector<Tri> tris;
+        std::vector<uint32_t> start, items;
+        std::vector<Range> ranges;  // per triangle: its first and last cell per axis
+    };
+
+    GridDistance(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices, Storage& storage)
+        : tris_(storage.tris), start_(storage.start), items_(storage.items) {
         const size_t triangles = indices.size() / 3;
         for (int i = 0; i < 3; ++i) {
             lo_[i] = 1e300;
             hi_[i] = -1e300;
         }
-        for (uint32_t v : indices)
-            for (int i = 0; i < 3; ++i) {
-                lo_[i] = std::min(lo_[i], positions[v][i]);
-                hi_[i] = std::max(hi_[i], positions[v][i]);
-            }
-        const double extent = std::max({hi_[0] - lo_[0], hi_[1] - lo_[1], hi_[2] - lo_[2], 1e-9});
-        // Per triangle, in one record (one cache line and a half, no indirection through the
-        // index buffer at query time): corners, bounding sphere, box.
-        tris_.resize(triangles);
+        // Per triangle, in one record (no indirection through the index buffer at query time):
+        // corners, bounding sphere, supporting plane.
+        if (tris_.size() < triangles) tris_.resize(triangles);
+        tri_count_ = triangles;
         double edges = 0;
         size_t measured = 0;
         for (size_t t = 0; t < triangles; ++t) {
             Tri& tri = tris_[t];
-            for (int k = 0; k < 3; ++k) tri.p[k] = positions[indices[3 * t + k]];
+            for (int k = 0; k < 3; ++k) {
+                tri.p[k] = positions[indices[3 * t + k]];
+                for (int i = 0; i < 3; ++i) {
+                    lo_[i] = std::min(lo_[i], tri.p[k][i]);
+                    hi_[i] = std::max(hi_[i], tri.p[k][i]);
+                }
+            }
             // The mean edge only sizes the grid: a sample of the triangles will do.
             if (t % 8 == 0) {
                 for (int k = 0; k < 3; ++k) edges += length(tri.p[k], tri.p[(k + 1) % 3]);
@@ -259,9 +282,11 @@ public:
             Vec3d n = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
             const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
             // Degenerate triangles get a zero normal: their plane test always passes.
-            for (int i = 0; i < 3; ++i) tri.normal[i] = len > 0 ? n[i] / len : 0.0;
+            const double inv = len > 0 ? 1.0 / len : 0.0;
+            for (int i = 0; i < 3; ++i) tri.normal[i] = n[i] * inv;
             tri.offset = tri.normal[0] * tri.centre[0] + tri.normal[1] * tri.centre[1] + tri.normal[2] * tri.centre[2];
         }
+        const double extent = std::max({hi_[0] - lo_[0], hi_[1] - lo_[1], hi_[2] - lo_[2], 1e-9});
         // Cells of about two mean edge lengths (a surface fills few of them, each holding a few
         // triangles), at most 128 per axis.
         const double mean_edge = measured ? edges / double(3 * measured) : extent;
@@ -272,29 +297,40 @@ public:
         slack_ = cell_ * 1e-6 + 1e-6;
         for (int i = 0; i < 3; ++i) dims_[i] = std::max(1, int((hi_[i] - lo_[i]) / cell_) + 1);
         max_dim_ = std::max({dims_[0], dims_[1], dims_[2]});
-        start_.assign(size_t(dims_[0]) * dims_[1] * dims_[2] + 1, 0);
-        auto for_cells = [&](size_t t, auto&& f) {
-            int a[3], b[3];
+        // Counting sort of (cell, triangle) by cell.
+        const size_t cells = size_t(dims_[0]) * dims_[1] * dims_[2];
+        start_.assign(cells + 1, 0);
+        std::vector<Range>& ranges = storage.ranges;
+        if (ranges.size() < triangles) ranges.resize(triangles);
+        for (size_t t = 0; t < triangles; ++t) {
+            const Tri& tri = tris_[t];
+            int* r = ranges[t].v;
             for (int i = 0; i < 3; ++i) {
-                const Tri& tri = tris_[t];
-                a[i] = clamp_cell(i, std::min({tri.p[0][i], tri.p[1][i], tri.p[2][i]}));
-                b[i] = clamp_cell(i, std::max({tri.p[0][i], tri.p[1][i], tri.p[2][i]}));
+                r[i] = clamp_cell(i, std::min({tri.p[0][i], tri.p[1][i], tri.p[2][i]}));
+                r[3 + i] = clamp_cell(i, std::max({tri.p[0][i], tri.p[1][i], tri.p[2][i]}));
             }
-            for (int z = a[2]; z <= b[2]; ++z)
-                for (int y = a[1]; y <= b[1]; ++y)
-                    for (int x = a[0]; x <= b[0]; ++x) f(cell_index(x, y, z));
-        };
-        for (size_t t = 0; t < triangles; ++t) for_cells(t, [&](size_t c) { start_[c + 1]++; });
-        for (size_t c = 1; c < start_.size(); ++c) start_[c] += start_[c - 1];
-        items_.resize(start_.back());
-        std::vector<uint32_t> fill(start_.begin(), start_.end() - 1);
-        for (size_t t = 0; t < triangles; ++t) for_cells(t, [&](size_t c) { items_[fill[c]++] = uint32_t(t); });
+            for (int z = r[2]; z <= r[5]; ++z)
+                for (int y = r[1]; y <= r[4]; ++y)
+                    for (int x = r[0]; x <= r[3]; ++x) start_[cell_index(x, y, z)]++;
+        }
+        // Inclusive prefix sums: start_[c] is the end of cell c until the fill below.
+        for (size_t c = 1; c < cells; ++c) start_[c] += start_[c - 1];
+        start_[cells] = start_[cells - 1];
+        if (items_.size() < start_[cells]) items_.resize(start_[cells]);
+        // Fill back to front, decrementing the end of each cell: the ends become the starts, and
+        // every cell lists its triangles in increasing order.
+        for (size_t t = triangles; t-- > 0;) {
+            const int* r = ranges[t].v;
+            for (int z = r[2]; z <= r[5]; ++z)
+                for (int y = r[1]; y <= r[4]; ++y)
+                    for (int x = r[0]; x <= r[3]; ++x) items_[--start_[cell_index(x, y, z)]] = uint32_t(t);
+        }
     }
 
     // Distance from p to the mesh; or, when that is at most `enough`, possibly any value between
     // it and `enough` (the search stops at the first triangle within `enough`).
     double distance(const Vec3d& p, double enough = 0.0) const {
-        if (tris_.empty()) return 0.0;
+        if (tri_count_ == 0) return 0.0;
         int c[3];
         for (int i = 0; i < 3; ++i) c[i] = clamp_cell(i, p[i]);
         double best2 = 1e300, best = 1e150;  // squared and plain
@@ -365,13 +401,6 @@ public:
     }
 
 private:
-    struct Tri {
-        Vec3d p[3];
-        Vec3d centre;
-        double radius;
-        Vec3d normal;   // unit, or zero for a degenerate triangle
-        double offset;  // normal . centre
-    };
     static double length2(const Vec3d& a, const Vec3d& b) {
         return (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]);
     }
@@ -387,8 +416,10 @@ private:
     double lo_[3], hi_[3], cell_ = 1, slack_ = 0;
     int dims_[3] = {1, 1, 1};
     int max_dim_ = 1;
-    std::vector<Tri> tris_;
-    std::vector<uint32_t> start_, items_;
+    std::vector<Tri>& tris_;  // the first tri_count_ are this grid's
+    size_t tri_count_ = 0;
+    std::vector<uint32_t>& start_;
+    std::vector<uint32_t>& items_;
 };
 
 }  // namespace
@@ -408,30 +439,42 @@ double measured_simplification_error(const WorkFragment& gathered, const std::ve
     std::vector<uint8_t> kept(pos.size(), 0);
     for (uint32_t v : simplified) kept[v] = 1;
     double error = 0;
+    GridDistance::Storage storage;
     {
-        GridDistance to_simplified(pos, simplified);
+        GridDistance to_simplified(pos, simplified, storage);
         for (size_t v = 0; v < pos.size(); ++v)
             if (!kept[v]) error = std::max(error, to_simplified.distance(pos[v], error));
     }
-    GridDistance to_gathered(pos, gathered.indices);
-    std::vector<uint64_t> edges;
-    edges.reserve(simplified.size());
+    GridDistance to_gathered(pos, gathered.indices, storage);
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const Vec3d &a = pos[simplified[i]], &b = pos[simplified[i + 1]], &c = pos[simplified[i + 2]];
         const Vec3d centroid = {(a[0] + b[0] + c[0]) / 3, (a[1] + b[1] + c[1]) / 3, (a[2] + b[2] + c[2]) / 3};
         error = std::max(error, to_gathered.distance(centroid, error));
-        for (int k = 0; k < 3; ++k) {
-            const uint32_t u = simplified[i + k], w = simplified[i + (k + 1) % 3];
-            edges.push_back(uint64_t(std::min(u, w)) << 32 | std::max(u, w));
+    }
+    // Edges, each once: bucketed by their smaller vertex (a counting sort; sorting 64-bit edge
+    // keys cost a third as much as the queries it saved), duplicates found within a bucket.
+    std::vector<uint32_t> first(pos.size() + 1, 0);
+    for (size_t i = 0; i < simplified.size(); ++i) {
+        const uint32_t u = simplified[i], w = simplified[i % 3 == 2 ? i - 2 : i + 1];
+        first[std::min(u, w) + 1]++;
+    }
+    for (size_t v = 1; v < first.size(); ++v) first[v] += first[v - 1];
+    std::vector<uint32_t> other(simplified.size());
+    {
+        std::vector<uint32_t> fill(first.begin(), first.end() - 1);
+        for (size_t i = 0; i < simplified.size(); ++i) {
+            const uint32_t u = simplified[i], w = simplified[i % 3 == 2 ? i - 2 : i + 1];
+            other[fill[std::min(u, w)]++] = std::max(u, w);
         }
     }
-    std::sort(edges.begin(), edges.end());
-    edges.erase(std::unique(edges.begin(), edges.end()), edges.end());
-    for (uint64_t e : edges) {
-        const Vec3d &a = pos[uint32_t(e >> 32)], &b = pos[uint32_t(e)];
-        const Vec3d midpoint = {(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2};
-        error = std::max(error, to_gathered.distance(midpoint, error));
-    }
+    for (size_t u = 0; u < pos.size(); ++u)
+        for (uint32_t k = first[u]; k < first[u + 1]; ++k) {
+            const uint32_t w = other[k];
+            if (std::find(&other[first[u]], &other[k], w) != &other[k]) continue;  // seen
+            const Vec3d &a = pos[u], &b = pos[w];
+            const Vec3d midpoint = {(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2};
+            error = std::max(error, to_gathered.distance(midpoint, error));
+        }
     return error;
 }
 
