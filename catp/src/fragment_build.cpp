@@ -238,12 +238,11 @@ class GridDistance {
     };
 
 public:
-    // Arrays of a grid, which the next grid may reuse (the two grids of one measurement share
-    // them); the per-triangle arrays are not zero-filled.
+    // Arrays of a grid (held by the caller, which may reuse them); the per-triangle records are
+    // not zero-filled.
     struct Storage {
         std::vector<Tri> tris;
         std::vector<uint32_t> start, items;
-        std::vector<Range> ranges;  // per triangle: its first and last cell per axis
     };
 
     GridDistance(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices, Storage& storage)
@@ -300,8 +299,7 @@ public:
         // Counting sort of (cell, triangle) by cell.
         const size_t cells = size_t(dims_[0]) * dims_[1] * dims_[2];
         start_.assign(cells + 1, 0);
-        std::vector<Range>& ranges = storage.ranges;
-        if (ranges.size() < triangles) ranges.resize(triangles);
+        std::vector<Range> ranges(triangles);  // per triangle: its first and last cell per axis
         for (size_t t = 0; t < triangles; ++t) {
             const Tri& tri = tris_[t];
             int* r = ranges[t].v;
@@ -439,12 +437,13 @@ double measured_simplification_error(const WorkFragment& gathered, const std::ve
     std::vector<uint8_t> kept(pos.size(), 0);
     for (uint32_t v : simplified) kept[v] = 1;
     double error = 0;
-    GridDistance::Storage storage;
     {
+        GridDistance::Storage storage;
         GridDistance to_simplified(pos, simplified, storage);
         for (size_t v = 0; v < pos.size(); ++v)
             if (!kept[v]) error = std::max(error, to_simplified.distance(pos[v], error));
     }
+    GridDistance::Storage storage;
     GridDistance to_gathered(pos, gathered.indices, storage);
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const Vec3d &a = pos[simplified[i]], &b = pos[simplified[i + 1]], &c = pos[simplified[i + 2]];
