@@ -89,7 +89,11 @@ uint32_t FragmentWelder::add(const Vec3d& position, const Vec3f& normal, const R
 
 void FragmentWelder::triangle(uint32_t a, uint32_t b, uint32_t c) {
     if (a == b || b == c || a == c) return;
-    f_.indices.insert(f_.indices.end(), {a, b, c});
+    // Three push_backs, not insert(end, {a, b, c}): the range insert is an out-of-line call
+    // that showed up in the clipping profile.
+    f_.indices.push_back(a);
+    f_.indices.push_back(b);
+    f_.indices.push_back(c);
 }
 
 void FragmentWelder::append(const WorkFragment& other) {
@@ -155,8 +159,13 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, Fragm
     // Vertices closer than a grid step quantize to the same position: merge them (keeping the
     // first one's normal and colour) and drop the triangles that collapse.
     std::vector<uint32_t> remap(in.positions.size());
-    std::unordered_map<uint32_t, uint32_t> by_position;
-    by_position.reserve(in.positions.size() * 2);
+    // Open addressing on the 24-bit position index (std::unordered_map allocated a node per
+    // vertex and was a measured hot spot of writing the nodes).
+    size_t capacity = 16;
+    while (capacity < in.positions.size() * 2) capacity *= 2;
+    const size_t mask = capacity - 1;
+    constexpr uint32_t kEmpty = UINT32_MAX;  // no 24-bit index
+    std::vector<std::pair<uint32_t, uint32_t>> by_position(capacity, {kEmpty, 0});  // index, vertex
     for (size_t v = 0; v < in.positions.size(); ++v) {
         const Vec3d& p = in.positions[v];
         SupportMask support = 0;
@@ -165,9 +174,15 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, Fragm
         if (support == 0) support = 0xf;  // cannot happen for a point in the tetrahedron
         BaryWeights w = bary_quantize(p.data(), c, support);
         uint32_t index = bary_pack(w);
-        auto [it, inserted] = by_position.emplace(index, uint32_t(out.vertices.size()));
-        remap[v] = it->second;
-        if (!inserted) continue;
+        const uint64_t k = uint64_t(index) * 0x9E3779B97F4A7C15ull;
+        size_t h = size_t(k ^ (k >> 32)) & mask;
+        while (by_position[h].first != kEmpty && by_position[h].first != index) h = (h + 1) & mask;
+        if (by_position[h].first == index) {
+            remap[v] = by_position[h].second;
+            continue;
+        }
+        by_position[h] = {index, uint32_t(out.vertices.size())};
+        remap[v] = uint32_t(out.vertices.size());
         const Vec3f& n = in.normals[v];
         out.vertices.push_back(PackedVertex::make(index, oct_encode_precise(n[0], n[1], n[2]), in.colors[v][0],
                                                   in.colors[v][1], in.colors[v][2]));
