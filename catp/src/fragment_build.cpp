@@ -5,6 +5,8 @@
 #include <cmath>
 #include <cstring>
 
+#include <tbb/parallel_invoke.h>
+
 #include "catp/simplify.h"
 #include "common_codec/barycentric.h"
 #include "common_codec/octahedral.h"
@@ -437,29 +439,27 @@ private:
 
 }  // namespace
 
-// Hausdorff-style distance between the gathered surface and its simplification, both ways:
-// removed vertices to the simplified surface, and the simplified triangles' centroids and edge
-// midpoints to the gathered surface. (The simplifier's quadric cost is a mean, not a bound:
-// measured here so the stored errors can be trusted by the cut engine.)
-//
-// The result is exactly the maximum of the sample points' distances: every query gets the
-// running maximum as its `enough`, so a query is only cut short when its distance cannot raise
-// the maximum; and an edge shared by two simplified triangles has one midpoint, measured once
-// (the same point, bit for bit, as (a + b) / 2 is symmetric).
-double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified) {
-    if (simplified.size() == gathered.indices.size()) return 0.0;
-    const std::vector<Vec3d>& pos = gathered.positions;
+namespace {
+
+// Largest distance from the vertices that the simplification removed to the simplified surface.
+double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& simplified) {
     std::vector<uint8_t> kept(pos.size(), 0);
     for (uint32_t v : simplified) kept[v] = 1;
-    double error = 0;
-    {
-        GridDistance::Storage storage;
-        GridDistance to_simplified(pos, simplified, storage);
-        for (size_t v = 0; v < pos.size(); ++v)
-            if (!kept[v]) error = std::max(error, to_simplified.distance(pos[v], error));
-    }
     GridDistance::Storage storage;
-    GridDistance to_gathered(pos, gathered.indices, storage);
+    GridDistance to_simplified(pos, simplified, storage);
+    double error = 0;
+    for (size_t v = 0; v < pos.size(); ++v)
+        if (!kept[v]) error = std::max(error, to_simplified.distance(pos[v], error));
+    return error;
+}
+
+// Largest distance from the simplified triangles' centroids and edge midpoints to the gathered
+// surface.
+double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& gathered,
+                               const std::vector<uint32_t>& simplified) {
+    GridDistance::Storage storage;
+    GridDistance to_gathered(pos, gathered, storage);
+    double error = 0;
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const Vec3d &a = pos[simplified[i]], &b = pos[simplified[i + 1]], &c = pos[simplified[i + 2]];
         const Vec3d centroid = {(a[0] + b[0] + c[0]) / 3, (a[1] + b[1] + c[1]) / 3, (a[2] + b[2] + c[2]) / 3};
@@ -490,6 +490,27 @@ double measured_simplification_error(const WorkFragment& gathered, const std::ve
             error = std::max(error, to_gathered.distance(midpoint, error));
         }
     return error;
+}
+
+}  // namespace
+
+// Hausdorff-style distance between the gathered surface and its simplification, both ways:
+// removed vertices to the simplified surface, and the simplified triangles' centroids and edge
+// midpoints to the gathered surface. (The simplifier's quadric cost is a mean, not a bound:
+// measured here so the stored errors can be trusted by the cut engine.)
+//
+// The result is exactly the maximum of the sample points' distances: every query gets the
+// running maximum as its `enough`, so a query is only cut short when its distance cannot raise
+// the maximum; and an edge shared by two simplified triangles has one midpoint, measured once
+// (the same point, bit for bit, as (a + b) / 2 is symmetric).
+double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified) {
+    if (simplified.size() == gathered.indices.size()) return 0.0;
+    // The two directions are independent (each is the exact maximum over its own points), so
+    // they may run side by side.
+    double removed = 0, points = 0;
+    tbb::parallel_invoke([&] { removed = removed_vertices_error(gathered.positions, simplified); },
+                         [&] { points = simplified_points_error(gathered.positions, gathered.indices, simplified); });
+    return std::max(removed, points);
 }
 
 namespace {
@@ -542,6 +563,44 @@ private:
     std::vector<int8_t> sides_;
 };
 
+// Clips the simplified triangles by the diamond's interior faces into its slots' fragments.
+void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const std::vector<uint32_t>& simplified,
+                     std::array<WorkFragment, 8>& out) {
+    const uint8_t slots = existing_slots(d);
+    const int n = d.ring_size;
+    // Clip by the interior faces into the slots.
+    std::vector<std::vector<ClipPlane>> slot_planes(n);
+    std::vector<FragmentWelder> welders;
+    welders.reserve(8);
+    for (int s = 0; s < 8; ++s) welders.emplace_back(out[s]);
+    for (int s = 0; s < n; ++s) {
+        if (!(slots & (1 << s))) continue;
+        Tetrahedron t = diamond_tetrahedron(d, s);
+        // Faces opposite corners 3 and 2 are (A, B, r0) and (A, B, r1): the interior ones.
+        slot_planes[s] = tetrahedron_clip_planes(t, (1u << 2) | (1u << 3));
+    }
+    // Which side of each slot plane every vertex lies on, decided once per vertex (exactly as
+    // clip_triangle would decide it for the same point): most triangles lie inside one slot and
+    // outside the others, and those need no clipping. (Clipping every simplified triangle by
+    // every slot was measured at about a third of the coarsening's clipping time.)
+    SlotSides sides(gathered.positions, simplified, slot_planes);
+    static const std::vector<ClipPlane> kNoPlanes;
+    for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
+        const uint32_t* f = &simplified[i];
+        std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
+        std::array<Vec3f, 3> normals = {gathered.normals[f[0]], gathered.normals[f[1]], gathered.normals[f[2]]};
+        std::array<Rgb8, 3> colors = {gathered.colors[f[0]], gathered.colors[f[1]], gathered.colors[f[2]]};
+        for (int s = 0; s < n; ++s) {
+            if (slot_planes[s].empty()) continue;
+            switch (sides.classify(f, s)) {
+                case SlotSides::kOutside: break;
+                case SlotSides::kInside: welders[s].add_clipped(tri, normals, colors, kNoPlanes); break;
+                case SlotSides::kCut: welders[s].add_clipped(tri, normals, colors, slot_planes[s]); break;
+            }
+        }
+    }
+}
+
 }  // namespace
 
 double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
@@ -575,39 +634,11 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
     settings.target_triangles = gathered.indices.size() / 3 / 2;
     SimplifyResult simplified = simplify_mesh(&gathered.positions[0][0], vertex_count, gathered.indices.data(),
                                               gathered.indices.size(), locked.data(), settings);
-    double error = measured_simplification_error(gathered, simplified.indices);
-
-    // Clip by the interior faces into the slots.
-    std::vector<std::vector<ClipPlane>> slot_planes(n);
-    std::vector<FragmentWelder> welders;
-    welders.reserve(8);
-    for (int s = 0; s < 8; ++s) welders.emplace_back(out[s]);
-    for (int s = 0; s < n; ++s) {
-        if (!(slots & (1 << s))) continue;
-        Tetrahedron t = diamond_tetrahedron(d, s);
-        // Faces opposite corners 3 and 2 are (A, B, r0) and (A, B, r1): the interior ones.
-        slot_planes[s] = tetrahedron_clip_planes(t, (1u << 2) | (1u << 3));
-    }
-    // Which side of each slot plane every vertex lies on, decided once per vertex (exactly as
-    // clip_triangle would decide it for the same point): most triangles lie inside one slot and
-    // outside the others, and those need no clipping. (Clipping every simplified triangle by
-    // every slot was measured at about a third of the coarsening's clipping time.)
-    SlotSides sides(gathered.positions, simplified.indices, slot_planes);
-    static const std::vector<ClipPlane> kNoPlanes;
-    for (size_t i = 0; i + 2 < simplified.indices.size(); i += 3) {
-        const uint32_t* f = &simplified.indices[i];
-        std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
-        std::array<Vec3f, 3> normals = {gathered.normals[f[0]], gathered.normals[f[1]], gathered.normals[f[2]]};
-        std::array<Rgb8, 3> colors = {gathered.colors[f[0]], gathered.colors[f[1]], gathered.colors[f[2]]};
-        for (int s = 0; s < n; ++s) {
-            if (slot_planes[s].empty()) continue;
-            switch (sides.classify(f, s)) {
-                case SlotSides::kOutside: break;
-                case SlotSides::kInside: welders[s].add_clipped(tri, normals, colors, kNoPlanes); break;
-                case SlotSides::kCut: welders[s].add_clipped(tri, normals, colors, slot_planes[s]); break;
-            }
-        }
-    }
+    // The measurement and the clipping only read the gathered and simplified meshes: run them
+    // side by side (the coarsest levels have fewer diamonds than cores).
+    double error = 0;
+    tbb::parallel_invoke([&] { error = measured_simplification_error(gathered, simplified.indices); },
+                         [&] { clip_into_slots(d, gathered, simplified.indices, out); });
     return error;
 }
 
