@@ -268,25 +268,19 @@ struct Sink {
     std::array<std::array<uint32_t, rans::kMaxAlphabet>, kStreamCount> counts{};
     size_t raw_bits = 0;
     uint32_t conn_symbols = 0;
-    // false: only counts and raw bits are kept, for a trial encoding whose cost is all that is
-    // needed (the chosen mode is emitted again, recording). Recording every trial's items was
-    // most of the encoder's time outside the entropy coder (perf, CATP converter).
-    bool record = true;
 
     int lane_of(int stream) { return stream == kStreamConn ? int(conn_symbols++ & 3) : kStreamLane[stream]; }
     void sym(int stream, uint32_t s) {
-        const uint8_t lane = uint8_t(lane_of(stream));
-        if (record) items.push_back({s, 0, uint8_t(stream), 0, lane});
+        items.push_back({s, 0, uint8_t(stream), 0, uint8_t(lane_of(stream))});
         ++counts[size_t(stream)][s];
     }
     void bits(uint32_t v, int n) {  // n <= 32
         raw_bits += size_t(n);
-        if (n > 0 && record) items.push_back({v, 0, uint8_t(kStreamRaw), uint8_t(n), 0});
+        if (n > 0) items.push_back({v, 0, uint8_t(kStreamRaw), uint8_t(n), 0});
     }
     void value(int stream, uint32_t z) {
         Bucket b = bucket_of(z);
-        const uint8_t lane = uint8_t(lane_of(stream));
-        if (record) items.push_back({b.sym, b.extra, uint8_t(stream), uint8_t(b.nbits), lane});
+        items.push_back({b.sym, b.extra, uint8_t(stream), uint8_t(b.nbits), uint8_t(lane_of(stream))});
         ++counts[size_t(stream)][b.sym];
         raw_bits += b.nbits;
     }
@@ -714,15 +708,14 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
         double best = 1e300;
         for (int mode : {kPosCumulative, kPosWeights}) {
             Sink s;
-            s.record = false;
             emit_positions(st, mode, coords, s);
             double c = s.cost(kStreamPos0, kStreamPos2);
             if (c < best) {
                 best = c;
                 pos_mode = mode;
+                pos = std::move(s);
             }
         }
-        emit_positions(st, pos_mode, coords, pos);
     } else {
         emit_positions(st, kPosRaw, coords, pos);
     }
@@ -743,15 +736,14 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
         for (int mode : {kNormalAverage, kNormalParallelogram, kNormalGeometric}) {
             if (mode == kNormalGeometric && !geometric) continue;
             Sink s;
-            s.record = false;
             emit_normals(st, mode, &acc, matrix, s);
             double c = s.cost(kStreamNormU, kStreamNormV) + (mode == kNormalGeometric ? 72 : 0);
             if (c < best) {
                 best = c;
                 normal_mode = mode;
+                nor = std::move(s);
             }
         }
-        emit_normals(st, normal_mode, &acc, matrix, nor);
     }
 
     // Colours.
@@ -761,16 +753,15 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
         double best = 1e300;
         for (int k = 0; k < 4; ++k) {
             Sink s;
-            s.record = false;
             emit_colors(st, k & 1, k & 2, s);
             double c = s.cost(kStreamColR, kStreamColB);
             if (c < best) {
                 best = c;
                 color_parallelogram = k & 1;
                 color_decorrelate = k & 2;
+                col = std::move(s);
             }
         }
-        emit_colors(st, color_parallelogram, color_decorrelate, col);
     }
 
     // Tables, then everything in decode order. Sections (for the size report): tables of each
