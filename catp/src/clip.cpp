@@ -237,25 +237,41 @@ ClipVertex triangle_line_point(const std::array<Vec3d, 3>& tri, const ClipPlane&
 
 }  // namespace
 
+namespace {
+
+// A polygon during clipping, in fixed storage: a triangle clipped by up to 4 planes has at most 7
+// corners (each plane adds at most one), and even with more planes a convex cut of a triangle
+// stays small. (Two std::vectors per call were a measured hot spot: clip_triangle runs for every
+// input triangle and, while coarsening, for every simplified triangle and slot.)
+constexpr size_t kMaxPolygon = 16;
+struct Polygon {
+    PolyVertex v[kMaxPolygon];
+    size_t n = 0;
+    void push(const PolyVertex& p) {
+        assert(n < kMaxPolygon);
+        if (n < kMaxPolygon) v[n++] = p;
+    }
+};
+
+}  // namespace
+
 void clip_triangle(const std::array<Vec3d, 3>& tri, const std::vector<ClipPlane>& planes, std::vector<ClipVertex>& out) {
     out.clear();
-    std::vector<PolyVertex> poly, next;
-    poly.reserve(12);
-    next.reserve(12);
+    Polygon poly, next;
     for (int k = 0; k < 3; ++k) {
         ClipVertex v;
         v.position = tri[k];
         v.weights = {0, 0, 0};
         v.weights[k] = 1.0;
-        poly.push_back({v, k});
+        poly.push({v, k});
     }
-    int side[16];
+    int side[kMaxPolygon];
     for (size_t j = 0; j < planes.size(); ++j) {
         const ClipPlane& cp = planes[j];
-        size_t n = poly.size();
+        const size_t n = poly.n;
         bool any_in = false, any_out = false;
         for (size_t i = 0; i < n; ++i) {
-            side[i] = plane_side(cp.plane, poly[i].v.position) * cp.sign;
+            side[i] = plane_side(cp.plane, poly.v[i].v.position) * cp.sign;
             any_in |= side[i] > 0;
             any_out |= side[i] < 0;
         }
@@ -275,12 +291,12 @@ void clip_triangle(const std::array<Vec3d, 3>& tri, const std::vector<ClipPlane>
             return;  // pointing into the kept side, or degenerate: the neighbour keeps it
         }
         if (!any_in) return;  // outside, or touching in a point or segment
-        next.clear();
+        next.n = 0;
         for (size_t i = 0; i < n; ++i) {
-            const PolyVertex& cur = poly[i];
+            const PolyVertex& cur = poly.v[i];
             int s0 = side[i], s1 = side[(i + 1) % n];
             Support e = cur.out;
-            if (s0 >= 0) next.push_back({cur.v, (s0 == 0 && s1 < 0) ? Support(3 + j) : e});
+            if (s0 >= 0) next.push({cur.v, (s0 == 0 && s1 < 0) ? Support(3 + j) : e});
             if ((s0 > 0 && s1 < 0) || (s0 < 0 && s1 > 0)) {
                 ClipVertex x;
                 if (e < 3) {
@@ -288,23 +304,25 @@ void clip_triangle(const std::array<Vec3d, 3>& tri, const std::vector<ClipPlane>
                 } else {
                     Vec3d approx;
                     const Vec3d& p = cur.v.position;
-                    const Vec3d& q = poly[(i + 1) % n].v.position;
+                    const Vec3d& q = poly.v[(i + 1) % n].v.position;
                     double fp = plane_value(cp.plane, p), fq = plane_value(cp.plane, q);
                     double t = fp / (fp - fq);
                     for (int k = 0; k < 3; ++k) approx[k] = p[k] + t * (q[k] - p[k]);
                     x = triangle_line_point(tri, planes[e - 3], cp, approx);
                 }
-                next.push_back({x, s0 > 0 ? Support(3 + j) : e});
+                next.push({x, s0 > 0 ? Support(3 + j) : e});
             }
         }
         // Drop consecutive duplicates (a construction can land on an existing vertex).
-        poly.clear();
-        for (const PolyVertex& pv : next)
-            if (poly.empty() || !same_position(poly.back().v.position, pv.v.position)) poly.push_back(pv);
-        while (poly.size() > 1 && same_position(poly.back().v.position, poly.front().v.position)) poly.pop_back();
-        if (poly.size() < 3) return;
+        poly.n = 0;
+        for (size_t i = 0; i < next.n; ++i) {
+            const PolyVertex& pv = next.v[i];
+            if (poly.n == 0 || !same_position(poly.v[poly.n - 1].v.position, pv.v.position)) poly.push(pv);
+        }
+        while (poly.n > 1 && same_position(poly.v[poly.n - 1].v.position, poly.v[0].v.position)) --poly.n;
+        if (poly.n < 3) return;
     }
-    for (const PolyVertex& pv : poly) out.push_back(pv.v);
+    for (size_t i = 0; i < poly.n; ++i) out.push_back(poly.v[i].v);
 }
 
 void triangulate_polygon(const std::vector<ClipVertex>& polygon, std::vector<std::array<int, 3>>& out) {
@@ -312,7 +330,6 @@ void triangulate_polygon(const std::vector<ClipVertex>& polygon, std::vector<std
     if (n < 3) return;
     auto quality = [&](int a, int b, int c) {
         const Vec3d &p = polygon[a].position, &q = polygon[b].position, &r = polygon[c].position;
-        if (is_collinear(p, q, r)) return 0.0;
         double u[3], v[3], w[3];
         for (int i = 0; i < 3; ++i) {
             u[i] = q[i] - p[i];
@@ -323,6 +340,12 @@ void triangulate_polygon(const std::vector<ClipVertex>& polygon, std::vector<std
         double area2 = std::sqrt(cx * cx + cy * cy + cz * cz);
         double edges = u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + v[0] * v[0] + v[1] * v[1] + v[2] * v[2] +
                        w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+        // Floating-point filter for the exact collinearity test: for collinear points the
+        // computed cross product only holds the rounding of u and v, |u x v| < 1e-15 |u| |v| <=
+        // 1e-15 edges, so a quality above 1e-12 proves the points are not collinear. Only
+        // near-degenerate corners pay for the exact predicates (9 orient2d calls per triangle
+        // were a measured hot spot of leaf clipping, where almost every polygon is a triangle).
+        if (!(edges > 0 && area2 > 1e-12 * edges) && is_collinear(p, q, r)) return 0.0;
         return edges > 0 ? area2 / edges : 0.0;
     };
     int best_apex = 0;

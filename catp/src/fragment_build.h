@@ -64,6 +64,11 @@ std::vector<ClipPlane> tetrahedron_clip_planes(const Tetrahedron& t, unsigned fa
 // are dropped.
 void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, FragmentMesh& out);
 
+// Distance between the gathered surface of a diamond and its simplification (triangles indexing
+// gathered.positions), both ways: the removed vertices to the simplified surface, and the
+// simplified triangles' centroids and edge midpoints to the gathered surface (lattice units).
+double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified);
+
 // One coarsening step: `gathered` holds the welded fragments of the diamond's child tetrahedra.
 // Simplifies to about half with every vertex on the diamond's outer faces locked, then clips by
 // the interior faces into one fragment per slot. Returns the simplification error (lattice units).

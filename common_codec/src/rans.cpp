@@ -115,12 +115,26 @@ bool build_freqs(const TableDesc& desc, FreqTable& out) {
     return true;
 }
 
+// log2 of every possible frequency (at most 2^kMaxScaleBits), the same values std::log2 gives:
+// the encoder costs every trial table at every scale, and computing these logarithms was most of
+// its table work (perf, CATP converter).
+static const std::array<double, (1u << kMaxScaleBits) + 1>& log2_of_frequency() {
+    static const auto table = [] {
+        std::array<double, (1u << kMaxScaleBits) + 1> t{};
+        for (uint32_t f = 1; f < t.size(); ++f) t[f] = std::log2(double(f));
+        return t;
+    }();
+    return table;
+}
+
 double data_cost_bits(const uint32_t* counts, const FreqTable& freqs) {
+    const auto& log2f = log2_of_frequency();
     double bits = 0;
     for (int i = 0; i < kMaxAlphabet; ++i) {
         if (counts[i] == 0) continue;
         if (i >= freqs.nsym || freqs.freq[size_t(i)] == 0) return 1e30;
-        bits += double(counts[i]) * (double(freqs.scale_bits) - std::log2(double(freqs.freq[size_t(i)])));
+        const uint32_t f = freqs.freq[size_t(i)];
+        bits += double(counts[i]) * (double(freqs.scale_bits) - (f < log2f.size() ? log2f[f] : std::log2(double(f))));
     }
     return bits;
 }
