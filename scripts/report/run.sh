@@ -37,7 +37,7 @@ PYTHON="${PYTHON:-/usr/bin/python3}"
 REPORT_PY="$ROOT/scripts/report/report.py"
 WORK="$(mktemp -d /tmp/catpaq-report.XXXXXX)"
 RAW="$WORK/raw"
-mkdir -p "$RAW" "$WORK/root" "$WORK/frames_orbit" "$WORK/frames_zoom"
+mkdir -p "$RAW" "$WORK/root" "$WORK/rd" "$WORK/scanpaths"
 SERVER_PID=""
 
 cleanup() {
@@ -69,6 +69,8 @@ need codec_bench bench/codec/codec_bench
 need catp_build_bench bench/catp/catp_build_bench
 need render_bench bench/client/render_bench
 need hard_cases bench/catp/hard_cases
+need rd_bench bench/catp/rd_bench
+need gen_mesh bench/catp/gen_mesh
 
 # required NAME OUTFILE CMD...: runs a step the report needs, output to OUTFILE; on failure names
 # the step, shows the end of its output and stops the run (exit 1), so nothing half-measured is
@@ -114,6 +116,33 @@ required "verify bunny" "$RAW/verify.txt" "$CATPAQ" verify "$WORK/root/bunny.cpq
 log "codec_bench"
 required "codec_bench" "$RAW/codec_bench.txt" "$BUILD/bench/codec/codec_bench"
 
+# The colored scan-like meshes (mesh/generators.h make_scan_like): one for rate-distortion, one
+# (larger in the full run) for streaming. Short mode uses one 300k mesh for both.
+if [[ $MODE == short ]]; then RD_TRIS=300000; STREAM_TRIS=300000; else RD_TRIS=1000000; STREAM_TRIS=2000000; fi
+echo "rd_triangles: $RD_TRIS" >> "$RAW/machine.txt"
+echo "stream_triangles: $STREAM_TRIS" >> "$RAW/machine.txt"
+SCAN_RD="$WORK/scan_rd.ply"
+log "gen_mesh scan $RD_TRIS"
+required "gen_mesh scan $RD_TRIS" "$RAW/gen_scan_rd.txt" "$BUILD/bench/catp/gen_mesh" scan "$RD_TRIS" "$SCAN_RD"
+log "convert scan ($RD_TRIS triangles)"
+s=$(date +%s%N)
+required "convert scan" "$RAW/convert_scan_rd.txt" "$CATPAQ" convert "$SCAN_RD" -o "$WORK/rd/scan.cpq" --quiet
+e=$(date +%s%N)
+echo "convert_scan_rd_seconds: $(( (e - s) / 1000000 ))e-3" >> "$RAW/machine.txt"
+log "verify --mesh scan"
+required "verify scan" "$RAW/verify_scan.txt" "$CATPAQ" verify "$WORK/rd/scan.cpq" --mesh "$SCAN_RD"
+
+# Draco at several -qp and meshoptimizer at several position bit depths, measured with verify's
+# distance code; our decode speed on the same datasets, in the same run.
+log "rd_bench bunny"
+required "rd_bench bunny" "$RAW/rd_bunny.txt" "$BUILD/bench/catp/rd_bench" "$BUNNY" --cpq "$WORK/root/bunny.cpq"
+log "rd_bench scan"
+required "rd_bench scan" "$RAW/rd_scan.txt" "$BUILD/bench/catp/rd_bench" "$SCAN_RD" --cpq "$WORK/rd/scan.cpq"
+if [[ $MODE == full ]]; then
+    log "codec_bench scan"
+    required "codec_bench scan" "$RAW/codec_bench_scan.txt" "$BUILD/bench/codec/codec_bench" "$SCAN_RD"
+fi
+
 # ---- (2) build speed -----------------------------------------------------------------------
 if [[ $MODE == short ]]; then SIZES=100000; else SIZES=100000,1000000,10000000; fi
 log "catp_build_bench --sizes $SIZES"
@@ -127,6 +156,30 @@ required "hard_cases" "$RAW/hard_cases.txt" timeout 900 "$BUILD/bench/catp/hard_
 # ---- (3) streaming -------------------------------------------------------------------------
 log "camera paths"
 required "camera paths" "$RAW/paths.txt" "$PYTHON" "$REPORT_PY" paths --mesh "$BUNNY" --out "$WORK"
+
+if [[ $STREAM_TRIS == "$RD_TRIS" ]]; then
+    SCAN_STREAM="$SCAN_RD"
+    cp "$WORK/rd/scan.cpq" "$WORK/root/scan.cpq"
+    cp "$RAW/convert_scan_rd.txt" "$RAW/convert_scan_stream.txt"
+else
+    SCAN_STREAM="$WORK/scan_stream.ply"
+    log "gen_mesh scan $STREAM_TRIS"
+    required "gen_mesh scan $STREAM_TRIS" "$RAW/gen_scan_stream.txt" "$BUILD/bench/catp/gen_mesh" scan "$STREAM_TRIS" "$SCAN_STREAM"
+    log "convert scan ($STREAM_TRIS triangles)"
+    required "convert scan (streaming)" "$RAW/convert_scan_stream.txt" "$CATPAQ" convert "$SCAN_STREAM" -o "$WORK/root/scan.cpq" --quiet
+fi
+stat -c %s "$WORK/root/scan.cpq" > "$RAW/scan_dataset_size.txt"
+required "camera paths (scan)" "$RAW/paths_scan.txt" "$PYTHON" "$REPORT_PY" paths --mesh "$SCAN_STREAM" --out "$WORK/scanpaths" --kind scan
+SCAN_PATHS="orbit zoom fly"
+
+# Reference images: the same paths from the local file, tolerance 0.1 px, each frame converged
+# (the finest level wherever it is visible).
+for p in $SCAN_PATHS; do
+    log "reference render scan $p (local, 0.1 px, converged)"
+    required "reference render $p" "$RAW/ref_render_$p.txt" "$CATPAQ" render "$WORK/root/scan.cpq" \
+        --camera-path "$WORK/scanpaths/path_$p.json" --tolerance 0.1 --timeout 600 \
+        --stats "$RAW/ref_scan_$p.jsonl" --out "$WORK/ref_scan_$p"
+done
 
 log "serve"
 "$CATPAQ" serve --root "$WORK/root" --port 0 --log-level warn > "$WORK/serve.log" 2>&1 &
@@ -147,6 +200,24 @@ for p in orbit zoom; do
     required "render $p" "$RAW/render_$p.txt" "$CATPAQ" render "${URL}api/datasets/bunny" \
         --camera-path "$WORK/path_$p.json" --size 640x480 --tolerance 1.5 --no-converge \
         --stats "$RAW/stream_$p.jsonl" --out "$WORK/frames_$p"
+done
+for p in $SCAN_PATHS; do
+    # Progressive: one streaming step per frame from a cold start (fresh client, empty caches).
+    log "render scan $p over HTTP (progressive)"
+    required "render scan $p" "$RAW/render_scan_$p.txt" "$CATPAQ" render "${URL}api/datasets/scan" \
+        --camera-path "$WORK/scanpaths/path_$p.json" --tolerance 1.5 --no-converge \
+        --stats "$RAW/stream_scan_$p.jsonl" --out "$WORK/frames_scan_$p"
+    # Cold start on the path's first view alone, waiting until it converges: bytes and time to
+    # reach the tolerance (the wall time of the whole command is kept too).
+    log "render scan $p first view over HTTP (cold start, converged)"
+    s=$(date +%s%N)
+    required "cold start scan $p" "$RAW/cold_render_scan_$p.txt" "$CATPAQ" render "${URL}api/datasets/scan" \
+        --camera-path "$WORK/scanpaths/path_${p}_first.json" --tolerance 1.5 --timeout 300 \
+        --stats "$RAW/cold_scan_$p.jsonl"
+    e=$(date +%s%N)
+    echo "$(( (e - s) / 1000000 ))" > "$RAW/cold_scan_${p}_wall_ms.txt"
+    required "image error scan $p" "$RAW/imgerr_scan_$p.txt" "$PYTHON" "$REPORT_PY" compare \
+        --ref "$WORK/ref_scan_$p" --frames "$WORK/frames_scan_$p" --out "$RAW/imgerr_scan_$p.jsonl"
 done
 kill "$SERVER_PID" 2>/dev/null || true
 wait "$SERVER_PID" 2>/dev/null || true
