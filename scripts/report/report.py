@@ -65,6 +65,23 @@ def norm(v):
     return [c / l for c in v]
 
 
+def frustum_fraction(pts, frame, width=640, height=480, fov=45.0):
+    """Fraction of the points inside a camera frame's view frustum (no occlusion): what a perfectly
+    view-dependent client would need at most, to compare with what it fetched."""
+    import numpy as np
+    e, t = np.array(frame["eye"], float), np.array(frame["target"], float)
+    f = (t - e) / np.linalg.norm(t - e)
+    r = np.cross(f, np.array(frame["up"], float))
+    r /= np.linalg.norm(r)
+    u = np.cross(r, f)
+    d = pts - e
+    z = d @ f
+    ty = math.tan(math.radians(fov / 2))
+    tx = ty * width / height
+    inside = (z > 0) & (abs(d @ r) <= tx * z) & (abs(d @ u) <= ty * z)
+    return float(inside.mean())
+
+
 def write_path(out, name, frames, width=640, height=480):
     with open(os.path.join(out, "path_%s.json" % name), "w") as f:
         json.dump({"width": width, "height": height, "fov": 45, "frames": frames}, f)
@@ -141,6 +158,11 @@ def make_paths(mesh, out, kind):
     print("bbox diagonal %.6g, centre %s, %s %s, zoom distance %.4g -> %.4g%s"
           % (diag, fmt_vec(centre), what, fmt_vec(tip), far, near, fly))
     print("paths: " + " ".join(names))
+    for name in names:
+        with open(os.path.join(out, "path_%s.json" % name)) as f:
+            frames = json.load(f)["frames"]
+        print("in_frustum %s first %.4f last %.4f" % (name, frustum_fraction(pts, frames[0]),
+                                                     frustum_fraction(pts, frames[-1])))
 
 
 SCAN_PATHS = ("orbit", "zoom", "fly")
@@ -644,7 +666,11 @@ def write_report(raw, work, docs):
     rb = parse_render_bench(read(os.path.join(raw, "render_bench.txt")))
     streams = {p: read_jsonl(os.path.join(raw, "stream_%s.jsonl" % p)) for p in ("orbit", "zoom")}
     paths_txt = read(os.path.join(raw, "paths.txt")).strip().splitlines()[0]
-    scan_paths_txt = read(os.path.join(raw, "paths_scan.txt")).strip().splitlines()[0]
+    scan_paths_raw = read(os.path.join(raw, "paths_scan.txt"))
+    scan_paths_txt = scan_paths_raw.strip().splitlines()[0]
+    in_frustum = {m.group(1): (float(m.group(2)), float(m.group(3)))
+                  for m in re.finditer(r"^in_frustum (\S+) first ([0-9.]+) last ([0-9.]+)$", scan_paths_raw, re.M)}
+    require(all(p in in_frustum for p in SCAN_PATHS), "paths_scan.txt: no frustum fractions")
     scan_size = int(read(os.path.join(raw, "scan_dataset_size.txt"), "0").strip() or 0)
     require(scan_size > 0, "scan_dataset_size.txt missing")
     scan_streams, scan_cold, scan_imgerr = {}, {}, {}
@@ -952,12 +978,13 @@ def write_report(raw, work, docs):
         c = scan_cold[p]
         reached = c["certified_error_px"] <= c["tolerance_px"]
         crows.append([p, fmt_bytes(c["bytes_fetched"]) + ("" if reached else " (not reached)"),
-                      "%.1f%%" % (100 * c["bytes_fetched"] / scan_size),
+                      "%.1f%%" % (100 * c["bytes_fetched"] / scan_size), "%.1f%%" % (100 * in_frustum[p][0]),
                       c["requests"], f"{c['triangles']:,}", "%.0f" % c["elapsed_ms"], "%.0f" % c["wall_ms"],
                       "%.3g" % c["certified_error_px"]])
     w("**Cold start to tolerance (first view of each path, converged):**")
     w("")
-    w(md_table(["path", "bytes to reach 1.5 px", "of dataset", "requests", "triangles drawn",
+    w(md_table(["path", "bytes to reach 1.5 px", "of dataset", "input vertices in the view frustum", "requests",
+                "triangles drawn",
                 "ms from opening the dataset", "ms wall (whole command)", "certified error (px)"], crows))
     w("")
     w("*(not reached)*: the view converged (nothing left to fetch) with a certified error above the "
@@ -973,6 +1000,7 @@ def write_report(raw, work, docs):
         first = within[0] if within else None
         srows.append([p, len(rows), fmt_bytes(last["bytes_fetched"]),
                       "**%.1f%%**" % (100 * last["bytes_fetched"] / scan_size),
+                      "%.1f%%" % (100 * in_frustum[p][1]),
                       f"{max(r['triangles'] for r in rows):,}", max(r["pending"] for r in rows),
                       "%.3g" % last["certified_error_px"], len(within),
                       ("frame %d: %s, %.0f ms" % (first["frame"], fmt_bytes(first["bytes_fetched"]), first["elapsed_ms"]))
@@ -981,11 +1009,14 @@ def write_report(raw, work, docs):
                       "%.1f / %.2f" % (err[-1]["psnr"], err[-1]["mad"])])
     w("**Progressive streaming along the paths (cold start, one step per frame):**")
     w("")
-    w(md_table(["path", "frames", "bytes fetched", "of dataset", "max triangles", "max pending",
+    w(md_table(["path", "frames", "bytes fetched", "of dataset", "input vertices in the last frame's frustum",
+                "max triangles", "max pending",
                 "certified error, last frame (px)", "frames within tolerance", "first within tolerance",
                 "mean PSNR (dB, drawn frames)", "last frame PSNR dB / MAD"], srows))
     w("")
-    w("*Of dataset* is the fraction of the file the client fetched by the end of the path. PSNR of identical images is infinite and shown as 99 dB; the reference is rendered "
+    w("*Of dataset* is the fraction of the file the client fetched by the end of the path. *Input vertices "
+      "in the frustum* (no occlusion) bounds what a perfectly view-dependent client would need for that "
+      "view; a fetched fraction far above it means the cut refines well outside the view. PSNR of identical images is infinite and shown as 99 dB; the reference is rendered "
       "with the same renderer, so the remaining differences come from the cut (tolerance 1.5 px against "
       "0.1 px) and from frames not yet refined.")
     w("")
