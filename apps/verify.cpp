@@ -14,8 +14,9 @@ static const char* kVerifyUsage =
     "  Decodes every node and checks checksums, slot masks, triangle counts, monotone errors and\n"
     "  that the fragments on both sides of every shared face have identical borders (on each\n"
     "  uniform level cut and a random mixed cut). With --mesh, measures per level the distance\n"
-    "  between the level's surface and the original (both directions), in model units and\n"
-    "  relative to the bounding-box diagonal. Exit status 1 if any check fails.\n";
+    "  between the level's surface and the original (both directions, largest and root mean\n"
+    "  square over surface samples), in model units and relative to the bounding-box diagonal.\n"
+    "  Exit status 1 if any check fails.\n";
 
 int cmd_verify(int argc, char** argv) {
     Options options(argc, argv, kVerifyUsage);
@@ -39,18 +40,26 @@ int cmd_verify(int argc, char** argv) {
                 r.monotonicity_violations ? "FAIL" : "ok", r.face_mismatches ? "FAIL" : "ok", r.faces_checked);
     double diag = r.diagonal > 0 ? r.diagonal : 1.0;
     std::printf("errors in model units (and relative to the bounding-box diagonal %.6g):\n", r.diagonal);
-    std::printf("%5s %8s %9s %12s %11s %11s %21s %21s\n", "level", "diamonds", "triangles", "bytes", "stored", "quant.step",
-                "level->original max", "original->level max");
+    std::printf("%5s %8s %9s %9s %12s %11s %11s %21s %21s %21s %21s\n", "level", "diamonds", "triangles", "vertices",
+                "bytes", "stored", "quant.step", "level->original max", "original->level max", "level->original rms",
+                "original->level rms");
+    auto cell = [diag](char* out, size_t size, double v) {
+        if (v < 0)
+            std::snprintf(out, size, "-");
+        else
+            std::snprintf(out, size, "%.3g (%.1e)", v, v / diag);
+    };
     for (const VerifyLevel& l : r.levels) {
         if (!l.diamonds) continue;
-        char to[64] = "-", from[64] = "-";
-        if (l.distance_to_original_max >= 0) {
-            std::snprintf(to, sizeof to, "%.3g (%.1e)", l.distance_to_original_max, l.distance_to_original_max / diag);
-            std::snprintf(from, sizeof from, "%.3g (%.1e)", l.distance_from_original_max,
-                          l.distance_from_original_max / diag);
-        }
-        std::printf("%5d %8zu %9zu %12llu %11.3g %11.3g %21s %21s\n", l.level, l.diamonds, l.triangles,
-                    (unsigned long long)l.bytes, l.stored_error, l.quantization_step, to, from);
+        char to[64], from[64], to_rms[64], from_rms[64];
+        cell(to, sizeof to, l.distance_to_original_max);
+        cell(from, sizeof from, l.distance_from_original_max);
+        cell(to_rms, sizeof to_rms, l.distance_to_original_rms);
+        cell(from_rms, sizeof from_rms, l.distance_from_original_rms);
+        // vertices: of the level's uniform cut, welded (what a renderer of that cut would hold).
+        std::printf("%5d %8zu %9zu %9zu %12llu %11.3g %11.3g %21s %21s %21s %21s\n", l.level, l.diamonds, l.triangles,
+                    l.cut_vertices, (unsigned long long)l.bytes, l.stored_error, l.quantization_step, to, from, to_rms,
+                    from_rms);
     }
     for (const std::string& p : r.problems) std::printf("problem: %s\n", p.c_str());
     std::printf("%s\n", r.ok() ? "verify: OK" : "verify: FAILED");

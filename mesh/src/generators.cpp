@@ -643,9 +643,48 @@ Mesh flat(bool tilted) {
     return std::move(b.mesh);
 }
 
-Mesh far_from_origin() {
+Mesh far_from_origin(double offset) {
     Mesh mesh = pushed_box();
-    for (Vec3d& p : mesh.positions) p = {p[0] + 1e6, p[1] + 2e6, p[2] - 1e6};
+    for (Vec3d& p : mesh.positions) p = {p[0] + offset, p[1] + 2 * offset, p[2] - offset};
+    return mesh;
+}
+
+// A closed box surface in which some triangles (a, b, c) become three: (a, m, c), (m, b, c) and
+// the sliver (a, b, m), with m at a height h above the midpoint of a-b (towards c in the
+// triangle's plane, or along its inward normal). The sliver covers exactly what the other two leave
+// out, so the surface stays closed and consistently oriented; its area relative to the triangle
+// is about h / height of c, from 1e-12 to 1e-6: near-degenerate, but never exactly degenerate.
+Mesh near_degenerate_triangles() {
+    BoxGrid grid{{8, 8, 8}};
+    Mesh mesh = box_surface(grid, 0, [](const Vec3d& q) {
+        return Vec3d{0.5 * q[0] + 0.5, 0.5 * q[1] + 0.5, 0.5 * q[2] + 0.5};
+    });
+    const size_t triangles = mesh.triangle_count();
+    const double heights[] = {1e-12, 1e-11, 1e-10, 1e-9, 1e-8, 1e-7, 1e-6};
+    size_t k = 0;
+    for (size_t t = 0; t < triangles; t += 13, ++k) {  // a spread-out subset, every face of the box
+        uint32_t a = mesh.indices[3 * t], b = mesh.indices[3 * t + 1], c = mesh.indices[3 * t + 2];
+        const Vec3d &pa = mesh.positions[a], &pb = mesh.positions[b], &pc = mesh.positions[c];
+        Vec3d mid, ab, ac, dir;
+        for (int i = 0; i < 3; ++i) {
+            mid[i] = 0.5 * (pa[i] + pb[i]);
+            ab[i] = pb[i] - pa[i];
+            ac[i] = pc[i] - pa[i];
+        }
+        if (k % 2 == 0) {  // in the plane, towards c: the part of ac orthogonal to ab
+            double s = (ab[0] * ac[0] + ab[1] * ac[1] + ab[2] * ac[2]) / (ab[0] * ab[0] + ab[1] * ab[1] + ab[2] * ab[2]);
+            dir = normalized({ac[0] - s * ab[0], ac[1] - s * ab[1], ac[2] - s * ab[2]});
+        } else {  // along the triangle's inward normal (outward could leave the documented bounds)
+            dir = normalized({ab[2] * ac[1] - ab[1] * ac[2], ab[0] * ac[2] - ab[2] * ac[0], ab[1] * ac[0] - ab[0] * ac[1]});
+        }
+        double h = heights[k % std::size(heights)];
+        Vec3d m{mid[0] + h * dir[0], mid[1] + h * dir[1], mid[2] + h * dir[2]};
+        if (m == mid) continue;  // h below the spacing of doubles here: would be exactly degenerate
+        mesh.positions.push_back(m);
+        uint32_t mi = uint32_t(mesh.positions.size() - 1);
+        mesh.indices[3 * t + 1] = mi;                               // (a, m, c)
+        mesh.indices.insert(mesh.indices.end(), {mi, b, c, a, b, mi});  // (m, b, c), sliver (a, b, m)
+    }
     return mesh;
 }
 
@@ -694,7 +733,9 @@ const char* hard_case_name(HardCase c) {
         case HardCase::Flat: return "Flat";
         case HardCase::FlatTilted: return "FlatTilted";
         case HardCase::FarFromOrigin: return "FarFromOrigin";
+        case HardCase::FarFromOrigin1e7: return "FarFromOrigin1e7";
         case HardCase::Tiny: return "Tiny";
+        case HardCase::NearDegenerateTriangles: return "NearDegenerateTriangles";
     }
     return "?";
 }
@@ -710,8 +751,10 @@ Mesh make_hard_case(HardCase c, uint64_t seed) {
         case HardCase::Holes: mesh = holes(); break;
         case HardCase::Flat: mesh = flat(false); break;
         case HardCase::FlatTilted: mesh = flat(true); break;
-        case HardCase::FarFromOrigin: mesh = far_from_origin(); break;
+        case HardCase::FarFromOrigin: mesh = far_from_origin(1e6); break;
+        case HardCase::FarFromOrigin1e7: mesh = far_from_origin(1e7); break;
         case HardCase::Tiny: mesh = unit_box_sphere(8, 1e-4); break;
+        case HardCase::NearDegenerateTriangles: mesh = near_degenerate_triangles(); break;
     }
     finish_hard_case(mesh, seed);
     return mesh;
@@ -732,9 +775,10 @@ Bounds hard_case_bounds(HardCase c) {
     bounds.min = {0, 0, 0};
     bounds.max = {1, 1, 1};
     if (c == HardCase::Flat) bounds.min[2] = bounds.max[2] = 0.5;
-    if (c == HardCase::FarFromOrigin) {
-        bounds.min = {1e6, 2e6, -1e6};
-        bounds.max = {1e6 + 1, 2e6 + 1, -1e6 + 1};
+    if (c == HardCase::FarFromOrigin || c == HardCase::FarFromOrigin1e7) {
+        double o = c == HardCase::FarFromOrigin ? 1e6 : 1e7;
+        bounds.min = {o, 2 * o, -o};
+        bounds.max = {o + 1, 2 * o + 1, -o + 1};
     }
     if (c == HardCase::Tiny) bounds.max = {1e-4, 1e-4, 1e-4};
     return bounds;

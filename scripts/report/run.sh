@@ -2,29 +2,42 @@
 # Evaluation report: runs the catpaq tools, keeps their raw output in a temporary directory and
 # lets report.py write docs/RESULTS.md and docs/results/*.png from it.
 #
-# Usage: scripts/report/run.sh [--short]
-#   --short   quick run (under 3 minutes on 2 cores): build bench on 100k triangles only,
-#             render_bench bounded to 60 s (skipped if slower)
+# Usage: scripts/report/run.sh [--short] [--out DIR]
+#   --short    quick run (under 3 minutes on 2 cores; CI runs it from scripts/test.sh): build
+#              bench on 100k triangles only, smaller generated meshes, render_bench bounded to
+#              60 s (skipped with a stated reason if slower)
+#   --out DIR  where RESULTS.md and results/*.png go (default: the repository's docs/)
 # Environment: BUILD (default <repo>/build), PYTHON (default /usr/bin/python3, needs matplotlib),
 #              KEEP_RAW=1 keeps the raw outputs (path printed at the end).
+# Exit status: non-zero when a step the report needs fails (the failing step is named); optional
+# sections (render_bench) degrade to a stated reason in the report instead.
 set -euo pipefail
 
 MODE=full
-for a in "$@"; do
-    case "$a" in
+OUT=""
+while [[ $# -gt 0 ]]; do
+    case "$1" in
         --short) MODE=short ;;
-        -h|--help) sed -n '2,10p' "$0"; exit 0 ;;
-        *) echo "run.sh: unknown option $a" >&2; exit 2 ;;
+        --out)
+            [[ $# -ge 2 && -n "$2" ]] || { echo "run.sh: --out needs a directory" >&2; exit 2; }
+            OUT="$2"; shift ;;
+        --out=*) OUT="${1#--out=}" ;;
+        -h|--help) sed -n '2,15p' "$0"; exit 0 ;;
+        *) echo "run.sh: unknown option $1 (see --help)" >&2; exit 2 ;;
     esac
+    shift
 done
 
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
+OUT="${OUT:-$ROOT/docs}"
+mkdir -p "$OUT" || { echo "run.sh: cannot create --out directory $OUT" >&2; exit 2; }
+OUT="$(cd "$OUT" && pwd)"
 BUILD="${BUILD:-$ROOT/build}"
 PYTHON="${PYTHON:-/usr/bin/python3}"
 REPORT_PY="$ROOT/scripts/report/report.py"
 WORK="$(mktemp -d /tmp/catpaq-report.XXXXXX)"
 RAW="$WORK/raw"
-mkdir -p "$RAW" "$WORK/root" "$WORK/frames_orbit" "$WORK/frames_zoom"
+mkdir -p "$RAW" "$WORK/root" "$WORK/rd" "$WORK/scanpaths"
 SERVER_PID=""
 
 cleanup() {
@@ -55,7 +68,23 @@ need catpaq apps/catpaq
 need codec_bench bench/codec/codec_bench
 need catp_build_bench bench/catp/catp_build_bench
 need render_bench bench/client/render_bench
-need catp_tests tests/catp/catp_tests
+need hard_cases bench/catp/hard_cases
+need rd_bench bench/catp/rd_bench
+need gen_mesh bench/catp/gen_mesh
+
+# required NAME OUTFILE CMD...: runs a step the report needs, output to OUTFILE; on failure names
+# the step, shows the end of its output and stops the run (exit 1), so nothing half-measured is
+# written.
+required() {
+    local name=$1 out=$2 rc=0
+    shift 2
+    "$@" > "$out" 2>&1 || rc=$?
+    if [[ $rc -ne 0 ]]; then
+        echo "run.sh: step '$name' failed (exit status $rc); end of its output:" >&2
+        tail -n 25 "$out" >&2
+        exit 1
+    fi
+}
 
 CATPAQ="$BUILD/apps/catpaq"
 BUNNY="$ROOT/data/bunny.ply"
@@ -75,36 +104,90 @@ T0=$(date +%s)
 # ---- (1) rate-distortion -------------------------------------------------------------------
 log "convert bunny"
 s=$(date +%s%N)
-"$CATPAQ" convert "$BUNNY" -o "$WORK/root/bunny.cpq" --quiet
+required "convert bunny" "$RAW/convert.txt" "$CATPAQ" convert "$BUNNY" -o "$WORK/root/bunny.cpq" --quiet
 e=$(date +%s%N)
 echo "convert_seconds: $(( (e - s) / 1000000 ))e-3" >> "$RAW/machine.txt"
 stat -c %s "$WORK/root/bunny.cpq" > "$RAW/dataset_size.txt"
-"$CATPAQ" info "$BUNNY" > "$RAW/info.txt"
+required "info bunny" "$RAW/info.txt" "$CATPAQ" info "$BUNNY"
 
 log "verify --mesh"
-"$CATPAQ" verify "$WORK/root/bunny.cpq" --mesh "$BUNNY" > "$RAW/verify.txt" 2>&1 \
-    || { echo "verify_rc: $?" >> "$RAW/verify.txt"; }
+required "verify bunny" "$RAW/verify.txt" "$CATPAQ" verify "$WORK/root/bunny.cpq" --mesh "$BUNNY"
 
 log "codec_bench"
-"$BUILD/bench/codec/codec_bench" > "$RAW/codec_bench.txt" 2>&1 \
-    || echo "codec_bench failed with status $?" >> "$RAW/codec_bench.txt"
+required "codec_bench" "$RAW/codec_bench.txt" "$BUILD/bench/codec/codec_bench"
+
+# The colored scan-like meshes (mesh/generators.h make_scan_like): one for rate-distortion, one
+# (larger in the full run) for streaming. Short mode uses one 300k mesh for both.
+if [[ $MODE == short ]]; then RD_TRIS=300000; STREAM_TRIS=300000; else RD_TRIS=1000000; STREAM_TRIS=2000000; fi
+echo "rd_triangles: $RD_TRIS" >> "$RAW/machine.txt"
+echo "stream_triangles: $STREAM_TRIS" >> "$RAW/machine.txt"
+SCAN_RD="$WORK/scan_rd.ply"
+log "gen_mesh scan $RD_TRIS"
+required "gen_mesh scan $RD_TRIS" "$RAW/gen_scan_rd.txt" "$BUILD/bench/catp/gen_mesh" scan "$RD_TRIS" "$SCAN_RD"
+log "convert scan ($RD_TRIS triangles)"
+s=$(date +%s%N)
+required "convert scan" "$RAW/convert_scan_rd.txt" "$CATPAQ" convert "$SCAN_RD" -o "$WORK/rd/scan.cpq" --quiet
+e=$(date +%s%N)
+echo "convert_scan_rd_seconds: $(( (e - s) / 1000000 ))e-3" >> "$RAW/machine.txt"
+log "verify --mesh scan"
+required "verify scan" "$RAW/verify_scan.txt" "$CATPAQ" verify "$WORK/rd/scan.cpq" --mesh "$SCAN_RD"
+
+# Draco at several -qp and meshoptimizer at several position bit depths, measured with verify's
+# distance code; our decode speed on the same datasets, in the same run.
+log "rd_bench bunny"
+required "rd_bench bunny" "$RAW/rd_bunny.txt" "$BUILD/bench/catp/rd_bench" "$BUNNY" --cpq "$WORK/root/bunny.cpq"
+log "rd_bench scan"
+required "rd_bench scan" "$RAW/rd_scan.txt" "$BUILD/bench/catp/rd_bench" "$SCAN_RD" --cpq "$WORK/rd/scan.cpq"
+if [[ $MODE == full ]]; then
+    log "codec_bench scan"
+    required "codec_bench scan" "$RAW/codec_bench_scan.txt" "$BUILD/bench/codec/codec_bench" "$SCAN_RD"
+fi
 
 # ---- (2) build speed -----------------------------------------------------------------------
 if [[ $MODE == short ]]; then SIZES=100000; else SIZES=100000,1000000,10000000; fi
 log "catp_build_bench --sizes $SIZES"
-"$BUILD/bench/catp/catp_build_bench" --sizes "$SIZES" > "$RAW/build_bench.txt" 2>&1 \
-    || echo "catp_build_bench failed with status $?" >> "$RAW/build_bench.txt"
+required "catp_build_bench" "$RAW/build_bench.txt" "$BUILD/bench/catp/catp_build_bench" --sizes "$SIZES"
 
 # ---- hard cases ----------------------------------------------------------------------------
+# A case that neither passes nor is refused with a message fails the run.
 log "hard cases"
-set +e
-timeout 600 "$BUILD/tests/catp/catp_tests" --gtest_filter='*Hard*' > "$RAW/hard.txt" 2>&1
-echo "$?" > "$RAW/hard_rc.txt"
-set -e
+required "hard_cases" "$RAW/hard_cases.txt" timeout 900 "$BUILD/bench/catp/hard_cases" --cuts 30
 
 # ---- (3) streaming -------------------------------------------------------------------------
 log "camera paths"
-"$PYTHON" "$REPORT_PY" paths --mesh "$BUNNY" --out "$WORK" > "$RAW/paths.txt"
+required "camera paths" "$RAW/paths.txt" "$PYTHON" "$REPORT_PY" paths --mesh "$BUNNY" --out "$WORK"
+
+if [[ $STREAM_TRIS == "$RD_TRIS" ]]; then
+    SCAN_STREAM="$SCAN_RD"
+    cp "$WORK/rd/scan.cpq" "$WORK/root/scan.cpq"
+    cp "$RAW/convert_scan_rd.txt" "$RAW/convert_scan_stream.txt"
+else
+    SCAN_STREAM="$WORK/scan_stream.ply"
+    log "gen_mesh scan $STREAM_TRIS"
+    required "gen_mesh scan $STREAM_TRIS" "$RAW/gen_scan_stream.txt" "$BUILD/bench/catp/gen_mesh" scan "$STREAM_TRIS" "$SCAN_STREAM"
+    log "convert scan ($STREAM_TRIS triangles)"
+    required "convert scan (streaming)" "$RAW/convert_scan_stream.txt" "$CATPAQ" convert "$SCAN_STREAM" -o "$WORK/root/scan.cpq" --quiet
+fi
+# The same mesh with finer nodes (500 instead of 2000 triangles per leaf fragment): how much of
+# the cold-start cost of a close view is node granularity.
+log "convert scan with --leaf-triangles 500"
+required "convert scan (fine nodes)" "$RAW/convert_scan_fine.txt" "$CATPAQ" convert "$SCAN_STREAM" \
+    -o "$WORK/root/scanfine.cpq" --leaf-triangles 500 --quiet
+stat -c %s "$WORK/root/scanfine.cpq" > "$RAW/scanfine_dataset_size.txt"
+required "verify scan (fine nodes)" "$RAW/verify_scan_fine.txt" "$CATPAQ" verify "$WORK/root/scanfine.cpq"
+stat -c %s "$WORK/root/scan.cpq" > "$RAW/scan_dataset_size.txt"
+required "verify scan (streaming)" "$RAW/verify_scan_stream.txt" "$CATPAQ" verify "$WORK/root/scan.cpq"
+required "camera paths (scan)" "$RAW/paths_scan.txt" "$PYTHON" "$REPORT_PY" paths --mesh "$SCAN_STREAM" --out "$WORK/scanpaths" --kind scan
+SCAN_PATHS="orbit zoom fly"
+
+# Reference images: the same paths from the local file, tolerance 0.1 px, each frame converged
+# (the finest level wherever it is visible).
+for p in $SCAN_PATHS; do
+    log "reference render scan $p (local, 0.1 px, converged)"
+    required "reference render $p" "$RAW/ref_render_$p.txt" "$CATPAQ" render "$WORK/root/scan.cpq" \
+        --camera-path "$WORK/scanpaths/path_$p.json" --tolerance 0.1 --timeout 600 \
+        --stats "$RAW/ref_scan_$p.jsonl" --out "$WORK/ref_scan_$p"
+done
 
 log "serve"
 "$CATPAQ" serve --root "$WORK/root" --port 0 --log-level warn > "$WORK/serve.log" 2>&1 &
@@ -122,9 +205,36 @@ curl -fsS "${URL}api/datasets" > "$RAW/datasets.json" || echo '{}' > "$RAW/datas
 
 for p in orbit zoom; do
     log "render $p over HTTP ($URL)"
-    "$CATPAQ" render "${URL}api/datasets/bunny" --camera-path "$WORK/path_$p.json" \
-        --size 640x480 --tolerance 1.5 --no-converge \
-        --stats "$RAW/stream_$p.jsonl" --out "$WORK/frames_$p" > "$RAW/render_$p.txt" 2>&1
+    required "render $p" "$RAW/render_$p.txt" "$CATPAQ" render "${URL}api/datasets/bunny" \
+        --camera-path "$WORK/path_$p.json" --size 640x480 --tolerance 1.5 --no-converge \
+        --stats "$RAW/stream_$p.jsonl" --out "$WORK/frames_$p"
+done
+for p in $SCAN_PATHS; do
+    # Progressive: one streaming step per frame from a cold start (fresh client, empty caches).
+    log "render scan $p over HTTP (progressive)"
+    required "render scan $p" "$RAW/render_scan_$p.txt" "$CATPAQ" render "${URL}api/datasets/scan" \
+        --camera-path "$WORK/scanpaths/path_$p.json" --tolerance 1.5 --no-converge \
+        --stats "$RAW/stream_scan_$p.jsonl" --out "$WORK/frames_scan_$p"
+    # Cold start on the path's first view alone, and on its last view alone, waiting until it
+    # converges: bytes and time to reach the tolerance (the whole command's wall time too).
+    for view in first last; do
+        log "render scan $p $view view over HTTP (cold start, converged)"
+        s=$(date +%s%N)
+        required "cold start scan $p $view" "$RAW/cold_render_scan_${p}_$view.txt" "$CATPAQ" render \
+            "${URL}api/datasets/scan" --camera-path "$WORK/scanpaths/path_${p}_$view.json" \
+            --tolerance 1.5 --timeout 300 --stats "$RAW/cold_scan_${p}_$view.jsonl"
+        e=$(date +%s%N)
+        echo "$(( (e - s) / 1000000 ))" > "$RAW/cold_scan_${p}_${view}_wall_ms.txt"
+    done
+    log "render scan $p last view over HTTP, fine nodes (cold start, converged)"
+    s=$(date +%s%N)
+    required "cold start scanfine $p last" "$RAW/cold_render_scanfine_${p}_last.txt" "$CATPAQ" render \
+        "${URL}api/datasets/scanfine" --camera-path "$WORK/scanpaths/path_${p}_last.json" \
+        --tolerance 1.5 --timeout 300 --stats "$RAW/cold_scanfine_${p}_last.jsonl"
+    e=$(date +%s%N)
+    echo "$(( (e - s) / 1000000 ))" > "$RAW/cold_scanfine_${p}_last_wall_ms.txt"
+    required "image error scan $p" "$RAW/imgerr_scan_$p.txt" "$PYTHON" "$REPORT_PY" compare \
+        --ref "$WORK/ref_scan_$p" --frames "$WORK/frames_scan_$p" --out "$RAW/imgerr_scan_$p.jsonl"
 done
 kill "$SERVER_PID" 2>/dev/null || true
 wait "$SERVER_PID" 2>/dev/null || true
@@ -146,5 +256,5 @@ echo "total_seconds: $((T1 - T0))" >> "$RAW/machine.txt"
 
 # ---- write the report ----------------------------------------------------------------------
 log "report.py"
-"$PYTHON" "$REPORT_PY" write --raw "$RAW" --work "$WORK" --docs "$ROOT/docs"
-log "done in $((T1 - T0)) s: $ROOT/docs/RESULTS.md"
+required "report.py write" "$RAW/report_py.txt" "$PYTHON" "$REPORT_PY" write --raw "$RAW" --work "$WORK" --docs "$OUT"
+log "done in $((T1 - T0)) s: $OUT/RESULTS.md"

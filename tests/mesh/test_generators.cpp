@@ -255,17 +255,40 @@ TEST(HardCases, SeedChangesOrderButNotGeometry) {
 
 TEST(HardCases, ClosedCasesAreClosed) {
     for (HardCase c : {HardCase::OnBisectionPlanes, HardCase::OnLatticeEdgesAndCorners, HardCase::Slivers,
-                       HardCase::FarFromOrigin, HardCase::Tiny}) {
+                       HardCase::FarFromOrigin, HardCase::FarFromOrigin1e7, HardCase::Tiny,
+                       HardCase::NearDegenerateTriangles}) {
         SCOPED_TRACE(hard_case_name(c));
         Mesh mesh = make_hard_case(c);
         EdgeCounts edges = count_edges(mesh.indices);
         EXPECT_EQ(edges.border, 0u);
         EXPECT_EQ(edges.nonmanifold, 0u);
         EXPECT_EQ(edges.misoriented, 0u);
-        if (c != HardCase::FarFromOrigin) {  // far from the origin the volume sum cancels badly
+        if (c != HardCase::FarFromOrigin && c != HardCase::FarFromOrigin1e7) {  // the volume sum cancels badly
             EXPECT_GT(signed_volume(mesh), 0.0);
         }
     }
+}
+
+TEST(HardCases, NearDegenerateTrianglesAreTinyButNeverExactlyDegenerate) {
+    Mesh mesh = make_hard_case(HardCase::NearDegenerateTriangles);
+    double largest = 0;
+    std::vector<double> areas;
+    for (size_t t = 0; t < mesh.indices.size(); t += 3) {
+        const Vec3d &a = mesh.positions[mesh.indices[t]], &b = mesh.positions[mesh.indices[t + 1]],
+                    &c = mesh.positions[mesh.indices[t + 2]];
+        Vec3d u{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, v{c[0] - a[0], c[1] - a[1], c[2] - a[2]};
+        double x = u[1] * v[2] - u[2] * v[1], y = u[2] * v[0] - u[0] * v[2], z = u[0] * v[1] - u[1] * v[0];
+        areas.push_back(0.5 * std::sqrt(x * x + y * y + z * z));
+        largest = std::max(largest, areas.back());
+    }
+    size_t tiny = 0, below_1e11 = 0;
+    for (double area : areas) {
+        EXPECT_GT(area, 0.0);  // never exactly degenerate
+        tiny += area < 1e-5 * largest;
+        below_1e11 += area < 1e-11 * largest;
+    }
+    EXPECT_GE(tiny, 50u);
+    EXPECT_GE(below_1e11, 5u);  // the 1e-12 slivers are there
 }
 
 TEST(HardCases, OnBisectionPlanes) {

@@ -21,4 +21,18 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
+// Points on a mesh for distance measures: the vertices of non-degenerate triangles (strided to
+// at most about count / 2), then uniform samples by area up to `count` in all. Zero-area
+// triangles and isolated vertices are not surface and are never sampled. Deterministic (fixed
+// seed), so two runs on the same mesh measure the same points.
+std::vector<std::array<double, 3>> sample_surface(const std::vector<std::array<double, 3>>& positions,
+                                                  const std::vector<uint32_t>& indices, size_t count);
+
+struct DistanceStats {
+    double max = 0, rms = 0;  // over the points, in the surface's units
+};
+
+// Distances from `points` to the surface `to` (in parallel): the largest and the root mean square.
+DistanceStats measure_distances(const SurfaceDistance& to, const std::vector<std::array<double, 3>>& points);
+
 }  // namespace catpaq

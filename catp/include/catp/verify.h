@@ -11,7 +11,9 @@ namespace catpaq {
 
 struct VerifyLevel {
     int level = 0;
-    size_t diamonds = 0, fragments = 0, triangles = 0, vertices = 0;
+    size_t diamonds = 0, fragments = 0, triangles = 0;
+    size_t vertices = 0;      // stored in the level's fragments (shared ones once per fragment)
+    size_t cut_vertices = 0;  // of the uniform cut at this level, welded by exact position
     uint64_t bytes = 0;
     double stored_error = 0;     // largest stored error bound of the level's diamonds (world)
     double quantization_step = 0;  // largest tetrahedron edge / grid of the level (world)

@@ -64,8 +64,15 @@ enum class HardCase {
     // OnBisectionPlanes offset by (1e6, 2e6, -1e6): bounding box [1e6, 1e6+1] x [2e6, 2e6+1] x
     // [-1e6, -1e6+1], every coordinate exactly representable in double (not in float).
     FarFromOrigin,
+    // The same offset by (1e7, 2e7, -1e7): the spacing of doubles there is 2^-28 to 2^-27 (about
+    // 4e-9 to 7e-9), still exact for the 1/64 steps of the model.
+    FarFromOrigin1e7,
     // A closed sphere with bounding box [0, 1e-4]^3.
     Tiny,
+    // A closed box surface on an 8^3 grid where about 60 triangles are split around slivers of
+    // relative area 1e-12 to 1e-6 (a vertex at that height above an edge, in the plane or off
+    // it): near-degenerate, never exactly degenerate; closed and consistently oriented.
+    NearDegenerateTriangles,
 };
 
 inline constexpr HardCase kAllHardCases[] = {
@@ -73,7 +80,8 @@ inline constexpr HardCase kAllHardCases[] = {
     HardCase::Slivers,           HardCase::DegenerateAndDuplicateTriangles,
     HardCase::NonManifoldEdges,  HardCase::Holes,
     HardCase::Flat,              HardCase::FlatTilted,
-    HardCase::FarFromOrigin,     HardCase::Tiny,
+    HardCase::FarFromOrigin,     HardCase::FarFromOrigin1e7,
+    HardCase::Tiny,              HardCase::NearDegenerateTriangles,
 };
 
 const char* hard_case_name(HardCase c);  // the enumerator's name, e.g. "OnBisectionPlanes"
