@@ -17,7 +17,7 @@ public:
 
     std::string name() const override { return name_; }
     uint64_t vertex_count() const override { return mesh_.vertex_count(); }
-    uint64_t triangle_estimate() const override { return mesh_.triangle_count(); }
+    uint64_t triangle_estimate() override { return mesh_.triangle_count(); }
     bool has_normals() const override { return mesh_.has_normals(); }
     bool has_colors() const override { return mesh_.has_colors(); }
 
@@ -58,7 +58,15 @@ public:
 
     std::string name() const override { return path_; }
     uint64_t vertex_count() const override { return stream_->vertex_count(); }
-    uint64_t triangle_estimate() const override { return stream_->face_count(); }
+    uint64_t triangle_estimate() override {
+        if (!peeked_) {
+            // Read ahead; the first triangle pass serves these before reading on.
+            peeked_ = true;
+            uint64_t faces = stream_->read_faces(kPeekFaces, peek_);
+            if (faces > 0) estimate_ = stream_->face_count() * (peek_.size() / 3) / faces;
+        }
+        return estimate_;
+    }
     bool has_normals() const override { return stream_->has_normals(); }
     bool has_colors() const override { return stream_->has_colors(); }
 
@@ -68,11 +76,23 @@ public:
                                       has_colors() ? colors : nullptr);
     }
     void rewind_triangles() override {
-        // The first pass continues from the vertices; later passes reopen the file (PlyStream
-        // skips the unread vertices).
-        if (passes_++ > 0) stream_ = std::make_unique<PlyStream>(path_);
+        // The first pass continues from the vertices (and the peeked faces); later passes reopen
+        // the file (PlyStream skips the unread vertices).
+        triangle_estimate();
+        if (passes_++ > 0) {
+            stream_ = std::make_unique<PlyStream>(path_);
+            peek_.clear();
+        }
+        peek_served_ = 0;
     }
     size_t read_triangles(size_t max, std::vector<uint32_t>& indices) override {
+        if (peek_served_ < peek_.size() / 3) {
+            size_t n = std::min(max, peek_.size() / 3 - peek_served_);
+            indices.insert(indices.end(), peek_.begin() + ptrdiff_t(3 * peek_served_),
+                           peek_.begin() + ptrdiff_t(3 * (peek_served_ + n)));
+            peek_served_ += n;
+            return n;
+        }
         size_t before = indices.size();
         stream_->read_faces(max, indices);
         return (indices.size() - before) / 3;
@@ -81,8 +101,13 @@ public:
 
 private:
     std::string path_;
+    static constexpr size_t kPeekFaces = 4096;
     std::unique_ptr<PlyStream> stream_;
     int passes_ = 0;
+    bool peeked_ = false;
+    uint64_t estimate_ = 0;
+    std::vector<uint32_t> peek_;  // indices of the first faces' triangles
+    size_t peek_served_ = 0;      // triangles of peek_ returned in the current pass
 };
 
 bool is_ply(const std::string& path) {

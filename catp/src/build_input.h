@@ -17,8 +17,9 @@ public:
     virtual ~BuildInput() = default;
     virtual std::string name() const = 0;
     virtual uint64_t vertex_count() const = 0;
-    // Triangles as declared (a PLY polygon counts once: exact for triangle meshes).
-    virtual uint64_t triangle_estimate() const = 0;
+    // Number of triangles, exact or estimated: a PLY file declares polygons, so its input reads the
+    // first faces to learn how many triangles a polygon makes. Call after the vertices are read.
+    virtual uint64_t triangle_estimate() = 0;
     virtual bool has_normals() const = 0;
     virtual bool has_colors() const = 0;
     // Appends up to `max` further vertices (normals / colours only when offered and requested).

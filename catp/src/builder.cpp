@@ -726,14 +726,15 @@ CatpBuildReport CatpBuild::run() {
     shares_ = std::make_unique<BudgetShares>(budget_ - (minimum - kMinimumDataMemory));
     report_.memory_budget = budget_;
     report_.input_vertices = in_.vertex_count();
-    uint64_t estimate = in_.triangle_estimate();
     bool needs_normals = !in_.has_normals();
-    progress_ = std::make_unique<Progress>("catp build", std::max<uint64_t>(1, estimate) * (needs_normals ? 4 : 3), "tri");
+    progress_ = std::make_unique<Progress>("catp build", std::max<uint64_t>(1, in_.vertex_count()) * (needs_normals ? 8 : 6), "tri");
     if (!settings_.progress) progress_->finish();
 
     // ---- Prepare: vertices, placement, normals, levels.
     read_vertices();
+    uint64_t estimate = in_.triangle_estimate();
     if (estimate == 0) fail("the mesh has no triangles");
+    progress_->set_total(estimate * (needs_normals ? 4 : 3));
     report_.diagonal = bounds_.diagonal();
     place_ = place_model(bounds_);
     if (needs_normals) compute_normals();

@@ -166,3 +166,33 @@ TEST(CatpOutOfCore, AMeshOfOnlyDegenerateTrianglesIsRefused) {
     }
     EXPECT_FALSE(fs::exists(dir.file("x.cpq")));
 }
+
+TEST(CatpOutOfCore, AQuadPlyIsStreamedWithTheLevelsOfItsTriangles) {
+    TempDir dir;
+    // A 100 x 100 grid of quads: 10k polygons, 20k triangles.
+    std::string input = dir.file("quads.ply");
+    {
+        std::string text;
+        const int n = 100;
+        text += "ply\nformat ascii 1.0\nelement vertex " + std::to_string((n + 1) * (n + 1)) +
+                "\nproperty double x\nproperty double y\nproperty double z\nelement face " + std::to_string(n * n) +
+                "\nproperty list uchar int vertex_indices\nend_header\n";
+        for (int y = 0; y <= n; ++y)
+            for (int x = 0; x <= n; ++x)
+                text += std::to_string(x) + " " + std::to_string(y) + " " + std::to_string((x * y) % 7) + "\n";
+        for (int y = 0; y < n; ++y)
+            for (int x = 0; x < n; ++x) {
+                int a = y * (n + 1) + x;
+                text += "4 " + std::to_string(a) + " " + std::to_string(a + 1) + " " + std::to_string(a + n + 2) + " " +
+                        std::to_string(a + n + 1) + "\n";
+            }
+        write_file_atomic(input, text.data(), text.size());
+    }
+    CatpBuildSettings settings = quiet_settings();
+    settings.leaf_triangles = 1000;
+    CatpBuildReport streamed = build_catp_file(input, dir.file("streamed.cpq"), settings);
+    CatpBuildReport memory = build_catp(read_mesh(input), dir.file("memory.cpq"), settings);
+    EXPECT_EQ(streamed.input_triangles, 20000u);
+    EXPECT_EQ(streamed.leaf_level, memory.leaf_level);
+    EXPECT_EQ(bytes_of(dir.file("streamed.cpq")), bytes_of(dir.file("memory.cpq")));
+}
