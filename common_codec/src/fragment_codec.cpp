@@ -269,14 +269,6 @@ struct Sink {
     size_t raw_bits = 0;
     uint32_t conn_symbols = 0;
 
-    // Empties the sink, keeping the items' capacity.
-    void reset() {
-        items.clear();
-        for (auto& c : counts) c.fill(0);
-        raw_bits = 0;
-        conn_symbols = 0;
-    }
-
     int lane_of(int stream) { return stream == kStreamConn ? int(conn_symbols++ & 3) : kStreamLane[stream]; }
     void sym(int stream, uint32_t s) {
         items.push_back({s, 0, uint8_t(stream), 0, uint8_t(lane_of(stream))});
@@ -609,15 +601,7 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     old_of_new.reserve(V);
     st.pred.reserve(V);
     st.indices.reserve(size_t(T) * 3);
-    // The sinks live in per-thread storage reused from call to call: allocating and growing
-    // fresh item arrays for every fragment and every trial mode cost page faults and copies
-    // (re-encoding the 1401 fragments of a 1M-triangle scan: 8.8% fewer instructions by
-    // cachegrind, and fewer page faults). Per part: the best trial so far and a scratch sink
-    // for the next one (swapped by pointer). Nothing here starts parallel work, so a thread
-    // never re-enters this function while it uses the pool.
-    static thread_local Sink pool[7];
-    Sink& conn = pool[0];
-    conn.reset();
+    Sink conn;
     uint32_t seen = 0;
     auto number = [&](uint32_t old, Pred p) {
         new_id[old] = seen++;
@@ -719,32 +703,27 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
         coords[v] = {w[1] + w[2] + w[3], w[2] + w[3], w[3], 0};
     }
     int pos_mode = kPosRaw;
-    Sink* pos_best = &pool[1];
-    Sink* scratch = &pool[2];
-    pos_best->reset();
+    Sink pos;
     if (all_valid) {
         double best = 1e300;
         for (int mode : {kPosCumulative, kPosWeights}) {
-            scratch->reset();
-            emit_positions(st, mode, coords, *scratch);
-            double c = scratch->cost(kStreamPos0, kStreamPos2);
+            Sink s;
+            emit_positions(st, mode, coords, s);
+            double c = s.cost(kStreamPos0, kStreamPos2);
             if (c < best) {
                 best = c;
                 pos_mode = mode;
-                std::swap(pos_best, scratch);
+                pos = std::move(s);
             }
         }
     } else {
-        emit_positions(st, kPosRaw, coords, *pos_best);
+        emit_positions(st, kPosRaw, coords, pos);
     }
-    const Sink& pos = *pos_best;
 
     // Normals.
     int normal_mode = kNormalAverage;
     std::array<int8_t, 9> matrix{};
-    Sink* nor_best = &pool[3];
-    nor_best->reset();
-    scratch = &pool[4];
+    Sink nor;
     {
         double best = 1e300;
         std::vector<NormalSum> acc;
@@ -756,38 +735,34 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
         }
         for (int mode : {kNormalAverage, kNormalParallelogram, kNormalGeometric}) {
             if (mode == kNormalGeometric && !geometric) continue;
-            scratch->reset();
-            emit_normals(st, mode, &acc, matrix, *scratch);
-            double c = scratch->cost(kStreamNormU, kStreamNormV) + (mode == kNormalGeometric ? 72 : 0);
+            Sink s;
+            emit_normals(st, mode, &acc, matrix, s);
+            double c = s.cost(kStreamNormU, kStreamNormV) + (mode == kNormalGeometric ? 72 : 0);
             if (c < best) {
                 best = c;
                 normal_mode = mode;
-                std::swap(nor_best, scratch);
+                nor = std::move(s);
             }
         }
     }
-    const Sink& nor = *nor_best;
 
     // Colours.
     bool color_parallelogram = false, color_decorrelate = false;
-    Sink* col_best = &pool[5];
-    col_best->reset();
-    scratch = &pool[6];
+    Sink col;
     {
         double best = 1e300;
         for (int k = 0; k < 4; ++k) {
-            scratch->reset();
-            emit_colors(st, k & 1, k & 2, *scratch);
-            double c = scratch->cost(kStreamColR, kStreamColB);
+            Sink s;
+            emit_colors(st, k & 1, k & 2, s);
+            double c = s.cost(kStreamColR, kStreamColB);
             if (c < best) {
                 best = c;
                 color_parallelogram = k & 1;
                 color_decorrelate = k & 2;
-                std::swap(col_best, scratch);
+                col = std::move(s);
             }
         }
     }
-    const Sink& col = *col_best;
 
     // Tables, then everything in decode order. Sections (for the size report): tables of each
     // part, then the symbols of each part.
