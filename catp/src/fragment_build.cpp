@@ -255,24 +255,15 @@ class GridDistance {
     };
 
 public:
-    // Arrays of a grid (held by the caller, which may reuse them); the per-triangle records are
-    // not zero-filled.
-    struct Storage {
-        std::vector<Tri> tris;
-        std::vector<uint32_t> start, items;
-    };
-
-    GridDistance(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices, Storage& storage)
-        : positions_(positions), tris_(storage.tris), start_(storage.start), items_(storage.items) {
+    GridDistance(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices) : positions_(positions) {
         const size_t triangles = indices.size() / 3;
         for (int i = 0; i < 3; ++i) {
             lo_[i] = 1e300;
             hi_[i] = -1e300;
         }
-        // Per triangle, in one record (no indirection through the index buffer at query time):
-        // corners, bounding sphere, supporting plane.
-        if (tris_.size() < triangles) tris_.resize(triangles);
-        tri_count_ = triangles;
+        // Per triangle, in one record: bounding sphere, supporting plane, corner indices (not
+        // zero-filled first: Tri's constructor leaves it alone).
+        tris_.resize(triangles);
         double edges = 0;
         size_t measured = 0;
         for (size_t t = 0; t < triangles; ++t) {
@@ -333,7 +324,7 @@ public:
         // Inclusive prefix sums: start_[c] is the end of cell c until the fill below.
         for (size_t c = 1; c < cells; ++c) start_[c] += start_[c - 1];
         start_[cells] = start_[cells - 1];
-        if (items_.size() < start_[cells]) items_.resize(start_[cells]);
+        items_.resize(start_[cells]);
         // Fill back to front, decrementing the end of each cell: the ends become the starts, and
         // every cell lists its triangles in increasing order.
         for (size_t t = triangles; t-- > 0;) {
@@ -347,7 +338,7 @@ public:
     // Distance from p to the mesh; or, when that is at most `enough`, possibly any value between
     // it and `enough` (the search stops at the first triangle within `enough`).
     double distance(const Vec3d& p, double enough = 0.0) const {
-        if (tri_count_ == 0) return 0.0;
+        if (tris_.empty()) return 0.0;
         int c[3];
         for (int i = 0; i < 3; ++i) c[i] = clamp_cell(i, p[i]);
         double best2 = 1e300, best = 1e150;  // squared and plain
@@ -442,10 +433,8 @@ private:
     int dims_[3] = {1, 1, 1};
     int max_dim_ = 1;
     const std::vector<Vec3d>& positions_;
-    std::vector<Tri>& tris_;  // the first tri_count_ are this grid's
-    size_t tri_count_ = 0;
-    std::vector<uint32_t>& start_;
-    std::vector<uint32_t>& items_;
+    std::vector<Tri> tris_;
+    std::vector<uint32_t> start_, items_;  // cell c lists items_[start_[c] .. start_[c + 1])
 };
 
 }  // namespace
@@ -456,8 +445,7 @@ namespace {
 double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& simplified) {
     std::vector<uint8_t> kept(pos.size(), 0);
     for (uint32_t v : simplified) kept[v] = 1;
-    GridDistance::Storage storage;
-    GridDistance to_simplified(pos, simplified, storage);
+    GridDistance to_simplified(pos, simplified);
     double error = 0;
     for (size_t v = 0; v < pos.size(); ++v)
         if (!kept[v]) error = std::max(error, to_simplified.distance(pos[v], error));
@@ -468,8 +456,7 @@ double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<u
 // surface.
 double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& gathered,
                                const std::vector<uint32_t>& simplified) {
-    GridDistance::Storage storage;
-    GridDistance to_gathered(pos, gathered, storage);
+    GridDistance to_gathered(pos, gathered);
     double error = 0;
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const Vec3d &a = pos[simplified[i]], &b = pos[simplified[i + 1]], &c = pos[simplified[i + 2]];
