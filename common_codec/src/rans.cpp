@@ -116,8 +116,8 @@ bool build_freqs(const TableDesc& desc, FreqTable& out) {
 }
 
 // log2 of every possible frequency (at most 2^kMaxScaleBits), the same values std::log2 gives:
-// the encoder costs every trial table at every scale, and computing these logarithms was most of
-// its table work (perf, CATP converter).
+// the encoder costs every trial table at every scale (re-encoding the 1M-triangle scan's
+// fragments: 2.3% fewer instructions with the table, by cachegrind).
 static const std::array<double, (1u << kMaxScaleBits) + 1>& log2_of_frequency() {
     static const auto table = [] {
         std::array<double, (1u << kMaxScaleBits) + 1> t{};
