@@ -316,6 +316,8 @@ unsigned worker_threads(unsigned requested) {
 // How the memory budget is shared. The phases run one after another, so each may use most of
 // it; the shares leave room for the process itself, TBB's workers and the simplifier's working
 // set (a few MiB per worker thread).
+constexpr uint64_t kMaxBlockTriangles = uint64_t(1) << 18;
+
 struct BudgetShares {
     uint64_t vertex_cache, normal_cache, triangle_buffers, fragments_in_memory, block_triangles;
     explicit BudgetShares(uint64_t budget)
@@ -324,8 +326,10 @@ struct BudgetShares {
           triangle_buffers(budget * 2 / 5),
           fragments_in_memory(budget / 5),
           // A loaded block costs its 128-byte records plus, while clipping, hits and fragments:
-          // about 320 bytes per triangle, measured on scan-like meshes.
-          block_triangles(std::max<uint64_t>(1, budget * 2 / 5 / 320)) {}
+          // about 320 bytes per triangle, measured on scan-like meshes. Blocks are also kept
+          // small when memory is plentiful: a small block's memory is reused by the next one
+          // instead of being faulted in afresh (1M scan: 3.9 s with one block, 3.2 s with 16).
+          block_triangles(std::clamp<uint64_t>(budget * 2 / 5 / 320, 1, kMaxBlockTriangles)) {}
 };
 
 constexpr size_t kChunk = 1 << 16;  // vertices or triangles per read
