@@ -87,19 +87,32 @@ void bisect(const Tetrahedron& t, Tetrahedron& c0, Tetrahedron& c1) {
     c1[a] = m;
 }
 
+// The points a rejection test is about, with their bounding box computed once.
+struct PointSet {
+    const Vec3d* pts;
+    int count;
+    double min[3], max[3];
+    PointSet(const Vec3d* p, int n) : pts(p), count(n) {
+        for (int i = 0; i < 3; ++i) {
+            min[i] = max[i] = p[0][i];
+            for (int k = 1; k < n; ++k) {
+                min[i] = std::min(min[i], p[k][i]);
+                max[i] = std::max(max[i], p[k][i]);
+            }
+        }
+    }
+};
+
 // Conservative rejection: true if all points are strictly outside one face (with a margin, so
 // floating-point error can only make it keep a tetrahedron that the exact clipper then rejects).
-bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
+// Leaf routing calls this about ten times per input triangle.
+bool separated(const Tetrahedron& t, const PointSet& ps) {
     // Axis-aligned boxes first: cheap and rejects most candidates.
     for (int i = 0; i < 3; ++i) {
-        double tmin = std::min({t[0][i], t[1][i], t[2][i], t[3][i]}), tmax = std::max({t[0][i], t[1][i], t[2][i], t[3][i]});
-        bool below = true, above = true;
-        for (int k = 0; k < count; ++k) {
-            below &= pts[k][i] < tmin - 1e-6;
-            above &= pts[k][i] > tmax + 1e-6;
-        }
-        if (below || above) return true;
+        int32_t tmin = std::min({t[0][i], t[1][i], t[2][i], t[3][i]}), tmax = std::max({t[0][i], t[1][i], t[2][i], t[3][i]});
+        if (ps.max[i] < tmin - 1e-6 || ps.min[i] > tmax + 1e-6) return true;
     }
+    const Vec3d* pts = ps.pts;
     for (int f = 0; f < 4; ++f) {
         const LatticePoint &a = t[(f + 1) % 4], &b = t[(f + 2) % 4], &c = t[(f + 3) % 4], &o = t[f];
         double u[3], v[3], n[3];
@@ -114,7 +127,7 @@ bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
         double sign = so > 0 ? 1.0 : -1.0;
         double scale = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
         bool all_out = true;
-        for (int k = 0; k < count && all_out; ++k) {
+        for (int k = 0; k < ps.count && all_out; ++k) {
             double s = sign * (n[0] * (pts[k][0] - a[0]) + n[1] * (pts[k][1] - a[1]) + n[2] * (pts[k][2] - a[2]));
             all_out = s < -1e-6 * scale;
         }
@@ -123,17 +136,19 @@ bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
     return false;
 }
 
+bool separated(const Tetrahedron& t, const Vec3d* pts, int count) { return separated(t, PointSet(pts, count)); }
+
 // Calls f(tetrahedron) for every descendant at `level` of `start` (at `start_level`) that the
 // points may overlap, pruning subtrees the points cannot reach.
 template <typename F>
-void descend_overlapping(const Tetrahedron& start, int start_level, const Vec3d* pts, int count, int level, F&& f) {
+void descend_overlapping(const Tetrahedron& start, int start_level, const PointSet& ps, int level, F&& f) {
     struct Item { Tetrahedron t; int level; };
     Item stack[64];
     int top = 0;
     stack[top++] = {start, start_level};
     while (top > 0) {
-        Item it = stack[--top];
-        if (separated(it.t, pts, count)) continue;
+        const Item it = stack[--top];
+        if (separated(it.t, ps)) continue;
         if (it.level == level) {
             f(it.t);
             continue;
@@ -182,6 +197,7 @@ void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&
     int32_t side = kLatticeSize >> octave;
     int32_t lo[3], hi[3];
     cube_range(pts, count, side, lo, hi);
+    const PointSet ps(pts, count);
     if (within) {
         int32_t per_block = int32_t(1) << (octave - within->octave);
         for (int i = 0; i < 3; ++i) {
@@ -195,7 +211,7 @@ void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&
                 LatticePoint corner = {x * side, y * side, z * side};
                 LatticePoint centre = {corner[0] + side / 2, corner[1] + side / 2, corner[2] + side / 2};
                 DiamondInfo cube = diamond_info(DiamondId::from_centre(centre));
-                for (int s = 0; s < 6; ++s) descend_overlapping(diamond_tetrahedron(cube, s), 3 * octave, pts, count, level, f);
+                for (int s = 0; s < 6; ++s) descend_overlapping(diamond_tetrahedron(cube, s), 3 * octave, ps, level, f);
             }
 }
 
