@@ -9,10 +9,12 @@
 #include <mutex>
 #include <unordered_map>
 
+#include <tbb/concurrent_queue.h>
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/global_control.h>
 #include <tbb/info.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_pipeline.h>
 #include <tbb/parallel_sort.h>
 
 #include "base/error.h"
@@ -469,20 +471,35 @@ void CatpBuild::compute_normals() {
 // triangle into every block tetrahedron it may overlap.
 void CatpBuild::bin_triangles() {
     bins_ = std::make_unique<TriangleBins>(output_, shares_->triangle_buffers);
-    std::vector<uint32_t> indices;
-    std::vector<TriangleRecord> records;
-    struct Hit { uint32_t record; uint64_t block; };
-    tbb::enumerable_thread_specific<std::vector<Hit>> local_hits;
-    std::vector<Hit> hits;
+    struct Batch {
+        std::vector<uint32_t> indices;
+        std::vector<TriangleRecord> records;
+        std::vector<std::pair<uint32_t, uint64_t>> hits;  // record, block cube
+        size_t triangles = 0;
+    };
+    // Three stages overlap on the cores: reading and resolving corners (serial: the input and
+    // the paged vertices are sequential), finding each triangle's block cubes (any order), and
+    // appending to the bins (serial, in input order, so a block keeps the input order). Batches
+    // are recycled: fresh memory costs page faults.
+    constexpr size_t kLiveBatches = 3;
+    std::vector<Batch> batches(kLiveBatches);
+    tbb::concurrent_queue<Batch*> free_batches;
+    for (Batch& b : batches) free_batches.push(&b);
     const int32_t side = kLatticeSize >> levels_.block_octave;
     in_.rewind_triangles();
-    for (;;) {
-        indices.clear();
-        size_t n = in_.read_triangles(kChunk, indices);
-        if (n == 0) break;
-        records.clear();
-        for (size_t t = 0; t < n; ++t, ++triangles_) {
-            const uint32_t* f = &indices[3 * t];
+    auto read = [&](tbb::flow_control& flow) -> Batch* {
+        Batch* batch = nullptr;
+        if (!free_batches.try_pop(batch)) fail("internal error: no free batch in the binning pipeline");
+        batch->indices.clear();
+        batch->records.clear();
+        batch->triangles = in_.read_triangles(kChunk, batch->indices);
+        if (batch->triangles == 0) {
+            free_batches.push(batch);
+            flow.stop();
+            return nullptr;
+        }
+        for (size_t t = 0; t < batch->triangles; ++t, ++triangles_) {
+            const uint32_t* f = &batch->indices[3 * t];
             if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) continue;  // no area, nothing to clip
             TriangleRecord r;
             std::memset(static_cast<void*>(&r), 0, sizeof r);  // padding too: records are written to disk
@@ -493,32 +510,32 @@ void CatpBuild::bin_triangles() {
                 r.normals[k] = v.normal;
                 r.colors[k] = v.color;
             }
-            records.push_back(r);
+            batch->records.push_back(r);
         }
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, records.size(), 1024), [&](const tbb::blocked_range<size_t>& range) {
-            auto& out = local_hits.local();
-            BlockCube cube;
-            for (size_t i = range.begin(); i != range.end(); ++i) {
-                int32_t lo[3], hi[3];
-                cube_range(records[i].positions.data(), 3, side, lo, hi);
-                for (cube.index[2] = lo[2]; cube.index[2] <= hi[2]; ++cube.index[2])
-                    for (cube.index[1] = lo[1]; cube.index[1] <= hi[1]; ++cube.index[1])
-                        for (cube.index[0] = lo[0]; cube.index[0] <= hi[0]; ++cube.index[0])
-                            out.push_back({uint32_t(i), cube.key()});
-            }
-        });
-        hits.clear();
-        for (auto& h : local_hits) {
-            hits.insert(hits.end(), h.begin(), h.end());
-            h.clear();
+        return batch;
+    };
+    auto find_blocks = [&](Batch* batch) -> Batch* {
+        batch->hits.clear();
+        BlockCube cube;
+        for (size_t i = 0; i < batch->records.size(); ++i) {
+            int32_t lo[3], hi[3];
+            cube_range(batch->records[i].positions.data(), 3, side, lo, hi);
+            for (cube.index[2] = lo[2]; cube.index[2] <= hi[2]; ++cube.index[2])
+                for (cube.index[1] = lo[1]; cube.index[1] <= hi[1]; ++cube.index[1])
+                    for (cube.index[0] = lo[0]; cube.index[0] <= hi[0]; ++cube.index[0])
+                        batch->hits.push_back({uint32_t(i), cube.key()});
         }
-        // Input order within every block, whatever the threads did.
-        std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
-            return a.record < b.record || (a.record == b.record && a.block < b.block);
-        });
-        for (const Hit& h : hits) bins_->add(h.block, records[h.record]);
-        progress_->add(n);
-    }
+        return batch;
+    };
+    auto append = [&](Batch* batch) {
+        for (auto [record, block] : batch->hits) bins_->add(block, batch->records[record]);
+        progress_->add(batch->triangles);
+        free_batches.push(batch);
+    };
+    tbb::parallel_pipeline(kLiveBatches,
+                           tbb::make_filter<void, Batch*>(tbb::filter_mode::serial_in_order, read) &
+                               tbb::make_filter<Batch*, Batch*>(tbb::filter_mode::parallel, find_blocks) &
+                               tbb::make_filter<Batch*, void>(tbb::filter_mode::serial_in_order, append));
     in_.finish();
     vertices_.reset();  // not needed any more: free the cache before the blocks are loaded
     return_free_memory();
