@@ -481,7 +481,7 @@ void CatpBuild::bin_triangles() {
     // the paged vertices are sequential), finding each triangle's block cubes (any order), and
     // appending to the bins (serial, in input order, so a block keeps the input order). Batches
     // are recycled: fresh memory costs page faults.
-    constexpr size_t kLiveBatches = 3;
+    constexpr size_t kLiveBatches = 3, kBatchTriangles = 1 << 14;  // about 2.5 MiB each
     std::vector<Batch> batches(kLiveBatches);
     tbb::concurrent_queue<Batch*> free_batches;
     for (Batch& b : batches) free_batches.push(&b);
@@ -492,7 +492,7 @@ void CatpBuild::bin_triangles() {
         if (!free_batches.try_pop(batch)) fail("internal error: no free batch in the binning pipeline");
         batch->indices.clear();
         batch->records.clear();
-        batch->triangles = in_.read_triangles(kChunk, batch->indices);
+        batch->triangles = in_.read_triangles(kBatchTriangles, batch->indices);
         if (batch->triangles == 0) {
             free_batches.push(batch);
             flow.stop();

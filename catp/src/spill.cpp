@@ -21,34 +21,35 @@ void TriangleBins::add(uint64_t block, const TriangleRecord& record) {
             keys_.push_back(block);
             counts_.push_back(0);
             buffers_.emplace_back();
-            last_fill_.push_back(kChunkRecords);
             chunks_.emplace_back();
         }
         b = last_block_ = it->second;
     }
-    if (last_fill_[b] == kChunkRecords) {
-        buffers_[b].emplace_back(new TriangleRecord[kChunkRecords]);
-        last_fill_[b] = 0;
-        buffered_ += kChunkRecords * sizeof(TriangleRecord);
+    std::vector<Chunk>& chunks = buffers_[b];
+    if (chunks.empty() || chunks.back().fill == chunks.back().capacity) {
+        uint32_t capacity = chunks.empty() ? kFirstChunkRecords : std::min(kMaxChunkRecords, 2 * chunks.back().capacity);
+        chunks.push_back({std::unique_ptr<TriangleRecord[]>(new TriangleRecord[capacity]), capacity, 0});
+        buffered_ += capacity * sizeof(TriangleRecord);
     }
-    buffers_[b].back()[last_fill_[b]++] = record;
+    Chunk& chunk = chunks.back();
+    chunk.records[chunk.fill++] = record;
     counts_[b]++;
     if (buffered_ > memory_cap_) flush();
 }
 
-// Writes every buffer out as one run of its block: sequential writes of large runs.
+// Writes every block's buffered records out as one run: sequential writes of large runs.
 void TriangleBins::flush() {
     if (!file_) file_ = std::make_unique<TempFile>(near_path_);
+    std::vector<TriangleRecord> run;
     for (size_t b = 0; b < buffers_.size(); ++b) {
-        auto& chunks = buffers_[b];
-        for (size_t c = 0; c < chunks.size(); ++c) {
-            size_t n = c + 1 == chunks.size() ? last_fill_[b] : kChunkRecords;
-            file_->write_at(file_end_, chunks[c].get(), n * sizeof(TriangleRecord));
-            chunks_[b].push_back({file_end_, uint32_t(n)});
-            file_end_ += n * sizeof(TriangleRecord);
-        }
+        std::vector<Chunk>& chunks = buffers_[b];
+        if (chunks.empty()) continue;
+        run.clear();
+        for (const Chunk& c : chunks) run.insert(run.end(), c.records.get(), c.records.get() + c.fill);
+        file_->write_at(file_end_, run.data(), run.size() * sizeof(TriangleRecord));
+        chunks_[b].push_back({file_end_, uint32_t(run.size())});
+        file_end_ += run.size() * sizeof(TriangleRecord);
         chunks.clear();
-        last_fill_[b] = kChunkRecords;
     }
     buffered_ = 0;
 }
@@ -61,14 +62,12 @@ void TriangleBins::load(size_t b, std::vector<TriangleRecord>& out) {
         out.resize(at + count);
         file_->read_at(offset, out.data() + at, size_t(count) * sizeof(TriangleRecord));
     }
-    auto& chunks = buffers_[b];
-    for (size_t c = 0; c < chunks.size(); ++c) {
-        size_t n = c + 1 == chunks.size() ? last_fill_[b] : kChunkRecords;
-        out.insert(out.end(), chunks[c].get(), chunks[c].get() + n);
+    std::vector<Chunk>& chunks = buffers_[b];
+    for (const Chunk& c : chunks) {
+        out.insert(out.end(), c.records.get(), c.records.get() + c.fill);
+        buffered_ -= c.capacity * sizeof(TriangleRecord);
     }
-    buffered_ -= chunks.size() * kChunkRecords * sizeof(TriangleRecord);
-    chunks.clear();
-    chunks.shrink_to_fit();
+    std::vector<Chunk>().swap(chunks);
 }
 
 // ---- FragmentSpill ----------------------------------------------------------------------------

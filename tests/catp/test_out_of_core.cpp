@@ -57,8 +57,8 @@ std::map<uint64_t, std::string> node_bytes(const std::string& path) {
 TEST(CatpOutOfCore, PagedArrayKeepsEveryRecordThroughEvictions) {
     TempDir dir;
     const uint64_t n = 100000;
-    // Two pages of 4096 records fit the cache: nearly every access below evicts a page.
-    PagedArray<uint64_t> paged(n, 2 * 4096 * sizeof(uint64_t), dir.file("x"));
+    // Two pages fit the cache: nearly every access below evicts a page.
+    PagedArray<uint64_t> paged(n, 2 * PagedArray<uint64_t>::kPageRecords * sizeof(uint64_t), dir.file("x"));
     std::vector<uint64_t> reference(n, 0);
     uint64_t state = 12345;
     for (int i = 0; i < 200000; ++i) {
