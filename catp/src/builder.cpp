@@ -375,6 +375,10 @@ private:
                     double error, bool leaf);
     double quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const;
 
+    // Percent of an input triangle's work done in each phase (measured on scan-like meshes).
+    static constexpr uint64_t kNormalsShare = 10, kBinShare = 20, kLeavesShare = 30, kCoarsenShare = 50;
+    uint64_t bin_share_ = kBinShare;
+
     BuildInput& in_;
     std::string output_;
     CatpBuildSettings settings_;
@@ -455,7 +459,7 @@ void CatpBuild::compute_normals() {
                 for (int i = 0; i < 3; ++i) s[i] += normal[i];
             }
         }
-        progress_->add(n);
+        progress_->add(n * kNormalsShare / 100);
     }
     for (uint64_t v = 0; v < count; ++v) {
         Vec3d s = sums.at(v);
@@ -529,7 +533,7 @@ void CatpBuild::bin_triangles() {
     };
     auto append = [&](Batch* batch) {
         for (auto [record, block] : batch->hits) bins_->add(block, batch->records[record]);
-        progress_->add(batch->triangles);
+        progress_->add(batch->triangles * bin_share_ / 100);
         free_batches.push(batch);
     };
     tbb::parallel_pipeline(kLiveBatches,
@@ -586,7 +590,7 @@ void CatpBuild::build_leaves() {
             }
             if (!fragment.indices.empty()) fragments_->put(key, fragment);
         });
-        progress_->add(records.size());
+        progress_->add(records.size() * kLeavesShare / 100);
     }
     bytes_spilled_ += bins_->bytes_spilled();
     bins_.reset();
@@ -724,7 +728,8 @@ void CatpBuild::coarsen_level(int level) {
         write_node(id, info, slots, produced_error[i] + quantization_step(info, slots), false);
         for (int s = 0; s < 8; ++s)
             if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, produced[s]);
-        progress_->add(gathered_triangles / 2);
+        // Gathered triangles sum to about twice the input over all levels.
+        progress_->add(gathered_triangles * kCoarsenShare / 200);
     });
     (void)level;
     bytes_spilled_ += fragments_->bytes_spilled();
@@ -764,14 +769,17 @@ CatpBuildReport CatpBuild::run() {
     report_.memory_budget = budget_;
     report_.input_vertices = in_.vertex_count();
     bool needs_normals = !in_.has_normals();
-    progress_ = std::make_unique<Progress>("catp build", std::max<uint64_t>(1, in_.vertex_count()) * (needs_normals ? 8 : 6), "tri");
+    // Progress counts input triangles, each phase adding its share of every triangle, so the
+    // rate shown is input triangles per second.
+    bin_share_ = needs_normals ? kBinShare - kNormalsShare : kBinShare;
+    progress_ = std::make_unique<Progress>("catp build", std::max<uint64_t>(1, 2 * in_.vertex_count()), "tri");
     if (!settings_.progress) progress_->finish();
 
     // ---- Prepare: vertices, placement, normals, levels.
     read_vertices();
     uint64_t estimate = in_.triangle_estimate();
     if (estimate == 0) fail("the mesh has no triangles");
-    progress_->set_total(estimate * (needs_normals ? 4 : 3));
+    progress_->set_total(estimate);
     report_.diagonal = bounds_.diagonal();
     place_ = place_model(bounds_);
     if (needs_normals) compute_normals();
