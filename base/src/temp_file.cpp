@@ -40,33 +40,27 @@ void TempFile::write_at(uint64_t offset, const void* data, size_t size) {
     }
 }
 
-void TempFile::read_at(uint64_t offset, void* data, size_t size) const {
+// Reads until `size` bytes or the end of the file; returns the bytes read.
+size_t TempFile::read_up_to(uint64_t offset, void* data, size_t size) const {
     char* p = static_cast<char*>(data);
-    while (size > 0) {
-        ssize_t n = ::pread(fd_, p, size, off_t(offset));
+    size_t done = 0;
+    while (done < size) {
+        ssize_t n = ::pread(fd_, p + done, size - done, off_t(offset + done));
         if (n < 0 && errno == EINTR) continue;
-        if (n <= 0)
-            fail("cannot read scratch data in '%s': %s", dir_.c_str(), n < 0 ? std::strerror(errno) : "file too short");
-        p += n;
-        offset += uint64_t(n);
-        size -= size_t(n);
+        if (n < 0) fail("cannot read scratch data in '%s': %s", dir_.c_str(), std::strerror(errno));
+        if (n == 0) break;
+        done += size_t(n);
     }
+    return done;
+}
+
+void TempFile::read_at(uint64_t offset, void* data, size_t size) const {
+    if (read_up_to(offset, data, size) != size) fail("cannot read scratch data in '%s': file too short", dir_.c_str());
 }
 
 void TempFile::read_or_zero(uint64_t offset, void* data, size_t size) const {
-    char* p = static_cast<char*>(data);
-    while (size > 0) {
-        ssize_t n = ::pread(fd_, p, size, off_t(offset));
-        if (n < 0 && errno == EINTR) continue;
-        if (n < 0) fail("cannot read scratch data in '%s': %s", dir_.c_str(), std::strerror(errno));
-        if (n == 0) {
-            std::memset(p, 0, size);
-            return;
-        }
-        p += n;
-        offset += uint64_t(n);
-        size -= size_t(n);
-    }
+    size_t done = read_up_to(offset, data, size);
+    std::memset(static_cast<char*>(data) + done, 0, size - done);
 }
 
 uint64_t physical_memory_bytes() {

@@ -18,6 +18,7 @@
 
 #include <meshoptimizer.h>
 
+#include "base/options.h"
 #include "base/sysinfo.h"
 #include "catp/builder.h"
 #include "mesh/generators.h"
@@ -108,42 +109,27 @@ static bool run_in_child(const std::string& input, const std::string& output, ui
     return n == ssize_t(sizeof out) && WIFEXITED(status) && WEXITSTATUS(status) == 0;
 }
 
-int main(int argc, char** argv) {
-    std::vector<size_t> sizes = {100000, 1000000, 10000000};
-    std::string bunny = std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply";
-    std::string dir = (fs::temp_directory_path() / ("catp_build_bench_" + std::to_string(getpid()))).string();
-    bool keep = false;
-    uint64_t budget = uint64_t(1) << 30;
-    for (int i = 1; i + 1 < argc; i += 2) {
-        std::string key = argv[i], value = argv[i + 1];
-        if (key == "--sizes") {
-            sizes.clear();
-            size_t start = 0;
-            while (start < value.size()) {
-                size_t comma = value.find(',', start);
-                sizes.push_back(std::stoull(value.substr(start, comma - start)));
-                start = comma == std::string::npos ? value.size() : comma + 1;
-            }
-        } else if (key == "--memory") {
-            char* end = nullptr;
-            double v = std::strtod(value.c_str(), &end);
-            std::string unit = end ? end : "";
-            double scale = unit == "G" ? double(1 << 30) : unit == "M" ? double(1 << 20) : unit.empty() ? 1.0 : -1.0;
-            if (!(v > 0) || scale < 0) {
-                std::fprintf(stderr, "--memory: '%s' is not a size like 512M or 2G\n", value.c_str());
-                return 2;
-            }
-            budget = uint64_t(v * scale);
-        } else if (key == "--bunny") {
-            bunny = value;
-        } else if (key == "--keep") {
-            dir = value;
-            keep = true;
-        } else {
-            std::fprintf(stderr, "unknown option %s\n", key.c_str());
-            return 2;
-        }
+static const char* kUsage =
+    "usage: catp_build_bench [--sizes 100000,1000000,10000000] [--memory 1G] [--bunny PATH] [--keep DIR]\n";
+
+int main(int argc, char** argv) try {
+    Options options(argc, argv, kUsage);
+    if (options.help()) {
+        std::printf("%s", kUsage);
+        return 0;
     }
+    std::vector<size_t> sizes;
+    std::string list = options.get("sizes", "100000,1000000,10000000");
+    for (size_t start = 0; start < list.size();) {
+        size_t comma = list.find(',', start);
+        sizes.push_back(std::stoull(list.substr(start, comma - start)));
+        start = comma == std::string::npos ? list.size() : comma + 1;
+    }
+    uint64_t budget = options.bytes("memory", uint64_t(1) << 30);
+    std::string bunny = options.get("bunny", std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply");
+    bool keep = options.has("keep");
+    std::string dir = options.get("keep", (fs::temp_directory_path() / ("catp_build_bench_" + std::to_string(getpid()))).string());
+    options.finish();
     fs::create_directories(dir);
     std::printf("catp_build_bench on %s (%ld cores)\n", cpu_model().c_str(), sysconf(_SC_NPROCESSORS_ONLN));
     std::printf("memory budget %.0f MiB; builds read binary PLY files (reading included in the time)\n",
@@ -169,4 +155,7 @@ int main(int argc, char** argv) {
     std::printf("ratio = full CATP build throughput / meshopt_simplify (one 50%% pass, 1 thread) throughput\n");
     if (!keep) fs::remove_all(dir);
     return 0;
+} catch (const std::exception& e) {
+    std::fprintf(stderr, "catp_build_bench: %s\n", e.what());
+    return 2;
 }

@@ -223,7 +223,6 @@ void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&
 struct LevelChoice {
     int leaf_level = 0;
     int block_octave = 0;                 // blocks are the cubes of this octave (level 3 x octave)
-    uint64_t largest_block_estimate = 0;  // triangles
 };
 
 // The leaf level: sample vertices are tracked down the hierarchy one bisection at a time (a point
@@ -289,8 +288,7 @@ LevelChoice choose_block_octave(const std::vector<Vec3d>& sample, uint64_t trian
         }
         // Triangles crossing block borders are counted in every block they touch: 25% margin.
         choice.block_octave = octave;
-        choice.largest_block_estimate = uint64_t(1.25 * per_point * double(largest)) + 1;
-        if (choice.largest_block_estimate <= block_target) break;
+        if (uint64_t(1.25 * per_point * double(largest)) + 1 <= block_target) break;
     }
     return choice;
 }
@@ -368,7 +366,7 @@ private:
     void bin_triangles();
     void build_leaves();
     void write_leaf_nodes();
-    void coarsen_level(int level);
+    void coarsen_level();
     void finish_archive();
 
     void write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
@@ -637,13 +635,13 @@ void CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::arr
     s.max_error = std::max(s.max_error, double(entry.error));
 }
 
-// Ranges [begin, end) of `refs` (sorted) over which `group_of` is constant.
+// Ranges [begin, end) of 0..count over which group_of(index) is constant (sorted input).
 template <typename GroupOf>
-std::vector<std::pair<size_t, size_t>> group_runs(const std::vector<SpilledFragment>& refs, GroupOf group_of) {
+std::vector<std::pair<size_t, size_t>> group_runs(size_t count, GroupOf group_of) {
     std::vector<std::pair<size_t, size_t>> runs;
-    for (size_t i = 0; i < refs.size();) {
+    for (size_t i = 0; i < count;) {
         size_t j = i + 1;
-        while (j < refs.size() && group_of(refs[j]) == group_of(refs[i])) ++j;
+        while (j < count && group_of(j) == group_of(i)) ++j;
         runs.push_back({i, j});
         i = j;
     }
@@ -653,7 +651,7 @@ std::vector<std::pair<size_t, size_t>> group_runs(const std::vector<SpilledFragm
 void CatpBuild::write_leaf_nodes() {
     std::vector<SpilledFragment>& refs = fragments_->fragments();
     std::sort(refs.begin(), refs.end(), [](const SpilledFragment& a, const SpilledFragment& b) { return a.key < b.key; });
-    auto runs = group_runs(refs, [](const SpilledFragment& r) { return r.key.diamond; });
+    auto runs = group_runs(refs.size(), [&](size_t i) { return refs[i].key.diamond; });
     for (auto& run : runs) diamond_error_.emplace(refs[run.first].key.diamond, 0.0);
     tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
         DiamondId id{refs[runs[i].first].key.diamond};
@@ -671,7 +669,7 @@ void CatpBuild::write_leaf_nodes() {
 // One coarsening step: every diamond of `level` is made from the fragments of the finer level
 // whose tetrahedra its refinement created (welded, simplified to about half, clipped into its
 // own tetrahedra); its node is written and its fragments replace the finer level's.
-void CatpBuild::coarsen_level(int level) {
+void CatpBuild::coarsen_level() {
     std::vector<SpilledFragment>& refs = fragments_->fragments();
     std::vector<uint64_t> parent_of(refs.size());
     {
@@ -691,13 +689,7 @@ void CatpBuild::coarsen_level(int level) {
         }
         refs = std::move(sorted);
     }
-    std::vector<std::pair<size_t, size_t>> runs;
-    for (size_t i = 0; i < refs.size();) {
-        size_t j = i + 1;
-        while (j < refs.size() && parent_of[j] == parent_of[i]) ++j;
-        runs.push_back({i, j});
-        i = j;
-    }
+    auto runs = group_runs(refs.size(), [&](size_t i) { return parent_of[i]; });
     auto next = std::make_unique<FragmentSpill>(output_, shares_->fragments_in_memory);
     std::vector<double> produced_error(runs.size(), 0.0);
     tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
@@ -731,7 +723,6 @@ void CatpBuild::coarsen_level(int level) {
         // Gathered triangles sum to about twice the input over all levels.
         progress_->add(gathered_triangles * kCoarsenShare / 200);
     });
-    (void)level;
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_ = std::move(next);
     return_free_memory();
@@ -812,7 +803,7 @@ CatpBuildReport CatpBuild::run() {
 
     // ---- Coarser levels, bottom-up.
     phase = now_seconds();
-    for (int level = levels_.leaf_level - 1; level >= 0; --level) coarsen_level(level);
+    for (int level = levels_.leaf_level - 1; level >= 0; --level) coarsen_level();
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_.reset();
     progress_->finish();

@@ -40,15 +40,16 @@ void TriangleBins::add(uint64_t block, const TriangleRecord& record) {
 // Writes every block's buffered records out as one run: sequential writes of large runs.
 void TriangleBins::flush() {
     if (!file_) file_ = std::make_unique<TempFile>(near_path_);
-    std::vector<TriangleRecord> run;
     for (size_t b = 0; b < buffers_.size(); ++b) {
         std::vector<Chunk>& chunks = buffers_[b];
         if (chunks.empty()) continue;
-        run.clear();
-        for (const Chunk& c : chunks) run.insert(run.end(), c.records.get(), c.records.get() + c.fill);
-        file_->write_at(file_end_, run.data(), run.size() * sizeof(TriangleRecord));
-        chunks_[b].push_back({file_end_, uint32_t(run.size())});
-        file_end_ += run.size() * sizeof(TriangleRecord);
+        // The block's chunks land back to back: one run to read later.
+        uint64_t start = file_end_;
+        for (const Chunk& c : chunks) {
+            file_->write_at(file_end_, c.records.get(), c.fill * sizeof(TriangleRecord));
+            file_end_ += c.fill * sizeof(TriangleRecord);
+        }
+        chunks_[b].push_back({start, uint32_t((file_end_ - start) / sizeof(TriangleRecord))});
         chunks.clear();
     }
     buffered_ = 0;

@@ -29,9 +29,6 @@ struct SlotKey {
     bool operator==(const SlotKey& o) const { return diamond == o.diamond && slot == o.slot; }
     bool operator<(const SlotKey& o) const { return diamond != o.diamond ? diamond < o.diamond : slot < o.slot; }
 };
-struct SlotKeyHash {
-    size_t operator()(const SlotKey& k) const { return size_t((k.diamond * 0x9E3779B97F4A7C15ull) ^ uint64_t(k.slot)); }
-};
 
 // One input triangle, self-contained: 128 bytes.
 struct TriangleRecord {
@@ -50,7 +47,6 @@ public:
     void add(uint64_t block, const TriangleRecord& record);
     size_t block_count() const { return keys_.size(); }
     uint64_t block_key(size_t b) const { return keys_[b]; }
-    uint64_t block_triangles(size_t b) const { return counts_[b]; }
     // Loads a block's triangles in the order they were added (and frees its buffer).
     void load(size_t b, std::vector<TriangleRecord>& out);
     uint64_t bytes_spilled() const { return file_end_; }

@@ -25,6 +25,8 @@ public:
     void read_or_zero(uint64_t offset, void* data, size_t size) const;
 
 private:
+    size_t read_up_to(uint64_t offset, void* data, size_t size) const;
+
     int fd_ = -1;
     std::string dir_;
 };
