@@ -76,10 +76,12 @@ int cmd_convert(int argc, char** argv) {
     std::printf("build:      %.2f s (reading included), %.0f input triangles/s, peak memory %.1f MiB of a %.0f MiB budget\n",
                 r.seconds, double(r.input_triangles) / r.seconds, double(r.peak_rss) / (1 << 20),
                 double(process_budget) / (1 << 20));
-    std::printf("out of core: %zu blocks at level %d, %.1f MiB of scratch data written to disk\n", r.blocks,
-                r.block_level, double(r.bytes_spilled) / (1 << 20));
-    std::printf("phases:     prepare %.2f s, leaves %.2f s, coarsen %.2f s, write %.2f s\n", r.seconds_prepare,
-                r.seconds_leaves, r.seconds_coarsen, r.seconds_write);
+    std::printf("out of core: %zu blocks at level %d, triangles binned %s, %.1f MiB of scratch data written to disk\n",
+                r.blocks, r.block_level, r.compact_bins ? "by vertex index" : "with their vertices",
+                double(r.bytes_spilled) / (1 << 20));
+    std::printf("phases:     read %.2f s, bin %.2f s, clip %.2f s, leaf nodes %.2f s, coarsen %.2f s, write %.2f s\n",
+                r.seconds_read, r.seconds_bin, r.seconds_clip, r.seconds_leaf_nodes, r.seconds_coarsen,
+                r.seconds_write);
     std::printf("size:       %.2f bits per stored vertex over all levels (%zu vertices, %zu triangles)\n",
                 vertices ? 8.0 * double(r.file_bytes) / double(vertices) : 0.0, vertices, triangles);
     std::printf("%6s %9s %10s %10s %12s %14s %12s\n", "level", "diamonds", "fragments", "triangles", "bytes",

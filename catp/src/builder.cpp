@@ -313,9 +313,9 @@ double tetrahedron_longest_edge(const Tetrahedron& t) {
     return std::sqrt(double(best));
 }
 
-// Per-vertex data as the converter keeps it while reading (40 bytes).
+// Per-vertex data as the converter keeps it (40 bytes).
 struct VertexRecord {
-    Vec3d position;  // model units
+    Vec3d position;  // model units until to_lattice(), then lattice units on the snapping grid
     Vec3f normal;
     Rgb8 color;
 };
@@ -331,16 +331,22 @@ unsigned worker_threads(unsigned requested) {
 
 // How the memory budget is shared. The phases run one after another, so each may use most of
 // it; the shares leave room for the process itself, TBB's workers and the simplifier's working
-// set (a few MiB per worker thread).
+// set (a few MiB per worker thread). While reading: vertices 2/5, normal sums 1/5, triangle bins
+// 2/5. While clipping leaves: a block 2/5, leaf fragments 1/5, and either the bins (2/5) or,
+// when the vertices fit beside compact bins in 2/5, both (see CatpBuild::choose_bins). While
+// coarsening: the finer level's fragments (at most 2/5) and the coarser level's (2/5).
 constexpr uint64_t kMaxBlockTriangles = uint64_t(1) << 18;
 
 struct BudgetShares {
-    uint64_t vertex_cache, normal_cache, triangle_buffers, fragments_in_memory, block_triangles;
+    uint64_t vertex_cache, normal_cache, triangle_buffers, fragments_in_memory, coarse_fragments_in_memory,
+        block_triangles;
     explicit BudgetShares(uint64_t budget)
-        : vertex_cache(budget / 5),
+        : vertex_cache(budget * 2 / 5),
           normal_cache(budget / 5),
           triangle_buffers(budget * 2 / 5),
           fragments_in_memory(budget / 5),
+          // Coarsening holds two levels' fragments and nothing else big.
+          coarse_fragments_in_memory(budget * 2 / 5),
           // A loaded block costs its 128-byte records plus, while clipping, hits and fragments:
           // about 320 bytes per triangle, measured on scan-like meshes. Blocks are also kept
           // small when memory is plentiful: a small block's memory is reused by the next one
@@ -363,8 +369,14 @@ public:
 private:
     void read_vertices();
     void compute_normals();
-    void bin_triangles();
-    void build_leaves();
+    void to_lattice();
+    bool choose_bins(uint64_t triangle_estimate) const;
+    template <typename Record>
+    void bin_triangles(TriangleBins<Record>& bins);
+    template <typename Record>
+    void load_block(TriangleBins<Record>& bins, size_t b, std::vector<TriangleRecord>& records);
+    template <typename Record>
+    void build_leaves(TriangleBins<Record>& bins);
     void write_leaf_nodes();
     void coarsen_level();
     void finish_archive();
@@ -391,7 +403,7 @@ private:
     std::vector<Vec3d> sample_;  // model units
     LevelChoice levels_;
     uint64_t triangles_ = 0;
-    std::unique_ptr<TriangleBins> bins_;
+    std::vector<TriangleCorners> block_corners_;  // the block being loaded, by corner indices
     std::unique_ptr<ArchiveWriter> archive_;
     std::vector<CatpLevelStats> stats_;
     std::mutex stats_mutex_;
@@ -469,21 +481,69 @@ void CatpBuild::compute_normals() {
     bytes_spilled_ += sums.bytes_spilled();
 }
 
-// Pass over the triangles: resolves corners to lattice positions and attributes and sorts each
-// triangle into every block tetrahedron it may overlap.
-void CatpBuild::bin_triangles() {
-    bins_ = std::make_unique<TriangleBins>(output_, shares_->triangle_buffers);
+// Vertex positions from model units to lattice units on the snapping grid, once per vertex
+// (before, every triangle converted its three corners: 30M conversions for 10M triangles).
+void CatpBuild::to_lattice() {
+    for (uint64_t v = 0; v < vertices_->size(); ++v) {
+        Vec3d& p = vertices_->at_for_write(v).position;
+        for (int i = 0; i < 3; ++i) p[i] = snap_to_grid((p[i] - place_.origin[i]) / place_.cell);
+    }
+}
+
+// True to bin triangles as corner indices (TriangleCorners), keeping the vertices in memory until
+// the leaves are built: when every vertex is in memory and vertices plus compact bins fit in 2/5
+// of the budget (the share the bins have otherwise). Else triangles are binned as TriangleRecords
+// and the vertices are freed first. Both give the same leaves.
+bool CatpBuild::choose_bins(uint64_t triangle_estimate) const {
+    if (!vertices_->resident()) return false;
+    uint64_t vertex_bytes = vertices_->size() * sizeof(VertexRecord);
+    // Triangles crossing block borders are binned once per block: 25% margin.
+    uint64_t bin_bytes = triangle_estimate * sizeof(TriangleCorners) * 5 / 4;
+    return vertex_bytes + bin_bytes <= budget_ * 2 / 5;
+}
+
+namespace {
+
+// A binned triangle's corners, in lattice units.
+void corner_positions(const TriangleRecord& r, const PagedArray<VertexRecord>&, Vec3d out[3]) {
+    for (int k = 0; k < 3; ++k) out[k] = r.positions[k];
+}
+void corner_positions(const TriangleCorners& r, const PagedArray<VertexRecord>& vertices, Vec3d out[3]) {
+    for (int k = 0; k < 3; ++k) out[k] = vertices.resident_at(r.vertices[k]).position;
+}
+
+// A triangle as binned, from its corner indices (the reading stage: PagedArray::at is not
+// thread-safe, and the corners of consecutive triangles share pages).
+void make_record(const uint32_t* f, PagedArray<VertexRecord>& vertices, TriangleRecord& r) {
+    std::memset(static_cast<void*>(&r), 0, sizeof r);  // padding too: records are written to disk
+    for (int k = 0; k < 3; ++k) {
+        const VertexRecord& v = vertices.at(f[k]);
+        r.positions[k] = v.position;
+        r.normals[k] = v.normal;
+        r.colors[k] = v.color;
+    }
+}
+void make_record(const uint32_t* f, PagedArray<VertexRecord>&, TriangleCorners& r) {
+    r.vertices = {f[0], f[1], f[2]};
+}
+
+}  // namespace
+
+// Pass over the triangles: sorts each into every block cube it may overlap, as a record of its
+// corners' data or as corner indices.
+template <typename Record>
+void CatpBuild::bin_triangles(TriangleBins<Record>& bins) {
     struct Batch {
         std::vector<uint32_t> indices;
-        std::vector<TriangleRecord> records;
+        std::vector<Record> records;
         std::vector<std::pair<uint32_t, uint64_t>> hits;  // record, block cube
         size_t triangles = 0;
     };
-    // Three stages overlap on the cores: reading and resolving corners (serial: the input and
-    // the paged vertices are sequential), finding each triangle's block cubes (any order), and
-    // appending to the bins (serial, in input order, so a block keeps the input order). Batches
-    // are recycled: fresh memory costs page faults.
-    constexpr size_t kLiveBatches = 3, kBatchTriangles = 1 << 14;  // about 2.5 MiB each
+    // Three stages overlap on the cores: reading (serial: the input and the paged vertices are
+    // sequential), finding each triangle's block cubes (any order), and appending to the bins
+    // (serial, in input order, so a block keeps the input order). Batches are recycled: fresh
+    // memory costs page faults.
+    constexpr size_t kLiveBatches = 3, kBatchTriangles = 1 << 14;  // at most about 2.5 MiB each
     std::vector<Batch> batches(kLiveBatches);
     tbb::concurrent_queue<Batch*> free_batches;
     for (Batch& b : batches) free_batches.push(&b);
@@ -500,19 +560,11 @@ void CatpBuild::bin_triangles() {
             flow.stop();
             return nullptr;
         }
-        for (size_t t = 0; t < batch->triangles; ++t, ++triangles_) {
+        triangles_ += batch->triangles;
+        for (size_t t = 0; t < batch->triangles; ++t) {
             const uint32_t* f = &batch->indices[3 * t];
             if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) continue;  // no area, nothing to clip
-            TriangleRecord r;
-            std::memset(static_cast<void*>(&r), 0, sizeof r);  // padding too: records are written to disk
-            r.triangle = triangles_;
-            for (int k = 0; k < 3; ++k) {
-                const VertexRecord& v = vertices_->at(f[k]);
-                for (int i = 0; i < 3; ++i) r.positions[k][i] = snap_to_grid((v.position[i] - place_.origin[i]) / place_.cell);
-                r.normals[k] = v.normal;
-                r.colors[k] = v.color;
-            }
-            batch->records.push_back(r);
+            make_record(f, *vertices_, batch->records.emplace_back());
         }
         return batch;
     };
@@ -520,8 +572,10 @@ void CatpBuild::bin_triangles() {
         batch->hits.clear();
         BlockCube cube;
         for (size_t i = 0; i < batch->records.size(); ++i) {
+            Vec3d corners[3];
+            corner_positions(batch->records[i], *vertices_, corners);
             int32_t lo[3], hi[3];
-            cube_range(batch->records[i].positions.data(), 3, side, lo, hi);
+            cube_range(corners, 3, side, lo, hi);
             for (cube.index[2] = lo[2]; cube.index[2] <= hi[2]; ++cube.index[2])
                 for (cube.index[1] = lo[1]; cube.index[1] <= hi[1]; ++cube.index[1])
                     for (cube.index[0] = lo[0]; cube.index[0] <= hi[0]; ++cube.index[0])
@@ -530,7 +584,7 @@ void CatpBuild::bin_triangles() {
         return batch;
     };
     auto append = [&](Batch* batch) {
-        for (auto [record, block] : batch->hits) bins_->add(block, batch->records[record]);
+        for (auto [record, block] : batch->hits) bins.add(block, batch->records[record]);
         progress_->add(batch->triangles * bin_share_ / 100);
         free_batches.push(batch);
     };
@@ -539,24 +593,46 @@ void CatpBuild::bin_triangles() {
                                tbb::make_filter<Batch*, Batch*>(tbb::filter_mode::parallel, find_blocks) &
                                tbb::make_filter<Batch*, void>(tbb::filter_mode::serial_in_order, append));
     in_.finish();
-    vertices_.reset();  // not needed any more: free the cache before the blocks are loaded
-    return_free_memory();
+}
+
+// Loads block b's triangles as records (resolving corner indices, in parallel, from the
+// vertices in memory).
+template <>
+void CatpBuild::load_block(TriangleBins<TriangleRecord>& bins, size_t b, std::vector<TriangleRecord>& records) {
+    bins.load(b, records);
+}
+template <>
+void CatpBuild::load_block(TriangleBins<TriangleCorners>& bins, size_t b, std::vector<TriangleRecord>& records) {
+    std::vector<TriangleCorners>& corners = block_corners_;  // reused: fresh memory costs page faults
+    bins.load(b, corners);
+    records.resize(corners.size());
+    const PagedArray<VertexRecord>& vertices = *vertices_;
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i)
+            for (int k = 0; k < 3; ++k) {
+                const VertexRecord& v = vertices.resident_at(corners[i].vertices[k]);
+                records[i].positions[k] = v.position;
+                records[i].normals[k] = v.normal;
+                records[i].colors[k] = v.color;
+            }
+    });
 }
 
 // Clips each block's triangles by its leaf tetrahedra; the leaf fragments go to the spill.
-void CatpBuild::build_leaves() {
+template <typename Record>
+void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     fragments_ = std::make_unique<FragmentSpill>(output_, shares_->fragments_in_memory);
     // Blocks in key order, so the work (and the scratch file) is laid out the same every run.
-    std::vector<size_t> order(bins_->block_count());
+    std::vector<size_t> order(bins.block_count());
     for (size_t b = 0; b < order.size(); ++b) order[b] = b;
-    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return bins_->block_key(a) < bins_->block_key(b); });
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return bins.block_key(a) < bins.block_key(b); });
     std::vector<TriangleRecord> records;
     struct Hit { SlotKey key; uint32_t record; };
     tbb::enumerable_thread_specific<std::vector<Hit>> local_hits;
     std::vector<Hit> hits;
     for (size_t b : order) {
-        bins_->load(b, records);
-        BlockCube block = BlockCube::from_key(levels_.block_octave, bins_->block_key(b));
+        load_block(bins, b, records);
+        BlockCube block = BlockCube::from_key(levels_.block_octave, bins.block_key(b));
         int leaf_level = levels_.leaf_level;
         tbb::parallel_for(tbb::blocked_range<size_t>(0, records.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
             auto& out = local_hits.local();
@@ -586,12 +662,11 @@ void CatpBuild::build_leaves() {
                 const TriangleRecord& r = records[hits[i].record];
                 welder.add_clipped(r.positions, r.normals, r.colors, planes);
             }
-            if (!fragment.indices.empty()) fragments_->put(key, fragment);
+            if (!fragment.indices.empty()) fragments_->put(key, std::move(fragment));
         });
         progress_->add(records.size() * kLeavesShare / 100);
     }
-    bytes_spilled_ += bins_->bytes_spilled();
-    bins_.reset();
+    bytes_spilled_ += bins.bytes_spilled();
     return_free_memory();
 }
 
@@ -658,10 +733,8 @@ void CatpBuild::write_leaf_nodes() {
         DiamondInfo info = diamond_info(id);
         std::array<WorkFragment, 8> loaded;
         std::array<const WorkFragment*, 8> slots{};
-        for (size_t k = runs[i].first; k < runs[i].second; ++k) {
-            fragments_->get(refs[k], loaded[refs[k].key.slot]);
-            slots[refs[k].key.slot] = &loaded[refs[k].key.slot];
-        }
+        for (size_t k = runs[i].first; k < runs[i].second; ++k)
+            slots[refs[k].key.slot] = &fragments_->get(refs[k], loaded[refs[k].key.slot]);
         write_node(id, info, slots, quantization_step(info, slots), true);
     });
 }
@@ -690,7 +763,7 @@ void CatpBuild::coarsen_level() {
         refs = std::move(sorted);
     }
     auto runs = group_runs(refs.size(), [&](size_t i) { return parent_of[i]; });
-    auto next = std::make_unique<FragmentSpill>(output_, shares_->fragments_in_memory);
+    auto next = std::make_unique<FragmentSpill>(output_, shares_->coarse_fragments_in_memory);
     std::vector<double> produced_error(runs.size(), 0.0);
     tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
         DiamondId id{parent_of[runs[i].first]};
@@ -706,8 +779,8 @@ void CatpBuild::coarsen_level() {
         {
             FragmentWelder welder(gathered);
             for (size_t k = runs[i].first; k < runs[i].second; ++k) {
-                fragments_->get(refs[k], child);
-                welder.append(child);
+                welder.append(fragments_->get(refs[k], child));
+                fragments_->release(refs[k]);
             }
         }
         size_t gathered_triangles = gathered.indices.size() / 3;
@@ -719,7 +792,7 @@ void CatpBuild::coarsen_level() {
         produced_error[i] = child_error + simplify_error;
         write_node(id, info, slots, produced_error[i] + quantization_step(info, slots), false);
         for (int s = 0; s < 8; ++s)
-            if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, produced[s]);
+            if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, std::move(produced[s]));
         // Gathered triangles sum to about twice the input over all levels.
         progress_->add(gathered_triangles * kCoarsenShare / 200);
     });
@@ -766,7 +839,15 @@ CatpBuildReport CatpBuild::run() {
     progress_ = std::make_unique<Progress>("catp build", std::max<uint64_t>(1, 2 * in_.vertex_count()), "tri");
     if (!settings_.progress) progress_->finish();
 
-    // ---- Prepare: vertices, placement, normals, levels.
+    // Wall time per phase: each lap() ends one.
+    double mark = start;
+    auto lap = [&mark](double& seconds) {
+        double now = now_seconds();
+        seconds = now - mark;
+        mark = now;
+    };
+
+    // ---- Read: vertices, placement, normals, levels.
     read_vertices();
     uint64_t estimate = in_.triangle_estimate();
     if (estimate == 0) fail("the mesh has no triangles");
@@ -786,32 +867,47 @@ CatpBuildReport CatpBuild::run() {
     for (int l = 0; l <= levels_.leaf_level; ++l) stats_[size_t(l)].level = l;
     archive_ = std::make_unique<ArchiveWriter>(output_, ArchiveKind::Catp);
 
-    // ---- Triangles into blocks.
-    bin_triangles();
-    if (triangles_ == 0) fail("the mesh has no triangles");
-    report_.input_triangles = triangles_;
-    report_.blocks = bins_->block_count();
-    report_.seconds_prepare = now_seconds() - start;
+    to_lattice();
+    lap(report_.seconds_read);
 
-    // ---- Leaves.
-    double phase = now_seconds();
-    build_leaves();
+    // ---- Triangles into blocks, then leaves clipped block by block.
+    auto bin_and_clip = [&](auto& bins, bool records_carry_vertices) {
+        bin_triangles(bins);
+        lap(report_.seconds_bin);
+        if (triangles_ == 0) fail("the mesh has no triangles");
+        if (records_carry_vertices) {
+            vertices_.reset();  // free the cache before the blocks are loaded
+            return_free_memory();
+        }
+        report_.input_triangles = triangles_;
+        report_.blocks = bins.block_count();
+        build_leaves(bins);
+    };
+    report_.compact_bins = choose_bins(estimate);
+    if (report_.compact_bins) {
+        // Never flushed: choose_bins made sure they fit.
+        TriangleBins<TriangleCorners> bins(output_, UINT64_MAX);
+        bin_and_clip(bins, false);
+    } else {
+        TriangleBins<TriangleRecord> bins(output_, shares_->triangle_buffers);
+        bin_and_clip(bins, true);
+    }
+    vertices_.reset();
     if (fragments_->fragments().empty())
         fail("none of the %llu triangles has an area: nothing to build", (unsigned long long)triangles_);
+    lap(report_.seconds_clip);
     write_leaf_nodes();
-    report_.seconds_leaves = now_seconds() - phase;
+    lap(report_.seconds_leaf_nodes);
 
     // ---- Coarser levels, bottom-up.
-    phase = now_seconds();
     for (int level = levels_.leaf_level - 1; level >= 0; --level) coarsen_level();
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_.reset();
     progress_->finish();
-    report_.seconds_coarsen = now_seconds() - phase;
+    lap(report_.seconds_coarsen);
 
-    phase = now_seconds();
     finish_archive();
-    report_.seconds_write = now_seconds() - phase;
+    lap(report_.seconds_write);
     for (auto& s : stats_) {
         if (s.diamonds) report_.nodes += s.diamonds;
         report_.levels.push_back(s);

@@ -29,9 +29,7 @@
 #include <stdexcept>
 #include <type_traits>
 
-#ifdef __linux__
-#include <sys/mman.h>
-#endif
+#include "base/large_buffer.h"
 
 namespace catpaq {
 namespace {
@@ -206,18 +204,13 @@ private:
 // free per call. Fresh memory costs a page fault per 4 KiB page on first touch, which on virtual
 // machines (11 us measured on the development VM) can cost more than the simplification itself.
 // Small blocks come from the heap, whose allocator hands the same warm pages to the next call;
-// large blocks (big meshes; the allocator maps those afresh every time) are mapped here with
-// transparent huge pages requested, one fault per 2 MiB.
+// large blocks (big meshes; the allocator maps those afresh every time) are a LargeBuffer, with
+// huge pages: one fault per 2 MiB.
 class Arena {
 public:
     Arena() = default;
     Arena(const Arena&) = delete;
     Arena& operator=(const Arena&) = delete;
-    ~Arena() {
-#ifdef __linux__
-        if (map_) munmap(map_, map_bytes_);
-#endif
-    }
 
     // Reserves n elements of T (trivial types only; contents uninitialized) before allocate().
     template <class T>
@@ -230,21 +223,10 @@ public:
         size_t total = 0;
         for (size_t i = 0; i < count_; ++i) total += slots_[i].bytes;
         std::byte* p = nullptr;
-#ifdef __linux__
-        constexpr size_t kHuge = size_t(2) << 20;
-        if (total >= 4 * kHuge) {
-            const size_t bytes = (total + kHuge - 1) / kHuge * kHuge + kHuge;
-            void* map = mmap(nullptr, bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
-            if (map != MAP_FAILED) {
-                map_ = map;
-                map_bytes_ = bytes;
-                const uintptr_t start = (reinterpret_cast<uintptr_t>(map) + kHuge - 1) / kHuge * kHuge;
-                p = static_cast<std::byte*>(map) + (start - reinterpret_cast<uintptr_t>(map));
-                madvise(p, bytes - kHuge, MADV_HUGEPAGE);  // a hint: failure is harmless
-            }
-        }
-#endif
-        if (!p) {
+        if (total >= kLargeBytes) {
+            large_ = LargeBuffer(total);
+            p = large_.data();
+        } else {
             block_ = std::make_unique_for_overwrite<std::byte[]>(total + 64);
             p = block_.get();
             p += (64 - reinterpret_cast<uintptr_t>(p) % 64) % 64;
@@ -261,11 +243,11 @@ private:
         size_t bytes;
     };
     static constexpr size_t kMaxSlots = 16;
+    static constexpr size_t kLargeBytes = size_t(8) << 20;
     Slot slots_[kMaxSlots];
     size_t count_ = 0;
     std::unique_ptr<std::byte[]> block_;
-    void* map_ = nullptr;
-    size_t map_bytes_ = 0;
+    LargeBuffer large_;
 };
 
 class Simplifier {

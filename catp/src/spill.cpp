@@ -8,10 +8,12 @@ namespace catpaq {
 
 // ---- TriangleBins -----------------------------------------------------------------------------
 
-TriangleBins::TriangleBins(const std::string& near_path, uint64_t memory_cap)
+template <typename Record>
+TriangleBins<Record>::TriangleBins(const std::string& near_path, uint64_t memory_cap)
     : near_path_(near_path), memory_cap_(memory_cap) {}
 
-void TriangleBins::add(uint64_t block, const TriangleRecord& record) {
+template <typename Record>
+void TriangleBins<Record>::add(uint64_t block, const Record& record) {
     // Consecutive triangles mostly go to the same block: skip the hash lookup then.
     size_t b = last_block_;
     if (b == SIZE_MAX || keys_[b] != block) {
@@ -28,8 +30,8 @@ void TriangleBins::add(uint64_t block, const TriangleRecord& record) {
     std::vector<Chunk>& chunks = buffers_[b];
     if (chunks.empty() || chunks.back().fill == chunks.back().capacity) {
         uint32_t capacity = chunks.empty() ? kFirstChunkRecords : std::min(kMaxChunkRecords, 2 * chunks.back().capacity);
-        chunks.push_back({std::unique_ptr<TriangleRecord[]>(new TriangleRecord[capacity]), capacity, 0});
-        buffered_ += capacity * sizeof(TriangleRecord);
+        chunks.push_back({std::unique_ptr<Record[]>(new Record[capacity]), capacity, 0});
+        buffered_ += capacity * sizeof(Record);
     }
     Chunk& chunk = chunks.back();
     chunk.records[chunk.fill++] = record;
@@ -38,7 +40,8 @@ void TriangleBins::add(uint64_t block, const TriangleRecord& record) {
 }
 
 // Writes every block's buffered records out as one run: sequential writes of large runs.
-void TriangleBins::flush() {
+template <typename Record>
+void TriangleBins<Record>::flush() {
     if (!file_) file_ = std::make_unique<TempFile>(near_path_);
     for (size_t b = 0; b < buffers_.size(); ++b) {
         std::vector<Chunk>& chunks = buffers_[b];
@@ -46,30 +49,34 @@ void TriangleBins::flush() {
         // The block's chunks land back to back: one run to read later.
         uint64_t start = file_end_;
         for (const Chunk& c : chunks) {
-            file_->write_at(file_end_, c.records.get(), c.fill * sizeof(TriangleRecord));
-            file_end_ += c.fill * sizeof(TriangleRecord);
+            file_->write_at(file_end_, c.records.get(), c.fill * sizeof(Record));
+            file_end_ += c.fill * sizeof(Record);
         }
-        chunks_[b].push_back({start, uint32_t((file_end_ - start) / sizeof(TriangleRecord))});
+        chunks_[b].push_back({start, uint32_t((file_end_ - start) / sizeof(Record))});
         chunks.clear();
     }
     buffered_ = 0;
 }
 
-void TriangleBins::load(size_t b, std::vector<TriangleRecord>& out) {
+template <typename Record>
+void TriangleBins<Record>::load(size_t b, std::vector<Record>& out) {
     out.clear();
     out.reserve(size_t(counts_[b]));
     for (auto [offset, count] : chunks_[b]) {
         size_t at = out.size();
         out.resize(at + count);
-        file_->read_at(offset, out.data() + at, size_t(count) * sizeof(TriangleRecord));
+        file_->read_at(offset, out.data() + at, size_t(count) * sizeof(Record));
     }
     std::vector<Chunk>& chunks = buffers_[b];
     for (const Chunk& c : chunks) {
         out.insert(out.end(), c.records.get(), c.records.get() + c.fill);
-        buffered_ -= c.capacity * sizeof(TriangleRecord);
+        buffered_ -= c.capacity * sizeof(Record);
     }
     std::vector<Chunk>().swap(chunks);
 }
+
+template class TriangleBins<TriangleRecord>;
+template class TriangleBins<TriangleCorners>;
 
 // ---- FragmentSpill ----------------------------------------------------------------------------
 
@@ -121,34 +128,51 @@ void deserialize(const uint8_t* p, size_t size, WorkFragment& f) {
 FragmentSpill::FragmentSpill(const std::string& near_path, uint64_t memory_cap)
     : near_path_(near_path), memory_cap_(memory_cap) {}
 
-void FragmentSpill::put(const SlotKey& key, const WorkFragment& fragment) {
-    std::vector<uint8_t> bytes = serialize(fragment);
+namespace {
+
+uint64_t memory_bytes(const WorkFragment& f) {
+    return f.positions.capacity() * sizeof(Vec3d) + f.normals.capacity() * sizeof(Vec3f) +
+           f.colors.capacity() * sizeof(Rgb8) + f.indices.capacity() * sizeof(uint32_t);
+}
+
+}  // namespace
+
+// In memory the fragment is moved, not serialized: copying every fragment in and out of a byte
+// buffer was most of the spill's cost when nothing went to disk.
+void FragmentSpill::put(const SlotKey& key, WorkFragment&& fragment) {
+    const uint64_t bytes = memory_bytes(fragment);
     SpilledFragment ref;
     ref.key = key;
-    ref.bytes = uint32_t(bytes.size());
-    std::lock_guard lock(mutex_);
-    if (memory_bytes_ + bytes.size() <= memory_cap_) {
-        memory_bytes_ += bytes.size();
-        ref.memory_index = uint32_t(memory_.size());
-        memory_.push_back(std::move(bytes));
-    } else {
-        if (!file_) file_ = std::make_unique<TempFile>(near_path_);
-        ref.file_offset = int64_t(file_end_);
-        file_->write_at(file_end_, bytes.data(), bytes.size());
-        file_end_ += bytes.size();
+    {
+        std::lock_guard lock(mutex_);
+        if (memory_bytes_ + bytes <= memory_cap_) {
+            memory_bytes_ += bytes;
+            ref.memory_index = uint32_t(memory_.size());
+            memory_.push_back(std::move(fragment));
+            index_.push_back(ref);
+            return;
+        }
     }
+    std::vector<uint8_t> serialized = serialize(fragment);
+    ref.bytes = uint32_t(serialized.size());
+    std::lock_guard lock(mutex_);
+    if (!file_) file_ = std::make_unique<TempFile>(near_path_);
+    ref.file_offset = int64_t(file_end_);
+    file_->write_at(file_end_, serialized.data(), serialized.size());
+    file_end_ += serialized.size();
     index_.push_back(ref);
 }
 
-void FragmentSpill::get(const SpilledFragment& ref, WorkFragment& out) const {
-    if (ref.file_offset < 0) {
-        const std::vector<uint8_t>& bytes = memory_[ref.memory_index];
-        deserialize(bytes.data(), bytes.size(), out);
-        return;
-    }
+const WorkFragment& FragmentSpill::get(const SpilledFragment& ref, WorkFragment& scratch) const {
+    if (ref.file_offset < 0) return memory_[ref.memory_index];
     std::vector<uint8_t> bytes(ref.bytes);
     file_->read_at(uint64_t(ref.file_offset), bytes.data(), bytes.size());
-    deserialize(bytes.data(), bytes.size(), out);
+    deserialize(bytes.data(), bytes.size(), scratch);
+    return scratch;
+}
+
+void FragmentSpill::release(const SpilledFragment& ref) {
+    if (ref.file_offset < 0) memory_[ref.memory_index] = WorkFragment{};
 }
 
 }  // namespace catpaq

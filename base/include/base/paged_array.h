@@ -14,6 +14,7 @@
 #include <type_traits>
 #include <vector>
 
+#include "base/large_buffer.h"
 #include "base/temp_file.h"
 
 namespace catpaq {
@@ -30,6 +31,9 @@ public:
         uint64_t fit = cache_bytes / (kPageRecords * sizeof(T));
         slots_.resize(size_t(std::max<uint64_t>(2, std::min(pages, fit))));
         slot_of_page_.assign(size_t(pages), -1);
+        // All slots in one block (zero-filled, huge pages): a page allocated at a time cost a
+        // page fault per 4 KiB.
+        storage_ = LargeBuffer(slots_.size() * kPageRecords * sizeof(T));
     }
 
     uint64_t size() const { return size_; }
@@ -53,12 +57,23 @@ public:
         slots_[size_t(slot_of_page_[size_t(i / kPageRecords)])].dirty = true;
         return r;
     }
+    // True when every page is in memory and none was ever evicted: then resident_at() may be
+    // used, from any number of threads, as long as nothing calls at().
+    bool resident() const {
+        if (file_) return false;
+        for (int32_t s : slot_of_page_)
+            if (s < 0) return false;
+        return true;
+    }
+    const T& resident_at(uint64_t i) const {
+        return slots_[size_t(slot_of_page_[size_t(i / kPageRecords)])].data[size_t(i % kPageRecords)];
+    }
     // Bytes written to and read from the scratch file so far.
     uint64_t bytes_spilled() const { return spilled_; }
 
 private:
     struct Slot {
-        std::unique_ptr<T[]> data;
+        T* data = nullptr;  // in storage_, set when the slot is first used
         int64_t page = -1;
         bool dirty = false, referenced = false;
     };
@@ -74,19 +89,20 @@ private:
         hand_ = (hand_ + 1) % slots_.size();
         const size_t page_bytes = kPageRecords * sizeof(T);
         if (!slot.data) {
-            slot.data.reset(new T[kPageRecords]);
+            slot.data = reinterpret_cast<T*>(storage_.data()) + size_t(s) * kPageRecords;  // zero-filled
+            if (file_) file_->read_or_zero(page * page_bytes, slot.data, page_bytes);
         } else {
             if (slot.dirty) {
                 if (!file_) file_ = std::make_unique<TempFile>(near_path_);
-                file_->write_at(uint64_t(slot.page) * page_bytes, slot.data.get(), page_bytes);
+                file_->write_at(uint64_t(slot.page) * page_bytes, slot.data, page_bytes);
                 spilled_ += page_bytes;
             }
             slot_of_page_[size_t(slot.page)] = -1;
+            if (file_)
+                file_->read_or_zero(page * page_bytes, slot.data, page_bytes);
+            else
+                std::memset(static_cast<void*>(slot.data), 0, page_bytes);
         }
-        if (file_)
-            file_->read_or_zero(page * page_bytes, slot.data.get(), page_bytes);
-        else
-            std::memset(static_cast<void*>(slot.data.get()), 0, page_bytes);
         slot.page = int64_t(page);
         slot.dirty = false;
         slot_of_page_[size_t(page)] = s;
@@ -94,6 +110,7 @@ private:
     }
     uint64_t size_;
     std::string near_path_;
+    LargeBuffer storage_;
     std::vector<Slot> slots_;
     std::vector<int32_t> slot_of_page_;
     size_t hand_ = 0;

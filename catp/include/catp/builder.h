@@ -57,9 +57,12 @@ struct CatpBuildReport {
     size_t nodes = 0;
     uint64_t file_bytes = 0;
     double seconds = 0;
-    // Wall time of the phases: placement and level choice, leaf clipping, coarsening (with node
-    // encoding), and writing the final file.
-    double seconds_prepare = 0, seconds_leaves = 0, seconds_coarsen = 0, seconds_write = 0;
+    // Wall time of the phases: reading the vertices (with normals, placement and level choice),
+    // binning the triangles into blocks, clipping the leaves, encoding the leaf nodes,
+    // coarsening (with node encoding), and finishing the file.
+    double seconds_read = 0, seconds_bin = 0, seconds_clip = 0, seconds_leaf_nodes = 0, seconds_coarsen = 0,
+           seconds_write = 0;
+    bool compact_bins = false;  // triangles binned as vertex indices, the vertices kept in memory
     uint64_t peak_rss = 0;
     uint64_t memory_budget = 0;
     uint64_t bytes_spilled = 0;  // scratch bytes written to disk (0 when everything fitted)
