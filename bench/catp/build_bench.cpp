@@ -32,6 +32,8 @@ struct Result {
     double meshopt_triangles_per_second = 0, budget_mib = 0, spilled_mib = 0;
     int leaf_level = 0, block_level = 0;
     size_t stored_vertices = 0;
+    double phases[6] = {};  // read, bin, clip, leaf nodes, coarsen, write: seconds
+    double cpu_seconds = 0;  // user + system time of the build
 };
 
 static Result run_one(const std::string& input, const std::string& output, uint64_t budget) {
@@ -41,7 +43,12 @@ static Result run_one(const std::string& input, const std::string& output, uint6
     // The budget bounds the whole child process, as `catpaq convert --memory` does.
     uint64_t own = current_rss_bytes();
     settings.memory_budget = budget > own ? budget - own : 0;
+    double cpu0 = cpu_seconds();
     CatpBuildReport report = build_catp_file(input, output, settings);
+    r.cpu_seconds = cpu_seconds() - cpu0;
+    const double phases[6] = {report.seconds_read, report.seconds_bin, report.seconds_clip, report.seconds_leaf_nodes,
+                              report.seconds_coarsen, report.seconds_write};
+    std::copy(phases, phases + 6, r.phases);
     r.seconds = report.seconds;
     r.triangles_per_second = double(report.input_triangles) / report.seconds;
     for (const CatpLevelStats& l : report.levels) r.stored_vertices += l.vertices;
@@ -137,6 +144,7 @@ int main(int argc, char** argv) try {
     std::printf("%-12s %11s %8s %12s %11s %10s %10s %11s %8s %9s %14s %8s\n", "input", "triangles", "seconds", "tri/s",
                 "bits/vert", "MiB peak", "MiB budget", "MiB spilled", "leaf lvl", "block lvl", "meshopt tri/s", "ratio");
     std::vector<std::pair<std::string, size_t>> runs = {{"bunny", 0}};
+    std::vector<std::pair<std::string, Result>> done;
     for (size_t s : sizes) runs.push_back({"scan" + std::to_string(s), s});
     for (auto& [name, size] : runs) {
         Result r;
@@ -151,8 +159,15 @@ int main(int argc, char** argv) try {
                     r.spilled_mib, r.leaf_level, r.block_level, r.meshopt_triangles_per_second,
                     r.triangles_per_second / r.meshopt_triangles_per_second);
         std::fflush(stdout);
+        done.push_back({name, r});
     }
-    std::printf("ratio = full CATP build throughput / meshopt_simplify (one 50%% pass, 1 thread) throughput\n");
+    std::printf("ratio = full CATP build throughput / meshopt_simplify (one 50%% pass, 1 thread) throughput\n\n");
+    // Where the time goes, and how well the cores are used (CPU time over wall time).
+    std::printf("%-12s %8s %8s %8s %8s %8s %8s %10s\n", "phases (s)", "read", "bin", "clip", "nodes", "coarsen",
+                "write", "cores used");
+    for (auto& [name, r] : done)
+        std::printf("%-12s %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %10.2f\n", name.c_str(), r.phases[0], r.phases[1],
+                    r.phases[2], r.phases[3], r.phases[4], r.phases[5], r.cpu_seconds / r.seconds);
     if (!keep) fs::remove_all(dir);
     return 0;
 } catch (const std::exception& e) {
