@@ -202,15 +202,19 @@ private:
 
 // All working memory of one call lives in one block, carved into arrays: one allocation and one
 // free per call. Fresh memory costs a page fault per 4 KiB page on first touch, which on virtual
-// machines (11 us measured on the development VM) can cost more than the simplification itself.
-// Small blocks come from the heap, whose allocator hands the same warm pages to the next call;
-// large blocks (big meshes; the allocator maps those afresh every time) are a LargeBuffer, with
-// huge pages: one fault per 2 MiB.
+// machines (11-13 us measured on the development VM) can cost more than the simplification
+// itself. So a block up to kReuseBytes is the calling thread's, kept from call to call (warm
+// pages; the heap's own reuse was not enough: glibc trims and remaps blocks of this size, and
+// the simplifier made a quarter of the converter's page faults); larger blocks (big meshes) are
+// a LargeBuffer, with huge pages: one fault per 2 MiB.
 class Arena {
 public:
     Arena() = default;
     Arena(const Arena&) = delete;
     Arena& operator=(const Arena&) = delete;
+    ~Arena() {
+        if (thread_block_) thread_block_->in_use = false;
+    }
 
     // Reserves n elements of T (trivial types only; contents uninitialized) before allocate().
     template <class T>
@@ -223,14 +227,24 @@ public:
         size_t total = 0;
         for (size_t i = 0; i < count_; ++i) total += slots_[i].bytes;
         std::byte* p = nullptr;
-        if (total >= kLargeBytes) {
+        ThreadBlock& mine = thread_block();
+        if (total <= kReuseBytes && !mine.in_use) {
+            if (mine.bytes < total) {
+                mine.block.reset();  // free first: the peak holds one block per thread
+                mine.block = std::make_unique_for_overwrite<std::byte[]>(total + 64);
+                mine.bytes = total;
+            }
+            mine.in_use = true;
+            thread_block_ = &mine;
+            p = mine.block.get();
+        } else if (total >= kLargeBytes) {
             large_ = LargeBuffer(total);
             p = large_.data();
         } else {
             block_ = std::make_unique_for_overwrite<std::byte[]>(total + 64);
             p = block_.get();
-            p += (64 - reinterpret_cast<uintptr_t>(p) % 64) % 64;
         }
+        p += (64 - reinterpret_cast<uintptr_t>(p) % 64) % 64;
         for (size_t i = 0; i < count_; ++i) {
             *slots_[i].out = p;
             p += slots_[i].bytes;
@@ -242,10 +256,22 @@ private:
         void** out;
         size_t bytes;
     };
+    struct ThreadBlock {
+        std::unique_ptr<std::byte[]> block;
+        size_t bytes = 0;
+        bool in_use = false;  // an Arena of this thread holds it
+    };
+    static ThreadBlock& thread_block() {
+        thread_local ThreadBlock block;
+        return block;
+    }
     static constexpr size_t kMaxSlots = 16;
+    // Kept per thread: within the converter's per-thread memory allowance (8 MiB).
+    static constexpr size_t kReuseBytes = size_t(6) << 20;
     static constexpr size_t kLargeBytes = size_t(8) << 20;
     Slot slots_[kMaxSlots];
     size_t count_ = 0;
+    ThreadBlock* thread_block_ = nullptr;
     std::unique_ptr<std::byte[]> block_;
     LargeBuffer large_;
 };
