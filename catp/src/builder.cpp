@@ -31,6 +31,7 @@
 #include "common_codec/packed_vertex.h"
 #include "build_input.h"
 #include "fragment_build.h"
+#include "leaf_routing.h"
 #include "spill.h"
 
 namespace catpaq {
@@ -65,156 +66,12 @@ Placement place_model(const Bounds& b) {
 }
 
 // ----------------------------------------------------------------------------------------------
-// Tetrahedra by explicit bisection (cheap, used to find the leaves a triangle overlaps).
+// Edge lengths of lattice tetrahedra (bisection and the routing of triangles to leaves: leaf_routing.h).
 
 int64_t len2(const LatticePoint& a, const LatticePoint& b) {
     int64_t s = 0;
     for (int i = 0; i < 3; ++i) s += int64_t(a[i] - b[i]) * (a[i] - b[i]);
     return s;
-}
-
-void bisect(const Tetrahedron& t, Tetrahedron& c0, Tetrahedron& c1) {
-    int a = 0, b = 1;
-    int64_t best = -1;
-    for (int i = 0; i < 4; ++i)
-        for (int j = i + 1; j < 4; ++j) {
-            int64_t l = len2(t[i], t[j]);
-            if (l > best) { best = l; a = i; b = j; }
-        }
-    LatticePoint m;
-    for (int k = 0; k < 3; ++k) m[k] = (t[a][k] + t[b][k]) / 2;
-    c0 = t;
-    c0[b] = m;
-    c1 = t;
-    c1[a] = m;
-}
-
-// The points a rejection test is about, with their bounding box computed once.
-struct PointSet {
-    const Vec3d* pts;
-    int count;
-    double min[3], max[3];
-    PointSet(const Vec3d* p, int n) : pts(p), count(n) {
-        for (int i = 0; i < 3; ++i) {
-            min[i] = max[i] = p[0][i];
-            for (int k = 1; k < n; ++k) {
-                min[i] = std::min(min[i], p[k][i]);
-                max[i] = std::max(max[i], p[k][i]);
-            }
-        }
-    }
-};
-
-// Conservative rejection: true if all points are strictly outside one face (with a margin, so
-// floating-point error can only make it keep a tetrahedron that the exact clipper then rejects).
-// Leaf routing calls this about ten times per input triangle.
-bool separated(const Tetrahedron& t, const PointSet& ps) {
-    // Axis-aligned boxes first: cheap and rejects most candidates.
-    for (int i = 0; i < 3; ++i) {
-        int32_t tmin = std::min({t[0][i], t[1][i], t[2][i], t[3][i]}), tmax = std::max({t[0][i], t[1][i], t[2][i], t[3][i]});
-        if (ps.max[i] < tmin - 1e-6 || ps.min[i] > tmax + 1e-6) return true;
-    }
-    const Vec3d* pts = ps.pts;
-    for (int f = 0; f < 4; ++f) {
-        const LatticePoint &a = t[(f + 1) % 4], &b = t[(f + 2) % 4], &c = t[(f + 3) % 4], &o = t[f];
-        double u[3], v[3], n[3];
-        for (int i = 0; i < 3; ++i) {
-            u[i] = double(b[i] - a[i]);
-            v[i] = double(c[i] - a[i]);
-        }
-        n[0] = u[1] * v[2] - u[2] * v[1];
-        n[1] = u[2] * v[0] - u[0] * v[2];
-        n[2] = u[0] * v[1] - u[1] * v[0];
-        double so = n[0] * (o[0] - a[0]) + n[1] * (o[1] - a[1]) + n[2] * (o[2] - a[2]);
-        double sign = so > 0 ? 1.0 : -1.0;
-        double scale = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
-        bool all_out = true;
-        for (int k = 0; k < ps.count && all_out; ++k) {
-            double s = sign * (n[0] * (pts[k][0] - a[0]) + n[1] * (pts[k][1] - a[1]) + n[2] * (pts[k][2] - a[2]));
-            all_out = s < -1e-6 * scale;
-        }
-        if (all_out) return true;
-    }
-    return false;
-}
-
-bool separated(const Tetrahedron& t, const Vec3d* pts, int count) { return separated(t, PointSet(pts, count)); }
-
-// Calls f(tetrahedron) for every descendant at `level` of `start` (at `start_level`) that the
-// points may overlap, pruning subtrees the points cannot reach.
-template <typename F>
-void descend_overlapping(const Tetrahedron& start, int start_level, const PointSet& ps, int level, F&& f) {
-    struct Item { Tetrahedron t; int level; };
-    Item stack[64];
-    int top = 0;
-    stack[top++] = {start, start_level};
-    while (top > 0) {
-        const Item it = stack[--top];
-        if (separated(it.t, ps)) continue;
-        if (it.level == level) {
-            f(it.t);
-            continue;
-        }
-        Tetrahedron a, b;
-        bisect(it.t, a, b);
-        stack[top++] = {a, it.level + 1};
-        stack[top++] = {b, it.level + 1};
-    }
-}
-
-// Index range of the cubes of side `side` that the points' bounding box may touch. ceil - 1, not
-// floor: geometry exactly on a cube boundary plane belongs to both cubes (a triangle lying in that
-// plane is kept by exactly one of them, by the coplanar rule).
-void cube_range(const Vec3d* pts, int count, int32_t side, int32_t lo[3], int32_t hi[3]) {
-    for (int i = 0; i < 3; ++i) {
-        double mn = pts[0][i], mx = pts[0][i];
-        for (int k = 1; k < count; ++k) {
-            mn = std::min(mn, pts[k][i]);
-            mx = std::max(mx, pts[k][i]);
-        }
-        lo[i] = std::max(0, int32_t(std::ceil(mn / side)) - 1);
-        hi[i] = std::min((kLatticeSize / side) - 1, int32_t(std::floor(mx / side)));
-    }
-}
-
-// A block: one cube of the lattice at octave `octave` (side 2^20 >> octave), by integer index.
-struct BlockCube {
-    int octave = 0;
-    int32_t index[3] = {0, 0, 0};
-    uint64_t key() const { return uint64_t(index[0]) | (uint64_t(index[1]) << 21) | (uint64_t(index[2]) << 42); }
-    static BlockCube from_key(int octave, uint64_t key) {
-        BlockCube b;
-        b.octave = octave;
-        for (int i = 0; i < 3; ++i) b.index[i] = int32_t((key >> (21 * i)) & 0x1fffff);
-        return b;
-    }
-};
-
-// Calls f(tetrahedron) for every tetrahedron of `level` the points may overlap, optionally only
-// those inside the block cube `within` (its octave at most level / 3). Tetrahedra of level 3k
-// and below tile the cubes of octave k, so the search starts at the cubes of the level's octave.
-template <typename F>
-void for_each_overlapping_tetrahedron(const Vec3d* pts, int count, int level, F&& f, const BlockCube* within = nullptr) {
-    int octave = level / 3;
-    int32_t side = kLatticeSize >> octave;
-    int32_t lo[3], hi[3];
-    cube_range(pts, count, side, lo, hi);
-    const PointSet ps(pts, count);
-    if (within) {
-        int32_t per_block = int32_t(1) << (octave - within->octave);
-        for (int i = 0; i < 3; ++i) {
-            lo[i] = std::max(lo[i], within->index[i] * per_block);
-            hi[i] = std::min(hi[i], within->index[i] * per_block + per_block - 1);
-        }
-    }
-    for (int32_t z = lo[2]; z <= hi[2]; ++z)
-        for (int32_t y = lo[1]; y <= hi[1]; ++y)
-            for (int32_t x = lo[0]; x <= hi[0]; ++x) {
-                LatticePoint corner = {x * side, y * side, z * side};
-                LatticePoint centre = {corner[0] + side / 2, corner[1] + side / 2, corner[2] + side / 2};
-                DiamondInfo cube = diamond_info(DiamondId::from_centre(centre));
-                for (int s = 0; s < 6; ++s) descend_overlapping(diamond_tetrahedron(cube, s), 3 * octave, ps, level, f);
-            }
 }
 
 // ----------------------------------------------------------------------------------------------
@@ -294,15 +151,6 @@ LevelChoice choose_block_octave(const std::vector<Vec3d>& sample, uint64_t trian
 }
 
 // ----------------------------------------------------------------------------------------------
-
-SlotKey slot_key(const Tetrahedron& t) {
-    DiamondId id;
-    int slot;
-    bool ok = tetrahedron_diamond(t, id, slot);
-    (void)ok;
-    assert(ok);
-    return {id.bits, slot};
-}
 
 Tetrahedron slot_tetrahedron(const SlotKey& key) { return diamond_tetrahedron(diamond_info(DiamondId{key.diamond}), key.slot); }
 
@@ -637,9 +485,8 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
         tbb::parallel_for(tbb::blocked_range<size_t>(0, records.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
             auto& out = local_hits.local();
             for (size_t i = r.begin(); i != r.end(); ++i)
-                for_each_overlapping_tetrahedron(
-                    records[i].positions.data(), 3, leaf_level,
-                    [&](const Tetrahedron& tet) { out.push_back({slot_key(tet), uint32_t(i)}); }, &block);
+                for_each_leaf_slot(records[i].positions.data(), leaf_level, block,
+                                   [&](SlotKey key) { out.push_back({key, uint32_t(i)}); });
         });
         hits.clear();
         for (auto& h : local_hits) {
