@@ -475,7 +475,9 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     for (size_t b = 0; b < order.size(); ++b) order[b] = b;
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return bins.block_key(a) < bins.block_key(b); });
     std::vector<TriangleRecord> records;
-    struct Hit { SlotKey key; uint32_t record; };
+    // whole: the triangle lies strictly inside the leaf (routing's fast path), so clipping would
+    // keep it as it is: it is added without clip planes.
+    struct Hit { SlotKey key; uint32_t record; bool whole; };
     tbb::enumerable_thread_specific<std::vector<Hit>> local_hits;
     std::vector<Hit> hits;
     for (size_t b : order) {
@@ -484,9 +486,15 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
         int leaf_level = levels_.leaf_level;
         tbb::parallel_for(tbb::blocked_range<size_t>(0, records.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
             auto& out = local_hits.local();
-            for (size_t i = r.begin(); i != r.end(); ++i)
-                for_each_leaf_slot(records[i].positions.data(), leaf_level, block,
-                                   [&](SlotKey key) { out.push_back({key, uint32_t(i)}); });
+            for (size_t i = r.begin(); i != r.end(); ++i) {
+                const Vec3d* corners = records[i].positions.data();
+                SlotKey key;
+                if (single_leaf(corners, leaf_level, block, key)) {
+                    out.push_back({key, uint32_t(i), true});
+                    continue;
+                }
+                for_each_leaf_slot(corners, leaf_level, block, [&](SlotKey k) { out.push_back({k, uint32_t(i), false}); });
+            }
         });
         hits.clear();
         for (auto& h : local_hits) {
@@ -500,6 +508,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
         for (size_t i = 0; i < hits.size(); ++i)
             if (i == 0 || !(hits[i].key == hits[i - 1].key)) group_start.push_back(i);
         group_start.push_back(hits.size());
+        static const std::vector<ClipPlane> kNoPlanes;
         tbb::parallel_for(size_t(0), group_start.size() - 1, [&](size_t g) {
             SlotKey key = hits[group_start[g]].key;
             std::vector<ClipPlane> planes = tetrahedron_clip_planes(slot_tetrahedron(key), 0xf);
@@ -507,7 +516,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
             FragmentWelder welder(fragment);
             for (size_t i = group_start[g]; i < group_start[g + 1]; ++i) {
                 const TriangleRecord& r = records[hits[i].record];
-                welder.add_clipped(r.positions, r.normals, r.colors, planes);
+                welder.add_clipped(r.positions, r.normals, r.colors, hits[i].whole ? kNoPlanes : planes);
             }
             if (!fragment.indices.empty()) fragments_->put(key, std::move(fragment));
         });
