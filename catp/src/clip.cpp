@@ -350,6 +350,13 @@ void triangulate_polygon(const std::vector<ClipVertex>& polygon, std::vector<std
         if (!(edges > 0 && area2 > 1e-12 * edges) && is_collinear(p, q, r)) return 0.0;
         return edges > 0 ? area2 / edges : 0.0;
     };
+    if (n == 3) {
+        // A triangle (most polygons are whole input triangles) is its own triangulation: every
+        // apex gives it, only rotated. (Searching the best apex cost four quality evaluations
+        // per triangle; it was 2.7% of a 10M build's CPU time.)
+        if (quality(0, 1, 2) > 0.0) out.push_back({0, 1, 2});
+        return;
+    }
     int best_apex = 0;
     double best = -1.0;
     for (int a = 0; a < n; ++a) {
