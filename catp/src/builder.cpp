@@ -476,7 +476,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return bins.block_key(a) < bins.block_key(b); });
     std::vector<TriangleRecord> records;
     // whole: the triangle lies strictly inside the leaf (routing's fast path), so clipping would
-    // keep it as it is: it is added without clip planes.
+    // keep it as it is: it is added without the clipper.
     struct Hit { SlotKey key; uint32_t record; bool whole; };
     tbb::enumerable_thread_specific<std::vector<Hit>> local_hits;
     std::vector<Hit> hits;
@@ -508,15 +508,20 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
         for (size_t i = 0; i < hits.size(); ++i)
             if (i == 0 || !(hits[i].key == hits[i - 1].key)) group_start.push_back(i);
         group_start.push_back(hits.size());
-        static const std::vector<ClipPlane> kNoPlanes;
         tbb::parallel_for(size_t(0), group_start.size() - 1, [&](size_t g) {
             SlotKey key = hits[group_start[g]].key;
             std::vector<ClipPlane> planes = tetrahedron_clip_planes(slot_tetrahedron(key), 0xf);
             WorkFragment fragment;
             FragmentWelder welder(fragment);
+            // A mesh has about half as many vertices as triangles; clipping adds a few of each.
+            const size_t triangles = group_start[g + 1] - group_start[g];
+            welder.reserve(triangles * 5 / 8 + 64, triangles * 9 / 8 + 16);
             for (size_t i = group_start[g]; i < group_start[g + 1]; ++i) {
                 const TriangleRecord& r = records[hits[i].record];
-                welder.add_clipped(r.positions, r.normals, r.colors, hits[i].whole ? kNoPlanes : planes);
+                if (hits[i].whole)
+                    welder.add_whole(r.positions, r.normals, r.colors);
+                else
+                    welder.add_clipped(r.positions, r.normals, r.colors, planes);
             }
             if (!fragment.indices.empty()) fragments_->put(key, std::move(fragment));
         });

@@ -327,28 +327,34 @@ void clip_triangle(const std::array<Vec3d, 3>& tri, const std::vector<ClipPlane>
     for (size_t i = 0; i < poly.n; ++i) out.push_back(poly.v[i].v);
 }
 
+// Area over the sum of squared edge lengths (0 for collinear corners, decided exactly).
+double triangle_quality(const Vec3d& p, const Vec3d& q, const Vec3d& r) {
+    double u[3], v[3], w[3];
+    for (int i = 0; i < 3; ++i) {
+        u[i] = q[i] - p[i];
+        v[i] = r[i] - p[i];
+        w[i] = r[i] - q[i];
+    }
+    double cx = u[1] * v[2] - u[2] * v[1], cy = u[2] * v[0] - u[0] * v[2], cz = u[0] * v[1] - u[1] * v[0];
+    double area2 = std::sqrt(cx * cx + cy * cy + cz * cz);
+    double edges = u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + v[0] * v[0] + v[1] * v[1] + v[2] * v[2] +
+                   w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+    // Floating-point filter for the exact collinearity test: for collinear points the computed
+    // cross product only holds the rounding of u and v, |u x v| < 1e-15 |u| |v| <= 1e-15 edges,
+    // so a quality above 1e-12 proves the points are not collinear. Only near-degenerate corners
+    // pay for the exact predicates (9 orient2d calls per triangle were a measured hot spot of
+    // leaf clipping, where almost every polygon is a triangle).
+    if (!(edges > 0 && area2 > 1e-12 * edges) && is_collinear(p, q, r)) return 0.0;
+    return edges > 0 ? area2 / edges : 0.0;
+}
+
+bool has_area(const std::array<Vec3d, 3>& tri) { return triangle_quality(tri[0], tri[1], tri[2]) > 0.0; }
+
 void triangulate_polygon(const std::vector<ClipVertex>& polygon, std::vector<std::array<int, 3>>& out) {
     int n = int(polygon.size());
     if (n < 3) return;
     auto quality = [&](int a, int b, int c) {
-        const Vec3d &p = polygon[a].position, &q = polygon[b].position, &r = polygon[c].position;
-        double u[3], v[3], w[3];
-        for (int i = 0; i < 3; ++i) {
-            u[i] = q[i] - p[i];
-            v[i] = r[i] - p[i];
-            w[i] = r[i] - q[i];
-        }
-        double cx = u[1] * v[2] - u[2] * v[1], cy = u[2] * v[0] - u[0] * v[2], cz = u[0] * v[1] - u[1] * v[0];
-        double area2 = std::sqrt(cx * cx + cy * cy + cz * cz);
-        double edges = u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + v[0] * v[0] + v[1] * v[1] + v[2] * v[2] +
-                       w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
-        // Floating-point filter for the exact collinearity test: for collinear points the
-        // computed cross product only holds the rounding of u and v, |u x v| < 1e-15 |u| |v| <=
-        // 1e-15 edges, so a quality above 1e-12 proves the points are not collinear. Only
-        // near-degenerate corners pay for the exact predicates (9 orient2d calls per triangle
-        // were a measured hot spot of leaf clipping, where almost every polygon is a triangle).
-        if (!(edges > 0 && area2 > 1e-12 * edges) && is_collinear(p, q, r)) return 0.0;
-        return edges > 0 ? area2 / edges : 0.0;
+        return triangle_quality(polygon[a].position, polygon[b].position, polygon[c].position);
     };
     if (n == 3) {
         // A triangle (most polygons are whole input triangles) is its own triangulation: every

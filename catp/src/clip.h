@@ -59,6 +59,10 @@ struct ClipPlane {
 // sharing that face keeps it). Returns the polygon (possibly empty); `out` is cleared first.
 void clip_triangle(const std::array<Vec3d, 3>& tri, const std::vector<ClipPlane>& planes, std::vector<ClipVertex>& out);
 
+// True unless the triangle's corners are collinear (decided exactly): what clipping keeps of a
+// triangle with no plane to clip it.
+bool has_area(const std::array<Vec3d, 3>& tri);
+
 // Triangulates a convex planar polygon (the output of clip_triangle) without sliver fans: picks
 // the fan apex that maximises the smallest triangle quality. Appends index triples (into the
 // polygon) to `out`. Polygons with collinear vertices produce no triangle.

@@ -28,17 +28,23 @@ size_t PositionHash::operator()(const Vec3d& p) const {
 FragmentWelder::FragmentWelder(WorkFragment& fragment) : f_(fragment) {
     size_t capacity = 64;
     while (capacity < fragment.positions.size() * 2 + 16) capacity *= 2;
-    table_.assign(capacity, 0);
-    mask_ = capacity - 1;
-    for (uint32_t i = 0; i < fragment.positions.size(); ++i) {
-        size_t h = PositionHash()(fragment.positions[i]) & mask_;
-        while (table_[h] != 0) h = (h + 1) & mask_;
-        table_[h] = i + 1;
-    }
+    rehash(capacity);
 }
 
-void FragmentWelder::grow() {
-    size_t capacity = table_.size() * 2;
+void FragmentWelder::reserve(size_t vertices, size_t triangles) {
+    const size_t v = f_.positions.size() + vertices;
+    f_.positions.reserve(v);
+    f_.normals.reserve(v);
+    f_.colors.reserve(v);
+    f_.indices.reserve(f_.indices.size() + 3 * triangles);
+    size_t capacity = table_.size();
+    while (capacity < 2 * v) capacity *= 2;
+    if (capacity > table_.size()) rehash(capacity);
+}
+
+void FragmentWelder::grow() { rehash(table_.size() * 2); }
+
+void FragmentWelder::rehash(size_t capacity) {
     table_.assign(capacity, 0);
     mask_ = capacity - 1;
     for (uint32_t i = 0; i < f_.positions.size(); ++i) {
@@ -104,6 +110,14 @@ void FragmentWelder::append(const WorkFragment& other) {
         remap[v] = add(other.positions[v], other.normals[v], other.colors[v]);
     for (size_t i = 0; i + 2 < other.indices.size(); i += 3)
         triangle(remap[other.indices[i]], remap[other.indices[i + 1]], remap[other.indices[i + 2]]);
+}
+
+void FragmentWelder::add_whole(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                               const std::array<Rgb8, 3>& colors) {
+    if (!has_area(tri)) return;
+    uint32_t ids[3];
+    for (int k = 0; k < 3; ++k) ids[k] = add(tri[k], normals[k], colors[k]);
+    triangle(ids[0], ids[1], ids[2]);
 }
 
 void FragmentWelder::add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
@@ -582,7 +596,6 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     // outside the others, and those need no clipping. (With this, clip_triangle's share of the
     // 1M-triangle scan's profile fell by half.)
     SlotSides sides(gathered.positions, simplified, slot_planes);
-    static const std::vector<ClipPlane> kNoPlanes;
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const uint32_t* f = &simplified[i];
         std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
@@ -592,7 +605,7 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
             if (slot_planes[s].empty()) continue;
             switch (sides.classify(f, s)) {
                 case SlotSides::kOutside: break;
-                case SlotSides::kInside: welders[s].add_clipped(tri, normals, colors, kNoPlanes); break;
+                case SlotSides::kInside: welders[s].add_whole(tri, normals, colors); break;
                 case SlotSides::kCut: welders[s].add_clipped(tri, normals, colors, slot_planes[s]); break;
             }
         }

@@ -30,6 +30,9 @@ struct PositionHash {
 class FragmentWelder {
 public:
     explicit FragmentWelder(WorkFragment& fragment);
+    // Makes room for about this many more vertices and triangles (growing the arrays and the
+    // table step by step copies them and touches fresh memory each time).
+    void reserve(size_t vertices, size_t triangles);
     // normal: not necessarily unit; color: 0..255 floats.
     uint32_t add(const Vec3d& position, const float normal[3], const float color[3]);
     uint32_t add(const Vec3d& position, const Vec3f& normal, const Rgb8& color);
@@ -37,6 +40,9 @@ public:
     void triangle(uint32_t a, uint32_t b, uint32_t c);
     // Appends a whole fragment (welding its vertices).
     void append(const WorkFragment& other);
+    // Adds a whole triangle (what add_clipped does with no planes, without the clipper).
+    void add_whole(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                   const std::array<Rgb8, 3>& colors);
     // Clips triangle `tri` by `planes` and adds the pieces (triangulated without slivers). New
     // vertices interpolate the corners' normals and colours; the corners keep theirs exactly.
     void add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
@@ -47,6 +53,7 @@ private:
     // measured hot spot of the converter).
     uint32_t find_or_insert(const Vec3d& position, bool& inserted);
     void grow();
+    void rehash(size_t capacity);  // a power of two
 
     WorkFragment& f_;
     std::vector<ClipVertex> polygon_;  // scratch for add_clipped
