@@ -64,6 +64,9 @@ std::vector<ClipPlane> tetrahedron_clip_planes(const Tetrahedron& t, unsigned fa
 // are dropped.
 void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, FragmentMesh& out);
 
+// Squared distance from p to triangle (a, b, c), as the simplification error measures it.
+double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c);
+
 // Distance between the gathered surface of a diamond and its simplification (triangles indexing
 // gathered.positions), both ways: the removed vertices to the simplified surface, and the
 // simplified triangles' centroids and edge midpoints to the gathered surface (lattice units).

@@ -1,6 +1,8 @@
 // measured_simplification_error (the converter's own-error measure): its fast grid search with
 // early exits must return exactly the maximum of the sample points' distances, computed here by
-// brute force over every triangle.
+// brute force over every triangle: with an independent formula (equal up to rounding), and with
+// the converter's own point_triangle_distance2 (equal bit for bit, as the output files depend on
+// it).
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -51,23 +53,39 @@ double mesh_distance(const Vec3d& p, const std::vector<Vec3d>& pos, const std::v
     return std::sqrt(best);
 }
 
+double mesh_distance_exact(const Vec3d& p, const std::vector<Vec3d>& pos, const std::vector<uint32_t>& idx) {
+    double best = 1e300;
+    for (size_t i = 0; i + 2 < idx.size(); i += 3)
+        best = std::min(best, point_triangle_distance2(p, pos[idx[i]], pos[idx[i + 1]], pos[idx[i + 2]]));
+    return std::sqrt(best);
+}
+
 // The same sample points as the converter: removed vertices, simplified centroids and edge
-// midpoints.
-double brute_force_error(const WorkFragment& g, const std::vector<uint32_t>& s) {
+// midpoints; `distance` from a point to a mesh.
+template <class Distance>
+double brute_force_error(const WorkFragment& g, const std::vector<uint32_t>& s, Distance distance) {
     std::vector<uint8_t> kept(g.positions.size(), 0);
     for (uint32_t v : s) kept[v] = 1;
     double error = 0;
     for (size_t v = 0; v < g.positions.size(); ++v)
-        if (!kept[v]) error = std::max(error, mesh_distance(g.positions[v], g.positions, s));
+        if (!kept[v]) error = std::max(error, distance(g.positions[v], g.positions, s));
     for (size_t i = 0; i + 2 < s.size(); i += 3) {
         const Vec3d &a = g.positions[s[i]], &b = g.positions[s[i + 1]], &c = g.positions[s[i + 2]];
         Vec3d points[4] = {{(a[0] + b[0] + c[0]) / 3, (a[1] + b[1] + c[1]) / 3, (a[2] + b[2] + c[2]) / 3},
                            {(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2},
                            {(b[0] + c[0]) / 2, (b[1] + c[1]) / 2, (b[2] + c[2]) / 2},
                            {(a[0] + c[0]) / 2, (a[1] + c[1]) / 2, (a[2] + c[2]) / 2}};
-        for (const Vec3d& p : points) error = std::max(error, mesh_distance(p, g.positions, g.indices));
+        for (const Vec3d& p : points) error = std::max(error, distance(p, g.positions, g.indices));
     }
     return error;
+}
+
+double brute_force_error(const WorkFragment& g, const std::vector<uint32_t>& s) {
+    return brute_force_error(g, s, mesh_distance);
+}
+
+double brute_force_error_exact(const WorkFragment& g, const std::vector<uint32_t>& s) {
+    return brute_force_error(g, s, mesh_distance_exact);
 }
 
 // A noisy height field of n x n quads around (offset, offset, offset), in lattice-like units.
@@ -93,6 +111,43 @@ WorkFragment height_field(int n, double noise, uint64_t seed, double offset) {
     return f;
 }
 
+struct Random {
+    uint64_t state;
+    double operator()() {  // in [0, 1)
+        state = state * 6364136223846793005ull + 1442695040888963407ull;
+        return double(state >> 11) / double(1ull << 53);
+    }
+    uint32_t below(uint32_t n) { return uint32_t((*this)() * n); }
+};
+
+// A scan-like surface with the awkward cases of real data: degenerate triangles (repeated and
+// collinear corners), slivers, a far-away cluster (so the grid's cell count hits its cap and
+// most cells are empty), and duplicate triangles.
+WorkFragment awkward_surface(uint64_t seed) {
+    WorkFragment f = height_field(12, 2.0, seed, 500000.0);
+    Random random{seed};
+    const uint32_t n = uint32_t(f.positions.size());
+    for (int k = 0; k < 12; ++k) {
+        const uint32_t a = random.below(n), b = random.below(n);
+        f.indices.insert(f.indices.end(), {a, a, b});  // two equal corners
+        const Vec3d &pa = f.positions[a], &pb = f.positions[b];
+        f.positions.push_back({(pa[0] + pb[0]) / 2, (pa[1] + pb[1]) / 2, (pa[2] + pb[2]) / 2});
+        f.indices.insert(f.indices.end(), {a, b, uint32_t(f.positions.size() - 1)});  // collinear
+        f.positions.push_back({pa[0] + 1e-7, pa[1] + 30.0, pa[2] - 1e-7});
+        f.indices.insert(f.indices.end(), {a, uint32_t(f.positions.size() - 1), a == 0 ? 1u : a - 1});  // sliver-ish
+    }
+    const size_t triangles = f.indices.size();
+    for (size_t i = 0; i < triangles / 20; ++i) f.indices.push_back(f.indices[i]);  // duplicates
+    // A small cluster far away.
+    const uint32_t first = uint32_t(f.positions.size());
+    for (int k = 0; k < 12; ++k)
+        f.positions.push_back({520000.0 + 3 * random(), 530000.0 + 3 * random(), 540000.0 + 3 * random()});
+    for (uint32_t k = 0; k + 2 < 12; ++k) f.indices.insert(f.indices.end(), {first + k, first + k + 1, first + k + 2});
+    f.normals.assign(f.positions.size(), Vec3f{0, 0, 1});
+    f.colors.assign(f.positions.size(), Rgb8{0, 0, 0});
+    return f;
+}
+
 }  // namespace
 
 TEST(MeasuredError, EqualsTheBruteForceMaximumOfTheSampleDistances) {
@@ -111,10 +166,42 @@ TEST(MeasuredError, EqualsTheBruteForceMaximumOfTheSampleDistances) {
                 // Both are the same maximum of the same points' distances; only the rounding of
                 // the two point-triangle formulas may differ.
                 EXPECT_NEAR(measured, expected, 1e-9 * std::max(1.0, expected));
+                EXPECT_EQ(measured, brute_force_error_exact(g, r.indices));
                 if (noise > 0) {
                     EXPECT_GT(measured, 0.0);
                 }
             }
+        }
+    }
+}
+
+// The grid's float filters, fallbacks and exact ring search against arbitrary "simplifications"
+// (random triangles over the gathered vertices, some far from the surface) of meshes with
+// degenerate, sliver and duplicate triangles: still exactly the brute-force maximum, bit for bit.
+// The meshes grow and shrink, so the per-thread grid memory is reused at every size.
+TEST(MeasuredError, ExactOnAwkwardMeshesAndArbitrarySimplifications) {
+    for (uint64_t seed = 1; seed <= 5; ++seed) {
+        SCOPED_TRACE(testing::Message() << "seed " << seed);
+        WorkFragment g = awkward_surface(seed);
+        Random random{seed * 7919};
+        const uint32_t n = uint32_t(g.positions.size()) - 12;  // not the far cluster
+        for (size_t triangles : {size_t(1), size_t(5), g.indices.size() / 3 / 4, g.indices.size() / 3 / 2}) {
+            std::vector<uint32_t> s;
+            // Mostly a subset of the gathered triangles (points on the surface), plus random
+            // triangles across the main surface (points off it, raising the maximum query after
+            // query).
+            for (size_t t = 0; t < triangles; ++t) {
+                if (t % 4 == 3) {
+                    s.insert(s.end(), {random.below(n), random.below(n), random.below(n)});
+                } else {
+                    const size_t k = 3 * random.below(uint32_t(g.indices.size() / 3));
+                    s.insert(s.end(), {g.indices[k], g.indices[k + 1], g.indices[k + 2]});
+                }
+            }
+            // The far cluster kept as it is (its vertices removed, their exact searches would
+            // sweep the whole grid).
+            s.insert(s.end(), g.indices.end() - 30, g.indices.end());
+            EXPECT_EQ(measured_simplification_error(g, s), brute_force_error_exact(g, s)) << triangles << " triangles";
         }
     }
 }
