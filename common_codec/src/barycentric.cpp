@@ -7,8 +7,39 @@
 namespace catpaq {
 
 // Enumeration: a = w1+w2+w3, b = w2+w3, c = w3, index = Tet(a) + Tri(b) + c.
-static uint32_t tri(uint32_t b) { return b * (b + 1) / 2; }
-static uint32_t tet(uint32_t a) { return a * (a + 1) * (a + 2) / 6; }
+static constexpr uint32_t tri(uint32_t b) { return b * (b + 1) / 2; }
+static constexpr uint32_t tet(uint32_t a) { return a * (a + 1) * (a + 2) / 6; }
+
+// Inverting index = tet(a) + tri(b) + c by table. tet and tri run to kBaryGrid + 1, sentinels
+// above every valid index (tet(kBaryGrid + 1) = kBaryIndexCount) and every valid rest
+// (index - tet(a) < tri(a + 1)). Per block of 2^kBlockBits indices (2^kRestBlockBits rests),
+// a_of_block (b_of_block) is the largest a with tet(a) (b with tri(b)) at or below the block's
+// first value. A block is narrower than the gap to the next number once a >= 90 (b >= 64), so
+// one step from the block's value is then exact. This replaced std::cbrt and std::sqrt
+// estimates, 8x slower in encode_bench (the encoder unpacks every vertex of every fragment).
+struct UnpackTables {
+    static constexpr int kBlockBits = 12, kRestBlockBits = 6;
+    std::array<uint32_t, kBaryGrid + 2> tet{}, tri{};
+    std::array<uint16_t, (kBaryIndexCount >> kBlockBits) + 1> a_of_block{};
+    std::array<uint16_t, (catpaq::tri(kBaryGrid + 1) >> kRestBlockBits) + 1> b_of_block{};
+    constexpr UnpackTables() {
+        for (uint32_t a = 0; a < tet.size(); ++a) {
+            tet[a] = catpaq::tet(a);
+            tri[a] = catpaq::tri(a);
+        }
+        uint32_t a = 0, b = 0;
+        for (uint32_t block = 0; block < a_of_block.size(); ++block) {
+            while (tet[a + 1] <= block << kBlockBits) ++a;
+            a_of_block[block] = uint16_t(a);
+        }
+        for (uint32_t block = 0; block < b_of_block.size(); ++block) {
+            while (tri[b + 1] <= block << kRestBlockBits) ++b;
+            b_of_block[block] = uint16_t(b);
+        }
+    }
+};
+static constexpr UnpackTables kUnpack{};
+static_assert(kUnpack.tet[kBaryGrid + 1] == kBaryIndexCount);
 
 uint32_t bary_pack(const BaryWeights& w) {
     assert(w[0] >= 0 && w[1] >= 0 && w[2] >= 0 && w[3] >= 0);
@@ -19,41 +50,44 @@ uint32_t bary_pack(const BaryWeights& w) {
 
 bool bary_unpack(uint32_t index, BaryWeights& w) {
     if (index >= kBaryIndexCount) return false;
-    // Largest a with tet(a) <= index: estimate with a cube root, then correct (at most a
-    // couple of steps). Mirrors bary_unpack() in shaders/catp_decode.glsl.
-    uint32_t a = uint32_t(std::cbrt(6.0f * float(index)));
-    if (a > uint32_t(kBaryGrid)) a = kBaryGrid;
-    while (a > 0 && tet(a) > index) --a;
-    while (a < uint32_t(kBaryGrid) && tet(a + 1) <= index) ++a;
-    uint32_t rest = index - tet(a);
-    uint32_t b = uint32_t(std::sqrt(2.0f * float(rest)));
-    if (b > a) b = a;
-    while (b > 0 && tri(b) > rest) --b;
-    while (b < a && tri(b + 1) <= rest) ++b;
-    uint32_t c = rest - tri(b);
+    // Largest a with tet(a) <= index: the block's a, then one step without a branch and more
+    // only near the first corner (the sentinel stops the loop at kBaryGrid). Gives the same
+    // weights as bary_unpack() in shaders/catp_decode.glsl, which starts from a cube root.
+    uint32_t a = kUnpack.a_of_block[index >> UnpackTables::kBlockBits];
+    a += uint32_t(kUnpack.tet[a + 1] <= index);
+    while (kUnpack.tet[a + 1] <= index) [[unlikely]]
+        ++a;
+    const uint32_t rest = index - kUnpack.tet[a];
+    // Largest b with tri(b) <= rest, the same way; it is at most a since rest < tri(a + 1).
+    uint32_t b = kUnpack.b_of_block[rest >> UnpackTables::kRestBlockBits];
+    b += uint32_t(kUnpack.tri[b + 1] <= rest);
+    while (kUnpack.tri[b + 1] <= rest) [[unlikely]]
+        ++b;
+    uint32_t c = rest - kUnpack.tri[b];
     w = {int32_t(kBaryGrid - a), int32_t(a - b), int32_t(b - c), int32_t(c)};
     return true;
 }
 
-// Barycentric coordinates of p in the simplex spanned by k corners (k = 1..4), computed from
-// those corners only. Coordinates are clamped to be non-negative and renormalised.
-static void simplex_coordinates(const double p[3], const double* const corners[], int k, double out[]) {
+// Barycentric coordinates of p in the simplex spanned by K corners (K = 1..4), computed from
+// those corners only. Coordinates are clamped to be non-negative and renormalised. K is a
+// template parameter so that every loop unrolls (no branch depends on the support).
+template <int K>
+static void simplex_coordinates(const double p[3], const double* const corners[], double out[]) {
     auto sub = [](const double* a, const double* b, double r[3]) {
         for (int i = 0; i < 3; ++i) r[i] = a[i] - b[i];
     };
     auto dot = [](const double* a, const double* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; };
-    if (k == 1) {
+    if constexpr (K == 1) {
         out[0] = 1.0;
         return;
-    }
-    if (k == 2) {
+    } else if constexpr (K == 2) {
         double e[3], d[3];
         sub(corners[1], corners[0], e);
         sub(p, corners[0], d);
         double t = dot(d, e) / dot(e, e);
         out[0] = 1.0 - t;
         out[1] = t;
-    } else if (k == 3) {
+    } else if constexpr (K == 3) {
         double e0[3], e1[3], d[3];
         sub(corners[1], corners[0], e0);
         sub(corners[2], corners[0], e1);
@@ -86,51 +120,93 @@ static void simplex_coordinates(const double p[3], const double* const corners[]
         out[3] = l3;
     }
     double sum = 0.0;
-    for (int i = 0; i < k; ++i) {
-        if (!(out[i] > 0.0)) out[i] = 0.0;  // also maps NaN to 0
+    for (int i = 0; i < K; ++i) {
+        out[i] = out[i] > 0.0 ? out[i] : 0.0;  // also maps NaN to 0
         sum += out[i];
     }
-    if (sum > 0.0) {
-        for (int i = 0; i < k; ++i) out[i] /= sum;
+    if (sum == 1.0) {
+        // Dividing by exactly 1 changes nothing; skipping it shortens the function's longest
+        // latency chain, and the sum is exactly 1 for nearly every point (all of those tried in a
+        // Kuhn tetrahedron, 88% in random tetrahedra).
+    } else if (sum > 0.0) {
+        for (int i = 0; i < K; ++i) out[i] /= sum;
     } else {
-        for (int i = 0; i < k; ++i) out[i] = i == 0 ? 1.0 : 0.0;
+        for (int i = 0; i < K; ++i) out[i] = i == 0 ? 1.0 : 0.0;
+    }
+}
+
+// Largest-remainder rounding of K coordinates (>= 0, summing to about 1) to integer weights
+// summing to kBaryGrid; ties go to the lower index.
+template <int K>
+static void round_to_grid(const double lambda[], int32_t weight[]) {
+    double fraction[K];
+    int32_t total = 0;
+    for (int i = 0; i < K; ++i) {
+        const double scaled = lambda[i] * kBaryGrid;
+        weight[i] = int32_t(scaled);  // scaled >= 0: truncation is floor
+        fraction[i] = scaled - weight[i];
+        total += weight[i];
+    }
+    const int remaining = kBaryGrid - total;
+    if (remaining <= K) [[likely]] {
+        // The `remaining` first coordinates in the order (fraction descending, index ascending)
+        // get one more each: the result of handing them out one at a time to the first largest
+        // fraction, without that loop's unpredictable branches (the costliest part of
+        // bary_quantize, in perf). More than K cannot remain: the fractions sum to less than K.
+#pragma GCC unroll 4
+        for (int i = 0; i < K; ++i) {
+            int rank = 0;
+#pragma GCC unroll 4
+            for (int j = 0; j < K; ++j) rank += j < i ? fraction[j] >= fraction[i] : fraction[j] > fraction[i];
+            weight[i] += rank < remaining;
+        }
+    } else {
+        for (int left = remaining; left > 0; --left) {
+            int best = 0;
+            for (int i = 1; i < K; ++i)
+                if (fraction[i] > fraction[best]) best = i;
+            weight[best] += 1;
+            fraction[best] = -1.0;
+        }
+    }
+}
+
+// bary_quantize for a support of K corners.
+template <int K>
+static BaryWeights quantize_on_support(const double p[3], const std::array<LatticePoint, 4>& c, SupportMask support) {
+    double corners[K][3];
+    const double* used[K];
+    int index[K] = {}, k = 0;
+    for (int i = 0; i < 4; ++i) {
+        if (!(support & (1 << i))) continue;
+        for (int j = 0; j < 3; ++j) corners[k][j] = double(c[size_t(i)][size_t(j)]);
+        used[k] = corners[k];
+        index[k++] = i;
+    }
+    double lambda[K];
+    simplex_coordinates<K>(p, used, lambda);
+    int32_t weight[K];
+    round_to_grid<K>(lambda, weight);
+    if constexpr (K == 4) {
+        // Built whole: scattering into w then returning it stalls on store forwarding.
+        return {weight[0], weight[1], weight[2], weight[3]};
+    } else {
+        BaryWeights w{0, 0, 0, 0};
+        for (int i = 0; i < K; ++i) w[size_t(index[i])] = weight[i];
+        return w;
     }
 }
 
 BaryWeights bary_quantize(const double p[3], const std::array<LatticePoint, 4>& c, SupportMask support) {
     assert(support != 0 && support < 16);
-    double corners[4][3];
-    const double* used[4];
-    int index[4], k = 0;
-    for (int i = 0; i < 4; ++i) {
-        if (!(support & (1 << i))) continue;
-        for (int j = 0; j < 3; ++j) corners[k][j] = double(c[i][j]);
-        used[k] = corners[k];
-        index[k++] = i;
+    // Corners per support mask (std::popcount is a library call without a popcnt instruction).
+    static constexpr uint8_t kCorners[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
+    switch (kCorners[support & 15]) {
+        case 4: return quantize_on_support<4>(p, c, support);
+        case 3: return quantize_on_support<3>(p, c, support);
+        case 2: return quantize_on_support<2>(p, c, support);
+        default: return quantize_on_support<1>(p, c, support);
     }
-    double lambda[4];
-    simplex_coordinates(p, used, k, lambda);
-
-    // Largest-remainder rounding to integers summing to kBaryGrid; ties go to the lower index.
-    int32_t weight[4];
-    double fraction[4];
-    int32_t total = 0;
-    for (int i = 0; i < k; ++i) {
-        double scaled = lambda[i] * kBaryGrid;
-        weight[i] = int32_t(std::floor(scaled));
-        fraction[i] = scaled - weight[i];
-        total += weight[i];
-    }
-    for (int remaining = kBaryGrid - total; remaining > 0; --remaining) {
-        int best = 0;
-        for (int i = 1; i < k; ++i)
-            if (fraction[i] > fraction[best]) best = i;
-        weight[best] += 1;
-        fraction[best] = -1.0;
-    }
-    BaryWeights w{0, 0, 0, 0};
-    for (int i = 0; i < k; ++i) w[index[i]] = weight[i];
-    return w;
 }
 
 std::array<int32_t, 3> bary_weighted_sum(const BaryWeights& w, const std::array<LatticePoint, 4>& c,

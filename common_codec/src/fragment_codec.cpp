@@ -108,7 +108,6 @@ enum Stream : int {
     kStreamColG,
     kStreamColB,
     kStreamCount,
-    kStreamRaw = 255,
 };
 
 // rANS lane of each stream (the coordinates of one vertex decode in parallel); connectivity
@@ -131,10 +130,29 @@ int bit_width_u32(uint32_t v) { return int(std::bit_width(v)); }
 struct Bucket {
     uint32_t sym, nbits, extra;
 };
-Bucket bucket_of(uint32_t z) {
+constexpr Bucket bucket_by_bits(uint32_t z) {
     if (z < 8) return {z, 0, 0};
-    int k = bit_width_u32(z) - 1;
+    int k = int(std::bit_width(z)) - 1;
     return {uint32_t(8 + 2 * (k - 3)) + ((z >> (k - 1)) & 1u), uint32_t(k - 1), z & ((1u << (k - 1)) - 1)};
+}
+// Symbol and extra-bit count of every value below 1024 (all residuals but raw escapes: positions
+// are below 2 * 463, normals and colours below 256). A lookup instead of the branch on z < 8,
+// which the encoder mispredicted often (it buckets every residual of every trial mode).
+struct BucketTable {
+    std::array<uint8_t, 1024> sym{}, nbits{};
+    constexpr BucketTable() {
+        for (uint32_t z = 0; z < 1024; ++z) {
+            sym[z] = uint8_t(bucket_by_bits(z).sym);
+            nbits[z] = uint8_t(bucket_by_bits(z).nbits);
+        }
+    }
+};
+constexpr BucketTable kBucketTable{};
+CATPAQ_RANS_INLINE Bucket bucket_of(uint32_t z) {
+    if (z >= 1024) [[unlikely]]
+        return bucket_by_bits(z);
+    const uint32_t n = kBucketTable.nbits[z];
+    return {kBucketTable.sym[z], n, z & ((1u << n) - 1)};
 }
 // Per bucket symbol: (base << 8) | number of extra bits.
 struct BucketDecode {
@@ -253,51 +271,6 @@ struct Front {
     }
 };
 
-// ---------------------------------------------------------------------------------------------
-// Encoder side: symbols are collected per stream, in decode order, before the tables exist.
-
-struct Sink {
-    struct Item {
-        uint32_t value;  // symbol, or raw bits
-        uint32_t extra;  // the symbol's extra bits (bit stream)
-        uint8_t stream;  // kStreamRaw: raw bits
-        uint8_t nbits;
-        uint8_t lane;
-    };
-    std::vector<Item> items;
-    std::array<std::array<uint32_t, rans::kMaxAlphabet>, kStreamCount> counts{};
-    size_t raw_bits = 0;
-    uint32_t conn_symbols = 0;
-
-    int lane_of(int stream) { return stream == kStreamConn ? int(conn_symbols++ & 3) : kStreamLane[stream]; }
-    void sym(int stream, uint32_t s) {
-        items.push_back({s, 0, uint8_t(stream), 0, uint8_t(lane_of(stream))});
-        ++counts[size_t(stream)][s];
-    }
-    void bits(uint32_t v, int n) {  // n <= 32
-        raw_bits += size_t(n);
-        if (n > 0) items.push_back({v, 0, uint8_t(kStreamRaw), uint8_t(n), 0});
-    }
-    void value(int stream, uint32_t z) {
-        Bucket b = bucket_of(z);
-        items.push_back({b.sym, b.extra, uint8_t(stream), uint8_t(b.nbits), uint8_t(lane_of(stream))});
-        ++counts[size_t(stream)][b.sym];
-        raw_bits += b.nbits;
-    }
-    // Estimated coded size of the given streams plus all raw bits, tables included.
-    double cost(int first_stream, int last_stream) const {
-        double bits_total = double(raw_bits);
-        for (int s = first_stream; s <= last_stream; ++s) {
-            const uint32_t* c = counts[size_t(s)].data();
-            rans::TableDesc d = rans::describe_counts(c, rans::kMaxAlphabet);
-            rans::FreqTable f;
-            rans::build_freqs(d, f);
-            bits_total += rans::data_cost_bits(c, f) + rans::table_cost_bits(d);
-        }
-        return bits_total;
-    }
-};
-
 // Per-vertex prediction sources (new numbering); index V stands for a virtual zero vertex.
 struct Pred {
     uint32_t a, b, c;  // gate v0, gate v1, opposite (all equal for "previous vertex")
@@ -398,41 +371,152 @@ inline int channel(uint32_t word1, int c) { return int((word1 >> (8 + 8 * c)) & 
 
 // ---------------------------------------------------------------------------------------------
 // Encoder
+//
+// The connectivity traversal collects its symbols first (ConnSymbols). The attribute coding
+// modes are chosen by trial: each candidate's residuals are counted and, for positions and
+// normals, kept as 16-bit values (Candidate); only the cheapest candidate goes into the rANS
+// encoder (put_values; colours, only counted, are recomputed: Emitter). Keeping every
+// candidate's full symbol records (12 bytes per value) instead, and copying them, was 18% of
+// encode_bench's profile (bench/codec), before page faults.
 
-struct EncoderState {
-    uint32_t V = 0;
-    std::vector<PackedVertex> verts;  // new order, plus the virtual zero vertex at V
-    std::vector<Pred> pred;           // per new vertex
-    std::vector<uint32_t> indices;    // all triangles, new numbering (regular then degenerate)
+// Connectivity symbols and raw bits in decode order (rANS symbols and raw bits go to separate
+// streams, so their relative order does not matter).
+struct ConnSymbols {
+    struct Bits {
+        uint32_t value, nbits;
+    };
+    std::vector<uint8_t> symbols;  // symbol k is coded on lane k & 3
+    std::vector<Bits> bits;
+    std::array<uint32_t, rans::kMaxAlphabet> counts{};
+
+    void clear() {
+        symbols.clear();
+        bits.clear();
+        counts.fill(0);
+    }
+    void put_bits(uint32_t v, int n) {
+        if (n > 0) bits.push_back({v, uint32_t(n)});
+    }
 };
 
-void emit_positions(const EncoderState& st, int mode, const std::vector<Coord>& s, Sink& sink) {
-    const uint32_t V = st.V;
-    if (mode == kPosRaw) {
-        for (uint32_t v = 0; v < V; ++v) sink.bits(st.verts[v].position_index(), 24);
-        return;
+// One candidate coding of a part (positions, normals or colours): its symbol counts and raw bits
+// and, when recorded, its residual values in decode order (per vertex one value of each of the
+// part's streams), kept so that the chosen candidate is not computed twice (the geometric normal
+// prediction is not cheap). cost() also derives the tables that would code them.
+struct Candidate {
+    static constexpr int kMaxStreams = 3;
+    int first = 0;  // counts[k] belongs to stream first + k
+    std::array<std::array<uint32_t, rans::kMaxAlphabet>, kMaxStreams> counts{};
+    size_t raw_bits = 0;
+    std::vector<uint16_t> values;  // residuals are below 2 * kGrid
+    size_t size = 0;
+    std::array<rans::TableDesc, kMaxStreams> desc{};
+    std::array<rans::FreqTable, kMaxStreams> freqs{};
+
+    // Hot-loop view of a candidate: plain values that the compiler keeps in registers (through
+    // the members, it reloaded them after every store).
+    struct Recorder {
+        uint32_t* counts;  // of stream `first`; stream s at counts + (s - first) * kMaxAlphabet
+        int first;
+        uint16_t* out;
+        CATPAQ_RANS_INLINE void value(int stream, uint32_t z) {
+            ++counts[size_t(stream - first) * rans::kMaxAlphabet + bucket_of(z).sym];
+            *out++ = uint16_t(z);
+        }
+    };
+
+    // Zero counts for streams from first_stream, no values.
+    void clear(int first_stream) {
+        first = first_stream;
+        for (auto& c : counts) c.fill(0);
+        size = 0;
     }
-    // Coordinates in the coding space (index V: the virtual zero vertex).
-    std::vector<int32_t> q0(V + 1), q1(V + 1), q2(V + 1);
-    for (uint32_t v = 0; v <= V; ++v) {
-        if (mode == kPosCumulative) {
-            q0[v] = s[v][0], q1[v] = s[v][1], q2[v] = s[v][2];
-        } else {
-            q0[v] = s[v][0] - s[v][1], q1[v] = s[v][1] - s[v][2], q2[v] = s[v][2];
+    // Counts and records up to value_count values with `fill(recorder)`.
+    template <class Fill>
+    void record(int first_stream, size_t value_count, Fill&& fill) {
+        clear(first_stream);
+        if (values.size() < value_count) values.resize(value_count);
+        Recorder r{counts[0].data(), first, values.data()};
+        fill(r);
+        size = size_t(r.out - values.data());
+        assert(size <= value_count);
+        count_raw_bits();
+    }
+    // The extra bits follow from the symbols.
+    void count_raw_bits() {
+        raw_bits = 0;
+        for (const auto& c : counts)
+            for (size_t sym = 0; sym < c.size(); ++sym) raw_bits += size_t(c[sym]) * (kBucketDecode.packed[sym] & 0xff);
+    }
+    // Estimated coded size of `streams` streams: raw bits, then per stream symbols plus table
+    // (this summation order decides near-ties between modes, so it is part of the behaviour).
+    double cost(int streams) {
+        double bits_total = double(raw_bits);
+        for (int k = 0; k < streams; ++k) {
+            desc[size_t(k)] = rans::describe_counts(counts[size_t(k)].data(), rans::kMaxAlphabet);
+            rans::build_freqs(desc[size_t(k)], freqs[size_t(k)]);
+            bits_total += rans::data_cost_bits(counts[size_t(k)].data(), freqs[size_t(k)]) +
+                          rans::table_cost_bits(desc[size_t(k)]);
+        }
+        return bits_total;
+    }
+};
+static_assert(2 * kBaryGrid < 65536, "position residuals must fit the 16-bit values");
+
+// Puts a candidate's values into the encoder: per vertex one value of each of the N streams in
+// `order` (the decode order), each a symbol on its stream's lane plus its extra bits.
+template <int N>
+void put_values(rans::Encoder& enc, const Candidate& c, const std::array<rans::EncTable, kStreamCount>& tables,
+                const std::array<int, N>& order) {
+    const rans::EncTable* t[N];
+    int lane[N];
+    for (int j = 0; j < N; ++j) {
+        t[j] = &tables[size_t(order[size_t(j)])];
+        lane[j] = kStreamLane[order[size_t(j)]];
+    }
+    const uint16_t* z = c.values.data();
+    for (size_t i = 0; i + N <= c.size; i += N) {
+        for (int j = 0; j < N; ++j) {
+            const Bucket b = bucket_of(z[i + size_t(j)]);
+            enc.put(*t[j], b.sym, lane[j]);
+            enc.put_bits(b.extra, int(b.nbits));
         }
     }
-    for (uint32_t v = 0; v < V; ++v) {
-        const Pred& p = st.pred[v];
-        int32_t x0 = q0[v], x1 = q1[v], x2 = q2[v];
-        int32_t hi0 = kGrid;
-        int32_t hi1 = mode == kPosCumulative ? x0 : kGrid - x0;
-        int32_t p0 = std::clamp(q0[p.a] + q0[p.b] - q0[p.c], 0, hi0);
-        int32_t p1 = std::clamp(q1[p.a] + q1[p.b] - q1[p.c], 0, hi1);
-        int32_t hi2 = mode == kPosCumulative ? x1 : kGrid - x0 - x1;
-        int32_t p2 = std::clamp(q2[p.a] + q2[p.b] - q2[p.c], 0, hi2);
-        sink.value(kStreamPos0, zigzag(x0 - p0));
-        sink.value(kStreamPos1, zigzag(x1 - p1));
-        sink.value(kStreamPos2, zigzag(x2 - p2));
+}
+
+// Puts residual values straight into the encoder (for a candidate that was only counted).
+struct Emitter {
+    rans::Encoder& enc;
+    const std::array<rans::EncTable, kStreamCount>& tables;
+    CATPAQ_RANS_INLINE void value(int stream, uint32_t z) {
+        const Bucket b = bucket_of(z);
+        enc.put(tables[size_t(stream)], b.sym, kStreamLane[stream]);
+        enc.put_bits(b.extra, int(b.nbits));
+    }
+};
+
+// The mesh in coding order.
+struct EncoderState {
+    uint32_t V = 0;
+    const PackedVertex* verts = nullptr;  // new order, plus the virtual zero vertex at V
+    const Pred* pred = nullptr;           // per new vertex
+};
+
+// Position residuals. q: coordinates in the coding space (cumulative (a, b, c), or weights
+// (w1, w2, w3)), index V the virtual zero vertex.
+template <bool kCumulative, class Out>
+void emit_positions(const EncoderState& st, const Coord* q, Out& out) {
+    for (uint32_t v = 0; v < st.V; ++v) {
+        const Pred p = st.pred[v];
+        const Coord x = q[v], A = q[p.a], B = q[p.b], C = q[p.c];
+        const int32_t hi1 = kCumulative ? x[0] : kGrid - x[0];
+        const int32_t hi2 = kCumulative ? x[1] : kGrid - x[0] - x[1];
+        const int32_t p0 = std::clamp(A[0] + B[0] - C[0], 0, kGrid);
+        const int32_t p1 = std::clamp(A[1] + B[1] - C[1], 0, hi1);
+        const int32_t p2 = std::clamp(A[2] + B[2] - C[2], 0, hi2);
+        out.value(kStreamPos0, zigzag(x[0] - p0));
+        out.value(kStreamPos1, zigzag(x[1] - p1));
+        out.value(kStreamPos2, zigzag(x[2] - p2));
     }
 }
 
@@ -440,50 +524,72 @@ inline int normal_u(const PackedVertex& v) { return int8_t(uint8_t(v.word0 >> 24
 inline int normal_v(const PackedVertex& v) { return int8_t(uint8_t(v.word1)); }
 inline uint32_t wrap_residual(int actual, int pred) { return zigzag(int32_t(int8_t(uint8_t(actual - pred)))); }
 
-void emit_normals(const EncoderState& st, int mode, const std::vector<NormalSum>* acc, const std::array<int8_t, 9>& m,
-                  Sink& sink) {
-    const uint32_t V = st.V;
-    for (uint32_t v = 0; v < V; ++v) {
-        const Pred& p = st.pred[v];
+// Normal residuals under predictor kMode (acc and m: the geometric predictor's inputs).
+template <int kMode, class Out>
+void emit_normals(const EncoderState& st, const NormalSum* acc, const std::array<int8_t, 9>& m, Out& out) {
+    const PackedVertex* verts = st.verts;
+    for (uint32_t v = 0; v < st.V; ++v) {
+        const Pred p = st.pred[v];
         int pu, pv;
-        if (mode == kNormalGeometric) {
-            const PackedVertex& prev = st.verts[v == 0 ? V : v - 1];
-            geometric_prediction((*acc)[v], m, normal_u(prev), normal_v(prev), pu, pv);
-        } else if (mode == kNormalAverage) {
-            pu = (normal_u(st.verts[p.a]) + normal_u(st.verts[p.b])) >> 1;
-            pv = (normal_v(st.verts[p.a]) + normal_v(st.verts[p.b])) >> 1;
+        if constexpr (kMode == kNormalGeometric) {
+            const PackedVertex& prev = verts[v == 0 ? st.V : v - 1];
+            geometric_prediction(acc[v], m, normal_u(prev), normal_v(prev), pu, pv);
+        } else if constexpr (kMode == kNormalAverage) {
+            pu = (normal_u(verts[p.a]) + normal_u(verts[p.b])) >> 1;
+            pv = (normal_v(verts[p.a]) + normal_v(verts[p.b])) >> 1;
         } else {
-            pu = std::clamp(normal_u(st.verts[p.a]) + normal_u(st.verts[p.b]) - normal_u(st.verts[p.c]), -127, 127);
-            pv = std::clamp(normal_v(st.verts[p.a]) + normal_v(st.verts[p.b]) - normal_v(st.verts[p.c]), -127, 127);
+            pu = std::clamp(normal_u(verts[p.a]) + normal_u(verts[p.b]) - normal_u(verts[p.c]), -127, 127);
+            pv = std::clamp(normal_v(verts[p.a]) + normal_v(verts[p.b]) - normal_v(verts[p.c]), -127, 127);
         }
-        sink.value(kStreamNormU, wrap_residual(normal_u(st.verts[v]), pu));
-        sink.value(kStreamNormV, wrap_residual(normal_v(st.verts[v]), pv));
+        out.value(kStreamNormU, wrap_residual(normal_u(verts[v]), pu));
+        out.value(kStreamNormV, wrap_residual(normal_v(verts[v]), pv));
     }
 }
 
-void emit_colors(const EncoderState& st, bool parallelogram, bool decorrelate, Sink& sink) {
-    const uint32_t V = st.V;
-    for (uint32_t v = 0; v < V; ++v) {
-        const Pred& p = st.pred[v];
+// Colour residuals: G, then R and B (relative to G's residual when kDecorrelate).
+template <bool kParallelogram, bool kDecorrelate, class Out>
+void emit_colors(const EncoderState& st, Out& out) {
+    const PackedVertex* verts = st.verts;
+    for (uint32_t v = 0; v < st.V; ++v) {
+        const Pred p = st.pred[v];
+        const uint32_t wa = verts[p.a].word1, wb = verts[p.b].word1, wc = verts[p.c].word1, wv = verts[v].word1;
         int r[3];
         for (int c = 0; c < 3; ++c) {
-            int a = channel(st.verts[p.a].word1, c), b = channel(st.verts[p.b].word1, c);
-            int pc = parallelogram ? std::clamp(a + b - channel(st.verts[p.c].word1, c), 0, 255) : (a + b + 1) >> 1;
-            r[c] = channel(st.verts[v].word1, c) - pc;
+            const int a = channel(wa, c), b = channel(wb, c);
+            const int pc = kParallelogram ? std::clamp(a + b - channel(wc, c), 0, 255) : (a + b + 1) >> 1;
+            r[c] = channel(wv, c) - pc;
         }
-        if (decorrelate) {
+        if constexpr (kDecorrelate) {
             r[0] -= r[1];
             r[2] -= r[1];
         }
-        sink.value(kStreamColG, zigzag(int8_t(uint8_t(r[1]))));
-        sink.value(kStreamColR, zigzag(int8_t(uint8_t(r[0]))));
-        sink.value(kStreamColB, zigzag(int8_t(uint8_t(r[2]))));
+        out.value(kStreamColG, zigzag(int8_t(uint8_t(r[1]))));
+        out.value(kStreamColR, zigzag(int8_t(uint8_t(r[0]))));
+        out.value(kStreamColB, zigzag(int8_t(uint8_t(r[2]))));
     }
+}
+
+template <class Out>
+void emit_normals(const EncoderState& st, int mode, const NormalSum* acc, const std::array<int8_t, 9>& m, Out& out) {
+    if (mode == kNormalGeometric)
+        emit_normals<kNormalGeometric>(st, acc, m, out);
+    else if (mode == kNormalAverage)
+        emit_normals<kNormalAverage>(st, acc, m, out);
+    else
+        emit_normals<kNormalParallelogram>(st, acc, m, out);
+}
+
+template <class Out>
+void emit_colors(const EncoderState& st, bool parallelogram, bool decorrelate, Out& out) {
+    if (parallelogram)
+        decorrelate ? emit_colors<true, true>(st, out) : emit_colors<true, false>(st, out);
+    else
+        decorrelate ? emit_colors<false, true>(st, out) : emit_colors<false, false>(st, out);
 }
 
 // Fits M (normals ~ M * geometric normal) by least squares over unit vectors; false if
 // degenerate.
-bool fit_normal_matrix(const EncoderState& st, const std::vector<NormalSum>& acc, std::array<int8_t, 9>& m) {
+bool fit_normal_matrix(const EncoderState& st, const NormalSum* acc, std::array<int8_t, 9>& m) {
     double g[3][3] = {}, h[3][3] = {};
     size_t used = 0;
     for (uint32_t v = 0; v < st.V; ++v) {
@@ -493,13 +599,14 @@ bool fit_normal_matrix(const EncoderState& st, const std::vector<NormalSum>& acc
         for (double& x : n) x /= len;
         float t[3];
         oct_decode(st.verts[v].normal(), t);
-        for (int i = 0; i < 3; ++i)
-            for (int j = 0; j < 3; ++j) {
-                g[i][j] += n[i] * n[j];
-                h[i][j] += double(t[i]) * n[j];
-            }
+        for (int i = 0; i < 3; ++i) {
+            for (int j = i; j < 3; ++j) g[i][j] += n[i] * n[j];  // symmetric: the lower half below
+            for (int j = 0; j < 3; ++j) h[i][j] += double(t[i]) * n[j];
+        }
         ++used;
     }
+    // n[i] * n[j] and n[j] * n[i] round alike, so the mirrored sums are the ones summed directly.
+    g[1][0] = g[0][1], g[2][0] = g[0][2], g[2][1] = g[1][2];
     if (used < 3) return false;
     // M = H G^-1.
     double det = g[0][0] * (g[1][1] * g[2][2] - g[1][2] * g[2][1]) - g[0][1] * (g[1][0] * g[2][2] - g[1][2] * g[2][0]) +
@@ -528,6 +635,436 @@ bool fit_normal_matrix(const EncoderState& st, const std::vector<NormalSum>& acc
     return true;
 }
 
+// Scratch memory of the encoder, kept per thread between calls like the decoder's Workspace
+// (fresh memory costs a page fault per 4 KiB page, about 13 us each on the build machine, and
+// one encode used some 30 vectors). Fragments above kEncodeKeepVertices use a temporary one.
+struct EncoderWorkspace {
+    std::vector<uint32_t> regular, degenerate;  // triangle ids
+    std::vector<uint32_t> first, fill, cursor;  // half-edge CSR
+    std::vector<std::pair<uint32_t, uint32_t>> half;
+    std::vector<uint8_t> visited;
+    std::vector<uint32_t> new_id, old_of_new, indices;
+    std::vector<Pred> pred;
+    std::vector<PackedVertex> verts;
+    std::vector<Coord> coords, weights;
+    std::vector<NormalSum> acc;
+    std::array<Candidate, 2> pos;  // cumulative, weights
+    std::array<Candidate, 3> nor;  // by NormalMode
+    std::array<Candidate, 4> col;  // bit 0 parallelogram, bit 1 decorrelate
+    Front front;
+    ConnSymbols conn;
+    rans::Encoder enc;
+    std::vector<size_t> section_bytes;
+};
+constexpr size_t kEncodeKeepVertices = size_t(1) << 16;
+
+// Connectivity traversal (see the top of this file): fills ws.conn, ws.pred, ws.old_of_new and
+// ws.indices (new numbering, regular triangles then degenerate ones) and ws.degenerate.
+void encode_connectivity(const FragmentMesh& mesh, EncoderWorkspace& ws) {
+    const uint32_t V = uint32_t(mesh.vertices.size()), T = uint32_t(mesh.triangle_count());
+    const uint32_t* idx = mesh.indices.data();
+
+    // Split regular and degenerate triangles.
+    std::vector<uint32_t>& regular = ws.regular;
+    std::vector<uint32_t>& degenerate = ws.degenerate;
+    regular.clear();
+    degenerate.clear();
+    for (uint32_t t = 0; t < T; ++t) {
+        uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
+        (a == b || b == c || c == a ? degenerate : regular).push_back(t);
+    }
+    const uint32_t R = uint32_t(regular.size());
+
+    // Directed half-edges of regular triangles by origin vertex (CSR): (target, triangle), in
+    // triangle order. A lookup wants the first unvisited triangle with a given directed edge.
+    // Vertices of degree up to kScanDegree (nearly all) are scanned linearly. Larger groups are
+    // sorted by (target, triangle): a lookup binary-searches the target and scans that group
+    // from a cursor that skips visited triangles, so even pathological fans and stacks of
+    // duplicate triangles cost O(log degree) amortised per lookup. (Sorting every vertex's
+    // entries and binary-searching them were the traversal's hottest spots, in perf.)
+    constexpr uint32_t kScanDegree = 16;
+    std::vector<uint32_t>& first = ws.first;
+    first.assign(size_t(V) + 1, 0);
+    for (uint32_t t : regular)
+        for (int k = 0; k < 3; ++k) ++first[idx[3 * t + k] + 1];
+    for (uint32_t v = 0; v < V; ++v) first[v + 1] += first[v];
+    std::vector<std::pair<uint32_t, uint32_t>>& half = ws.half;
+    half.resize(size_t(first[V]));
+    std::vector<uint32_t>& cursor = ws.cursor;  // at a sorted group's first entry: where to resume
+    cursor.resize(half.size());
+    {
+        ws.fill.assign(first.begin(), first.end() - 1);
+        uint32_t* fill = ws.fill.data();
+        for (uint32_t t : regular)
+            for (int k = 0; k < 3; ++k) half[fill[idx[3 * t + k]]++] = {idx[3 * t + (k + 1) % 3], t};
+        for (uint32_t v = 0; v < V; ++v) {
+            if (first[v + 1] - first[v] <= kScanDegree) continue;
+            std::sort(half.begin() + first[v], half.begin() + first[v + 1]);
+            for (uint32_t h = first[v]; h < first[v + 1]; ++h) cursor[h] = h;
+        }
+    }
+    std::vector<uint8_t>& visited = ws.visited;
+    visited.assign(T, 0);
+    auto find_across = [&](uint32_t from, uint32_t to) -> uint32_t {
+        const uint32_t lo = first[from], hi = first[from + 1];
+        if (hi - lo <= kScanDegree) [[likely]] {
+            for (uint32_t h = lo; h < hi; ++h)
+                if (half[h].first == to && !visited[half[h].second]) return half[h].second;
+            return kNone;
+        }
+        auto g = std::lower_bound(half.begin() + lo, half.begin() + hi, std::pair<uint32_t, uint32_t>{to, 0});
+        if (g == half.begin() + hi || g->first != to) return kNone;
+        const uint32_t group = uint32_t(g - half.begin());
+        uint32_t h = cursor[group];
+        while (h < hi && half[h].first == to && visited[half[h].second]) ++h;
+        cursor[group] = h;
+        if (h < hi && half[h].first == to) return half[h].second;
+        return kNone;
+    };
+
+    // Outputs are sized up front and written through pointers: push_back's capacity checks, and
+    // the reloads of vector internals after every byte store, cost 6% of encode_bench's time.
+    ws.new_id.assign(V, kNone);
+    ws.old_of_new.resize(V);
+    ws.pred.resize(V);
+    ws.indices.resize(size_t(T) * 3);
+    // Every triangle takes one symbol (three to start a component), every BOUNDARY one of the
+    // at most 3 R front edges: at most 6 R symbols (the decoder's bound).
+    ws.conn.clear();
+    ws.conn.symbols.resize(6 * size_t(R));
+    uint32_t* const new_id = ws.new_id.data();
+    uint32_t* const old_of_new = ws.old_of_new.data();
+    Pred* const pred = ws.pred.data();
+    uint32_t* tri = ws.indices.data();
+    uint8_t* const symbols = ws.conn.symbols.data();
+    uint32_t nsym = 0, seen = 0;
+    auto number = [&](uint32_t old, Pred p) {
+        new_id[old] = seen;
+        old_of_new[seen] = old;
+        pred[seen] = p;
+        ++seen;
+    };
+    auto previous_pred = [&]() {
+        uint32_t p = seen == 0 ? V : seen - 1;
+        return Pred{p, p, p};
+    };
+    auto put_split = [&](uint32_t old) {
+        symbols[nsym++] = kSplit;
+        ws.conn.put_bits(new_id[old], bit_width_u32(seen - 1));
+    };
+
+    Front& front = ws.front;
+    front.reset(size_t(R) * 2 + 16);
+    size_t next_start = 0;
+    uint32_t done = 0;
+    while (done < R) {
+        uint32_t i;
+        front.reserve3();
+        if (!front.pop(i)) {
+            while (visited[regular[next_start]]) ++next_start;
+            uint32_t t = regular[next_start];
+            visited[t] = 1;
+            uint32_t c[3] = {idx[3 * t], idx[3 * t + 1], idx[3 * t + 2]};
+            for (uint32_t x : c) {
+                if (new_id[x] == kNone) {
+                    symbols[nsym++] = kNew;
+                    number(x, previous_pred());
+                } else {
+                    put_split(x);
+                }
+            }
+            front.start(c[0], c[1], c[2]);
+            for (uint32_t x : c) *tri++ = new_id[x];
+            ++done;
+            continue;
+        }
+        const FrontEdge ei = front.e[i];
+        uint32_t t = find_across(ei.v1, ei.v0);
+        if (t == kNone) {
+            symbols[nsym++] = kBoundary;
+            continue;
+        }
+        visited[t] = 1;
+        ++done;
+        uint32_t w = idx[3 * t] ^ idx[3 * t + 1] ^ idx[3 * t + 2] ^ ei.v0 ^ ei.v1;
+        if (new_id[w] == kNone) {
+            symbols[nsym++] = kNew;
+            number(w, Pred{new_id[ei.v0], new_id[ei.v1], new_id[ei.opp]});
+            front.add_vertex(i, ei, w);
+        } else {
+            bool left = front.e[ei.next].v1 == w, right = front.e[ei.prev].v0 == w;
+            if (left && right) {
+                symbols[nsym++] = kEnd;
+                front.end(i, ei);
+            } else if (left) {
+                symbols[nsym++] = kLeft;
+                front.left(i, ei, w);
+            } else if (right) {
+                symbols[nsym++] = kRight;
+                front.right(i, ei, w);
+            } else {
+                put_split(w);
+                front.add_vertex(i, ei, w);
+            }
+        }
+        tri[0] = new_id[ei.v1];
+        tri[1] = new_id[ei.v0];
+        tri[2] = new_id[w];
+        tri += 3;
+    }
+    assert(nsym <= ws.conn.symbols.size());
+    ws.conn.symbols.resize(nsym);
+    for (uint32_t k = 0; k < nsym; ++k) ++ws.conn.counts[symbols[k]];
+    // Vertices outside regular triangles, in original order.
+    for (uint32_t v = 0; v < V; ++v)
+        if (new_id[v] == kNone) number(v, previous_pred());
+    // Degenerate triangles, explicit.
+    const int index_bits = V > 0 ? bit_width_u32(V - 1) : 0;
+    for (uint32_t t : degenerate)
+        for (int k = 0; k < 3; ++k) {
+            uint32_t n = new_id[idx[3 * t + k]];
+            ws.conn.put_bits(n, index_bits);
+            *tri++ = n;
+        }
+    assert(tri == ws.indices.data() + ws.indices.size());
+}
+
+// The attribute modes chosen by trial and the chosen candidates (in the workspace).
+struct AttributeChoice {
+    int pos_mode = kPosRaw;
+    int normal_mode = kNormalAverage;
+    std::array<int8_t, 9> matrix{};
+    bool color_parallelogram = false, color_decorrelate = false;
+    const Candidate *pos = nullptr, *nor = nullptr, *col = nullptr;
+};
+
+// Positions: fills ws.coords (cumulative (a, b, c), index V zero) and, when every index is valid,
+// picks the cheaper of the cumulative and weight codings (else raw indices).
+void choose_positions(const EncoderState& st, EncoderWorkspace& ws, AttributeChoice& choice) {
+    const uint32_t V = st.V;
+    ws.coords.resize(size_t(V) + 1);
+    Coord* coords = ws.coords.data();
+    coords[V] = Coord{0, 0, 0, 0};
+    for (uint32_t v = 0; v < V; ++v) {
+        BaryWeights w;
+        if (!bary_unpack(st.verts[v].position_index(), w)) {
+            choice.pos_mode = kPosRaw;
+            return;
+        }
+        coords[v] = {w[1] + w[2] + w[3], w[2] + w[3], w[3], 0};
+    }
+    ws.weights.resize(size_t(V) + 1);
+    Coord* weights = ws.weights.data();
+    for (uint32_t v = 0; v <= V; ++v)
+        weights[v] = {coords[v][0] - coords[v][1], coords[v][1] - coords[v][2], coords[v][2], 0};
+    Candidate &cumulative = ws.pos[0], &by_weight = ws.pos[1];
+    cumulative.record(kStreamPos0, 3 * size_t(V), [&](auto& r) { emit_positions<true>(st, coords, r); });
+    by_weight.record(kStreamPos0, 3 * size_t(V), [&](auto& r) { emit_positions<false>(st, weights, r); });
+    const double c0 = cumulative.cost(3), c1 = by_weight.cost(3);
+    choice.pos_mode = c1 < c0 ? kPosWeights : kPosCumulative;
+    choice.pos = c1 < c0 ? &by_weight : &cumulative;
+}
+
+// Normals: the cheapest of the gate average, the parallelogram and (when positions are coded and
+// a matrix fits) the geometric predictor, which costs 72 bits more for its matrix.
+void choose_normals(const EncoderState& st, EncoderWorkspace& ws, AttributeChoice& choice) {
+    const uint32_t V = st.V;
+    bool geometric = false;
+    if (choice.pos_mode != kPosRaw && V > 0) {
+        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
+        accumulate_normals(ws.indices.data(), ws.indices.size() / 3, ws.coords.data(), ws.acc.data());
+        geometric = fit_normal_matrix(st, ws.acc.data(), choice.matrix);
+    }
+    double best = 1e300;
+    for (int mode : {kNormalAverage, kNormalParallelogram, kNormalGeometric}) {
+        if (mode == kNormalGeometric && !geometric) continue;
+        Candidate& c = ws.nor[size_t(mode)];
+        c.record(kStreamNormU, 2 * size_t(V),
+                 [&](auto& r) { emit_normals(st, mode, ws.acc.data(), choice.matrix, r); });
+        const double bits = c.cost(2) + (mode == kNormalGeometric ? 72 : 0);
+        if (bits < best) {
+            best = bits;
+            choice.normal_mode = mode;
+            choice.nor = &c;
+        }
+    }
+}
+
+// Colours: the cheapest of {gate average, parallelogram} x {plain, R and B relative to G}
+// (candidate k: bit 0 parallelogram, bit 1 relative). The four are counted in one pass: they
+// share the predictions, and the plain and relative codings share the G residual. The chosen
+// one is emitted later, recomputed (cheap). Four recording passes took twice as long.
+void choose_colors(const EncoderState& st, EncoderWorkspace& ws, AttributeChoice& choice) {
+    for (Candidate& c : ws.col) c.clear(kStreamColR);
+    // counts of candidate k, stream R, G or B (r = 0, g = 1, b = 2)
+    auto counts = [&](int k, int channel) { return ws.col[size_t(k)].counts[size_t(channel)].data(); };
+    uint32_t *g_avg = counts(0, 1), *r_avg = counts(0, 0), *b_avg = counts(0, 2);
+    uint32_t *g_par = counts(1, 1), *r_par = counts(1, 0), *b_par = counts(1, 2);
+    uint32_t *g_avg_rel = counts(2, 1), *r_avg_rel = counts(2, 0), *b_avg_rel = counts(2, 2);
+    uint32_t *g_par_rel = counts(3, 1), *r_par_rel = counts(3, 0), *b_par_rel = counts(3, 2);
+    auto sym = [](int residual) { return bucket_of(zigzag(int8_t(uint8_t(residual)))).sym; };
+    const PackedVertex* verts = st.verts;
+    for (uint32_t v = 0; v < st.V; ++v) {
+        const Pred p = st.pred[v];
+        const uint32_t wa = verts[p.a].word1, wb = verts[p.b].word1, wc = verts[p.c].word1, wv = verts[v].word1;
+        int avg[3], par[3];  // residuals against the gate average and the parallelogram
+        for (int c = 0; c < 3; ++c) {
+            const int a = channel(wa, c), b = channel(wb, c), x = channel(wv, c);
+            avg[c] = x - ((a + b + 1) >> 1);
+            par[c] = x - std::clamp(a + b - channel(wc, c), 0, 255);
+        }
+        const uint32_t ga = sym(avg[1]), gp = sym(par[1]);
+        ++g_avg[ga], ++g_avg_rel[ga], ++g_par[gp], ++g_par_rel[gp];
+        ++r_avg[sym(avg[0])], ++b_avg[sym(avg[2])];
+        ++r_par[sym(par[0])], ++b_par[sym(par[2])];
+        ++r_avg_rel[sym(avg[0] - avg[1])], ++b_avg_rel[sym(avg[2] - avg[1])];
+        ++r_par_rel[sym(par[0] - par[1])], ++b_par_rel[sym(par[2] - par[1])];
+    }
+    double best = 1e300;
+    for (int k = 0; k < 4; ++k) {
+        Candidate& c = ws.col[size_t(k)];
+        c.count_raw_bits();
+        const double bits = c.cost(3);
+        if (bits < best) {
+            best = bits;
+            choice.color_parallelogram = k & 1;
+            choice.color_decorrelate = k & 2;
+            choice.col = &c;
+        }
+    }
+}
+
+// Encodes into `out` (appending); returns the bytes appended.
+size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, FragmentEncodeStats* stats,
+                       EncoderWorkspace& ws) {
+    const size_t V_size = mesh.vertices.size(), T_size = mesh.triangle_count();
+    assert(mesh.indices.size() % 3 == 0);
+    assert(V_size <= kFragmentMaxVertices && T_size <= kFragmentMaxTriangles);
+    const uint32_t V = uint32_t(V_size), T = uint32_t(T_size);
+#ifndef NDEBUG
+    // One maximum (vectorised) instead of an assertion per index.
+    uint32_t largest = 0;
+    for (uint32_t i : mesh.indices) largest = std::max(largest, i);
+    assert(mesh.indices.empty() || largest < V);
+#endif
+
+    encode_connectivity(mesh, ws);
+    ws.verts.resize(size_t(V) + 1);
+    for (uint32_t v = 0; v < V; ++v) ws.verts[v] = mesh.vertices[ws.old_of_new[v]];
+    ws.verts[V] = PackedVertex{};
+    const EncoderState st{V, ws.verts.data(), ws.pred.data()};
+
+    AttributeChoice choice;
+    choose_positions(st, ws, choice);
+    choose_normals(st, ws, choice);
+    choose_colors(st, ws, choice);
+
+    // Tables, then everything in decode order. Sections (for the size report): tables of each
+    // part, then the symbols of each part.
+    rans::Encoder& enc = ws.enc;
+    enc.reset();
+    std::array<rans::EncTable, kStreamCount> tables;
+    const Candidate* parts[4] = {nullptr, choice.pos, choice.nor, choice.col};
+    const int stream_part[kStreamCount] = {0, 1, 1, 1, 2, 2, 3, 3, 3};
+    int section_part[8];
+    int sections = 0;
+    for (int s = 0; s < kStreamCount; ++s) {
+        if (stream_part[s] == 1 && choice.pos_mode == kPosRaw) continue;
+        if (sections == 0 || section_part[sections - 1] != stream_part[s]) {
+            enc.begin_section();
+            section_part[sections++] = stream_part[s];
+        }
+        rans::TableDesc d;
+        rans::FreqTable f;
+        if (s == kStreamConn) {
+            d = rans::describe_counts(ws.conn.counts.data(), int(kConnSymbols));
+            bool ok = rans::build_freqs(d, f);
+            assert(ok);
+            (void)ok;
+        } else {
+            // The part's cost() already described and built the table.
+            const Candidate& p = *parts[stream_part[s]];
+            d = p.desc[size_t(s - p.first)];
+            f = p.freqs[size_t(s - p.first)];
+        }
+        tables[size_t(s)].build(f);
+        enc.put_table(d);
+    }
+    // Connectivity.
+    enc.begin_section();
+    section_part[sections++] = 0;
+    const rans::EncTable& conn_table = tables[kStreamConn];
+    for (size_t k = 0; k < ws.conn.symbols.size(); ++k) enc.put(conn_table, ws.conn.symbols[k], int(k & 3));
+    for (const ConnSymbols::Bits& b : ws.conn.bits) enc.put_bits(b.value, int(b.nbits));
+    // Positions.
+    enc.begin_section();
+    section_part[sections++] = 1;
+    if (choice.pos_mode == kPosRaw) {
+        for (uint32_t v = 0; v < V; ++v) enc.put_bits(st.verts[v].position_index(), 24);
+    } else {
+        put_values<3>(enc, *choice.pos, tables, {kStreamPos0, kStreamPos1, kStreamPos2});
+    }
+    // Normals.
+    enc.begin_section();
+    section_part[sections++] = 2;
+    put_values<2>(enc, *choice.nor, tables, {kStreamNormU, kStreamNormV});
+    // Colours.
+    enc.begin_section();
+    section_part[sections++] = 3;
+    Emitter emitter{enc, tables};
+    emit_colors(st, choice.color_parallelogram, choice.color_decorrelate, emitter);
+
+    // Assemble: header, then the payload straight after it in `out`.
+    const size_t base = out.size();
+    out.resize(base + kHeaderBytes, 0);
+    uint8_t* header = out.data() + base;
+    std::memcpy(header, kMagicBytes, 4);
+    header[4] = kVersion;
+    for (int i = 0; i < 4; ++i) {
+        header[8 + i] = uint8_t(V >> (8 * i));
+        header[12 + i] = uint8_t(T >> (8 * i));
+    }
+    const size_t payload_at = out.size();
+    put_u16(out, header_fold(out.data() + base));
+    out.push_back(kCodingCompressed);
+    out.push_back(uint8_t(choice.pos_mode | (choice.normal_mode << 2) | (choice.color_parallelogram << 4) |
+                          (choice.color_decorrelate << 5)));
+    if (choice.normal_mode == kNormalGeometric)
+        for (int8_t x : choice.matrix) out.push_back(uint8_t(x));
+    put_varint(out, ws.degenerate.size());
+    put_varint(out, ws.conn.symbols.size());
+    const size_t prefix_bytes = out.size() - payload_at;
+    std::vector<size_t>& section_bytes = ws.section_bytes;
+    enc.finish(out, &section_bytes);
+
+    FragmentEncodeStats s;
+    const size_t stored_payload = 3 + 8 * size_t(V) + 12 * size_t(T);
+    if (out.size() - payload_at >= stored_payload) {
+        out.resize(payload_at + 2);
+        out.push_back(kCodingStored);
+        for (const PackedVertex& v : mesh.vertices) {
+            put_u32(out, v.word0);
+            put_u32(out, v.word1);
+        }
+        for (uint32_t i : mesh.indices) put_u32(out, i);
+        s.header_bytes = kHeaderBytes + 3;
+        s.connectivity_bytes = 12 * size_t(T);
+        s.position_bytes = 3 * size_t(V);
+        s.normal_bytes = 2 * size_t(V);
+        s.color_bytes = 3 * size_t(V);
+    } else {
+        s.header_bytes = kHeaderBytes + prefix_bytes - (choice.normal_mode == kNormalGeometric ? 9 : 0);
+        s.normal_bytes = choice.normal_mode == kNormalGeometric ? 9 : 0;
+        size_t* target[4] = {&s.connectivity_bytes, &s.position_bytes, &s.normal_bytes, &s.color_bytes};
+        for (size_t i = 0; i < section_bytes.size(); ++i) *target[section_part[i]] += section_bytes[i];
+    }
+    const uint64_t sum = checksum64(out.data() + payload_at, out.size() - payload_at);
+    header = out.data() + base;  // `out` may have moved
+    for (int i = 0; i < 8; ++i) header[kChecksumOffset + size_t(i)] = uint8_t(sum >> (8 * i));
+    if (stats) *stats = s;
+    return out.size() - base;
+}
+
 }  // namespace
 
 const char* fragment_status_name(FragmentStatus status) {
@@ -548,304 +1085,12 @@ size_t fragment_encode_bound(size_t vertex_count, size_t triangle_count) {
 }
 
 size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, FragmentEncodeStats* stats) {
-    const size_t V_size = mesh.vertices.size(), T_size = mesh.triangle_count();
-    assert(mesh.indices.size() % 3 == 0);
-    assert(V_size <= kFragmentMaxVertices && T_size <= kFragmentMaxTriangles);
-    const uint32_t V = uint32_t(V_size), T = uint32_t(T_size);
-    const uint32_t* idx = mesh.indices.data();
-    for (size_t i = 0; i < mesh.indices.size(); ++i) assert(idx[i] < V);
-
-    // Split regular and degenerate triangles.
-    std::vector<uint32_t> regular, degenerate;
-    regular.reserve(T);
-    for (uint32_t t = 0; t < T; ++t) {
-        uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
-        (a == b || b == c || c == a ? degenerate : regular).push_back(t);
+    if (mesh.vertices.size() <= kEncodeKeepVertices) {
+        thread_local EncoderWorkspace ws;
+        return encode_fragment(mesh, out, stats, ws);
     }
-    const uint32_t R = uint32_t(regular.size());
-
-    // Directed half-edges of regular triangles by origin vertex (CSR), each vertex's entries
-    // sorted by target: (target, triangle). A lookup binary-searches the target and scans that
-    // group from a cursor that skips visited triangles, so even pathological fans and stacks of
-    // duplicate triangles cost O(log degree) amortised per lookup.
-    std::vector<uint32_t> first(V + 1, 0);
-    for (uint32_t t : regular)
-        for (int k = 0; k < 3; ++k) ++first[idx[3 * t + k] + 1];
-    for (uint32_t v = 0; v < V; ++v) first[v + 1] += first[v];
-    std::vector<std::pair<uint32_t, uint32_t>> half(size_t(first[V]));
-    {
-        std::vector<uint32_t> fill(first.begin(), first.end() - 1);
-        for (uint32_t t : regular)
-            for (int k = 0; k < 3; ++k) half[fill[idx[3 * t + k]]++] = {idx[3 * t + (k + 1) % 3], t};
-        for (uint32_t v = 0; v < V; ++v)
-            if (first[v + 1] - first[v] > 1) std::sort(half.begin() + first[v], half.begin() + first[v + 1]);
-    }
-    std::vector<uint32_t> cursor(half.size());  // at a group's first entry: where to resume
-    for (size_t h = 0; h < half.size(); ++h) cursor[h] = uint32_t(h);
-    std::vector<uint8_t> visited(T, 0);
-    auto find_across = [&](uint32_t from, uint32_t to) -> uint32_t {
-        auto lo = half.begin() + first[from], hi = half.begin() + first[from + 1];
-        auto g = std::lower_bound(lo, hi, std::pair<uint32_t, uint32_t>{to, 0});
-        if (g == hi || g->first != to) return kNone;
-        const uint32_t group = uint32_t(g - half.begin());
-        uint32_t h = cursor[group];
-        while (h < first[from + 1] && half[h].first == to && visited[half[h].second]) ++h;
-        cursor[group] = h;
-        if (h < first[from + 1] && half[h].first == to) return half[h].second;
-        return kNone;
-    };
-
-    EncoderState st;
-    st.V = V;
-    std::vector<uint32_t> new_id(V, kNone), old_of_new;
-    old_of_new.reserve(V);
-    st.pred.reserve(V);
-    st.indices.reserve(size_t(T) * 3);
-    Sink conn;
-    uint32_t seen = 0;
-    auto number = [&](uint32_t old, Pred p) {
-        new_id[old] = seen++;
-        old_of_new.push_back(old);
-        st.pred.push_back(p);
-    };
-    auto previous_pred = [&]() {
-        uint32_t p = seen == 0 ? V : seen - 1;
-        return Pred{p, p, p};
-    };
-    auto put_split = [&](uint32_t old) {
-        conn.sym(kStreamConn, kSplit);
-        conn.bits(new_id[old], bit_width_u32(seen - 1));
-    };
-
-    Front front;
-    front.reset(size_t(R) * 2 + 16);
-    size_t next_start = 0;
-    uint32_t done = 0;
-    while (done < R) {
-        uint32_t i;
-        front.reserve3();
-        if (!front.pop(i)) {
-            while (visited[regular[next_start]]) ++next_start;
-            uint32_t t = regular[next_start];
-            visited[t] = 1;
-            uint32_t c[3] = {idx[3 * t], idx[3 * t + 1], idx[3 * t + 2]};
-            for (uint32_t x : c) {
-                if (new_id[x] == kNone) {
-                    conn.sym(kStreamConn, kNew);
-                    number(x, previous_pred());
-                } else {
-                    put_split(x);
-                }
-            }
-            front.start(c[0], c[1], c[2]);
-            for (uint32_t x : c) st.indices.push_back(new_id[x]);
-            ++done;
-            continue;
-        }
-        const FrontEdge ei = front.e[i];
-        uint32_t t = find_across(ei.v1, ei.v0);
-        if (t == kNone) {
-            conn.sym(kStreamConn, kBoundary);
-            continue;
-        }
-        visited[t] = 1;
-        ++done;
-        uint32_t w = idx[3 * t] ^ idx[3 * t + 1] ^ idx[3 * t + 2] ^ ei.v0 ^ ei.v1;
-        if (new_id[w] == kNone) {
-            conn.sym(kStreamConn, kNew);
-            number(w, Pred{new_id[ei.v0], new_id[ei.v1], new_id[ei.opp]});
-            front.add_vertex(i, ei, w);
-        } else {
-            bool left = front.e[ei.next].v1 == w, right = front.e[ei.prev].v0 == w;
-            if (left && right) {
-                conn.sym(kStreamConn, kEnd);
-                front.end(i, ei);
-            } else if (left) {
-                conn.sym(kStreamConn, kLeft);
-                front.left(i, ei, w);
-            } else if (right) {
-                conn.sym(kStreamConn, kRight);
-                front.right(i, ei, w);
-            } else {
-                put_split(w);
-                front.add_vertex(i, ei, w);
-            }
-        }
-        st.indices.push_back(new_id[ei.v1]);
-        st.indices.push_back(new_id[ei.v0]);
-        st.indices.push_back(new_id[w]);
-    }
-    // Vertices outside regular triangles, in original order.
-    for (uint32_t v = 0; v < V; ++v)
-        if (new_id[v] == kNone) number(v, previous_pred());
-    // Degenerate triangles, explicit.
-    const int index_bits = V > 0 ? bit_width_u32(V - 1) : 0;
-    for (uint32_t t : degenerate)
-        for (int k = 0; k < 3; ++k) {
-            uint32_t n = new_id[idx[3 * t + k]];
-            conn.bits(n, index_bits);
-            st.indices.push_back(n);
-        }
-
-    st.verts.resize(size_t(V) + 1);
-    for (uint32_t v = 0; v < V; ++v) st.verts[v] = mesh.vertices[old_of_new[v]];
-    st.verts[V] = PackedVertex{};
-
-    // Positions.
-    bool all_valid = true;
-    std::vector<Coord> coords(size_t(V) + 1, Coord{0, 0, 0, 0});
-    for (uint32_t v = 0; v < V && all_valid; ++v) {
-        BaryWeights w;
-        if (!bary_unpack(st.verts[v].position_index(), w)) {
-            all_valid = false;
-            break;
-        }
-        coords[v] = {w[1] + w[2] + w[3], w[2] + w[3], w[3], 0};
-    }
-    int pos_mode = kPosRaw;
-    Sink pos;
-    if (all_valid) {
-        double best = 1e300;
-        for (int mode : {kPosCumulative, kPosWeights}) {
-            Sink s;
-            emit_positions(st, mode, coords, s);
-            double c = s.cost(kStreamPos0, kStreamPos2);
-            if (c < best) {
-                best = c;
-                pos_mode = mode;
-                pos = std::move(s);
-            }
-        }
-    } else {
-        emit_positions(st, kPosRaw, coords, pos);
-    }
-
-    // Normals.
-    int normal_mode = kNormalAverage;
-    std::array<int8_t, 9> matrix{};
-    Sink nor;
-    {
-        double best = 1e300;
-        std::vector<NormalSum> acc;
-        bool geometric = false;
-        if (pos_mode != kPosRaw && V > 0) {
-            acc.assign(V, NormalSum{0, 0, 0, 0});
-            accumulate_normals(st.indices.data(), st.indices.size() / 3, coords.data(), acc.data());
-            geometric = fit_normal_matrix(st, acc, matrix);
-        }
-        for (int mode : {kNormalAverage, kNormalParallelogram, kNormalGeometric}) {
-            if (mode == kNormalGeometric && !geometric) continue;
-            Sink s;
-            emit_normals(st, mode, &acc, matrix, s);
-            double c = s.cost(kStreamNormU, kStreamNormV) + (mode == kNormalGeometric ? 72 : 0);
-            if (c < best) {
-                best = c;
-                normal_mode = mode;
-                nor = std::move(s);
-            }
-        }
-    }
-
-    // Colours.
-    bool color_parallelogram = false, color_decorrelate = false;
-    Sink col;
-    {
-        double best = 1e300;
-        for (int k = 0; k < 4; ++k) {
-            Sink s;
-            emit_colors(st, k & 1, k & 2, s);
-            double c = s.cost(kStreamColR, kStreamColB);
-            if (c < best) {
-                best = c;
-                color_parallelogram = k & 1;
-                color_decorrelate = k & 2;
-                col = std::move(s);
-            }
-        }
-    }
-
-    // Tables, then everything in decode order. Sections (for the size report): tables of each
-    // part, then the symbols of each part.
-    rans::Encoder enc;
-    std::array<rans::FreqTable, kStreamCount> freqs;
-    const Sink* parts[4] = {&conn, &pos, &nor, &col};
-    const int stream_part[kStreamCount] = {0, 1, 1, 1, 2, 2, 3, 3, 3};
-    std::vector<int> section_part;
-    for (int s = 0; s < kStreamCount; ++s) {
-        if (stream_part[s] == 1 && pos_mode == kPosRaw) continue;
-        if (section_part.empty() || section_part.back() != stream_part[s]) {
-            enc.begin_section();
-            section_part.push_back(stream_part[s]);
-        }
-        const uint32_t* counts = parts[stream_part[s]]->counts[size_t(s)].data();
-        int alphabet = s == kStreamConn ? int(kConnSymbols) : rans::kMaxAlphabet;
-        rans::TableDesc d = rans::describe_counts(counts, alphabet);
-        bool ok = rans::build_freqs(d, freqs[size_t(s)]);
-        assert(ok);
-        (void)ok;
-        enc.put_table(d);
-    }
-    for (int p = 0; p < 4; ++p) {
-        enc.begin_section();
-        section_part.push_back(p);
-        for (const Sink::Item& it : parts[p]->items) {
-            if (it.stream == kStreamRaw) {
-                enc.put_bits(it.value, it.nbits);
-            } else {
-                enc.put(freqs[it.stream], it.value, it.lane);
-                enc.put_bits(it.extra, it.nbits);
-            }
-        }
-    }
-
-    // Assemble.
-    const size_t base = out.size();
-    std::vector<uint8_t> header(kHeaderBytes, 0);
-    std::memcpy(header.data(), kMagicBytes, 4);
-    header[4] = kVersion;
-    for (int i = 0; i < 4; ++i) {
-        header[8 + i] = uint8_t(V >> (8 * i));
-        header[12 + i] = uint8_t(T >> (8 * i));
-    }
-    std::vector<uint8_t> payload;
-    put_u16(payload, header_fold(header.data()));
-    payload.push_back(kCodingCompressed);
-    payload.push_back(uint8_t(pos_mode | (normal_mode << 2) | (color_parallelogram << 4) | (color_decorrelate << 5)));
-    if (normal_mode == kNormalGeometric)
-        for (int8_t x : matrix) payload.push_back(uint8_t(x));
-    put_varint(payload, degenerate.size());
-    put_varint(payload, conn.conn_symbols);
-    const size_t prefix_bytes = payload.size();
-    std::vector<size_t> section_bytes;
-    enc.finish(payload, &section_bytes);
-
-    FragmentEncodeStats s;
-    const size_t stored_payload = 3 + 8 * size_t(V) + 12 * size_t(T);
-    if (payload.size() >= stored_payload) {
-        payload.resize(2);
-        payload.push_back(kCodingStored);
-        for (const PackedVertex& v : mesh.vertices) {
-            put_u32(payload, v.word0);
-            put_u32(payload, v.word1);
-        }
-        for (uint32_t i : mesh.indices) put_u32(payload, i);
-        s.header_bytes = kHeaderBytes + 3;
-        s.connectivity_bytes = 12 * size_t(T);
-        s.position_bytes = 3 * size_t(V);
-        s.normal_bytes = 2 * size_t(V);
-        s.color_bytes = 3 * size_t(V);
-    } else {
-        s.header_bytes = kHeaderBytes + prefix_bytes - (normal_mode == kNormalGeometric ? 9 : 0);
-        s.normal_bytes = normal_mode == kNormalGeometric ? 9 : 0;
-        size_t* target[4] = {&s.connectivity_bytes, &s.position_bytes, &s.normal_bytes, &s.color_bytes};
-        for (size_t i = 0; i < section_bytes.size(); ++i) *target[section_part[i]] += section_bytes[i];
-    }
-    uint64_t sum = checksum64(payload.data(), payload.size());
-    for (int i = 0; i < 8; ++i) header[kChecksumOffset + size_t(i)] = uint8_t(sum >> (8 * i));
-    out.insert(out.end(), header.begin(), header.end());
-    out.insert(out.end(), payload.begin(), payload.end());
-    if (stats) *stats = s;
-    return out.size() - base;
+    EncoderWorkspace ws;
+    return encode_fragment(mesh, out, stats, ws);
 }
 
 FragmentStatus fragment_peek(const uint8_t* data, size_t size, uint32_t& vertex_count, uint32_t& triangle_count) {

@@ -39,6 +39,7 @@ static_assert(meta_listed_sum() < 4096, "the escape symbol needs a frequency");
 struct Meta {
     FreqTable freqs;
     DecodeTable table;
+    EncTable enc;
     Meta() {
         uint32_t sum = 0;
         for (int i = 0; i < kMetaSymbols - 1; ++i) sum += kMetaFreq[size_t(i)];
@@ -52,6 +53,7 @@ struct Meta {
             start += f;
         }
         table.build(freqs);
+        enc.build(freqs);
     }
 };
 
@@ -62,31 +64,38 @@ const Meta& meta() {
 
 }  // namespace
 
-bool build_freqs(const TableDesc& desc, FreqTable& out) {
-    if (desc.nsym < 1 || desc.nsym > kMaxAlphabet) return false;
-    if (desc.scale_bits < kMinScaleBits || desc.scale_bits > kMaxScaleBits) return false;
+// Weights of a description scaled to 2^kMaxScaleBits: scaled[i] = floor(w_i * 4096 / W) with W
+// the sum of the weights. The frequency at any scale s is then scaled[i] >> (12 - s), which equals
+// floor(w_i * 2^s / W) (floor(floor(x) / 2^k) = floor(x / 2^k)): describe_counts prices all eight
+// scales with one division per symbol instead of eight. Returns false for an invalid description.
+static bool scaled_weights(const TableDesc& desc, std::array<uint32_t, kMaxAlphabet>& scaled) {
     const int n = desc.nsym;
-    const uint32_t total_freq = 1u << desc.scale_bits;
-    out.scale_bits = desc.scale_bits;
-    out.nsym = n;
-    out.freq.fill(0);
-    out.start.fill(0);
-    if (n == 1) {
-        out.freq[0] = total_freq;
-        return true;
-    }
-    if (desc.code[size_t(n - 1)] == 0) return false;  // the last symbol is present by construction
     uint32_t total_weight = 0;
     for (int i = 0; i < n; ++i) {
         if (desc.code[size_t(i)] > kMaxWeightCode) return false;
         total_weight += weight_value(desc.code[size_t(i)]);
     }
+    // weight_value(kMaxWeightCode) = 7 << 9, so w * 2^12 < 2^32.
+    static_assert(uint64_t(7u << 9) << kMaxScaleBits < (uint64_t(1) << 32));
+    for (int i = 0; i < n; ++i)
+        scaled[size_t(i)] = (weight_value(desc.code[size_t(i)]) << kMaxScaleBits) / total_weight;
+    return true;
+}
+
+// Frequencies at `scale_bits` from scaled_weights (n >= 2, the last symbol present): each present
+// symbol gets max(1, floor(w * 2^scale / W)), then the first largest absorbs the difference.
+// Writes out.freq[0, n) (and nsym, scale_bits) only: enough for data_cost_bits when the rest of
+// out.freq is zero.
+static bool frequencies(const std::array<uint32_t, kMaxAlphabet>& scaled, const TableDesc& desc, int scale_bits,
+                        FreqTable& out) {
+    const int n = desc.nsym;
+    const uint32_t total_freq = 1u << scale_bits;
+    const int down = kMaxScaleBits - scale_bits;
+    out.scale_bits = scale_bits;
+    out.nsym = n;
     uint32_t sum = 0;
     for (int i = 0; i < n; ++i) {
-        uint32_t w = weight_value(desc.code[size_t(i)]);
-        if (w == 0) continue;
-        uint32_t f = uint32_t(uint64_t(w) * total_freq / total_weight);
-        out.freq[size_t(i)] = std::max(1u, f);
+        out.freq[size_t(i)] = desc.code[size_t(i)] == 0 ? 0u : std::max(1u, scaled[size_t(i)] >> down);
         sum += out.freq[size_t(i)];
     }
     auto first_max = [&]() {
@@ -107,12 +116,38 @@ bool build_freqs(const TableDesc& desc, FreqTable& out) {
             --sum;
         }
     }
+    return true;
+}
+
+// frequencies() plus the rest of a complete FreqTable.
+static bool normalise(const std::array<uint32_t, kMaxAlphabet>& scaled, const TableDesc& desc, int scale_bits,
+                      FreqTable& out) {
+    const int n = desc.nsym;
+    out.freq.fill(0);
+    out.start.fill(0);
+    if (!frequencies(scaled, desc, scale_bits, out)) return false;
     uint32_t start = 0;
     for (int i = 0; i < n; ++i) {
         out.start[size_t(i)] = start;
         start += out.freq[size_t(i)];
     }
     return true;
+}
+
+bool build_freqs(const TableDesc& desc, FreqTable& out) {
+    if (desc.nsym < 1 || desc.nsym > kMaxAlphabet) return false;
+    if (desc.scale_bits < kMinScaleBits || desc.scale_bits > kMaxScaleBits) return false;
+    if (desc.nsym == 1) {
+        out.scale_bits = desc.scale_bits;
+        out.nsym = 1;
+        out.freq.fill(0);
+        out.start.fill(0);
+        out.freq[0] = 1u << desc.scale_bits;
+        return true;
+    }
+    if (desc.code[size_t(desc.nsym - 1)] == 0) return false;  // the last symbol is present by construction
+    std::array<uint32_t, kMaxAlphabet> scaled;
+    return scaled_weights(desc, scaled) && normalise(scaled, desc, desc.scale_bits, out);
 }
 
 // log2 of every possible frequency (at most 2^kMaxScaleBits), the same values std::log2 gives:
@@ -179,13 +214,14 @@ TableDesc describe_counts(const uint32_t* counts, int nsym) {
         desc.code[size_t(i)] = uint8_t(best);
     }
     // Smallest scale whose cost is within a hair of the best (smaller tables decode faster).
+    // The frequencies are those build_freqs derives, for all scales from one scaled_weights.
     double costs[kMaxScaleBits + 1];
     double best_cost = 1e30;
+    std::array<uint32_t, kMaxAlphabet> scaled;
+    const bool valid = scaled_weights(desc, scaled);
+    FreqTable f;  // frequencies() rewrites freq[0, nsym); the rest stays zero
     for (int s = kMinScaleBits; s <= kMaxScaleBits; ++s) {
-        TableDesc d = desc;
-        d.scale_bits = s;
-        FreqTable f;
-        costs[s] = build_freqs(d, f) ? data_cost_bits(counts, f) : 1e30;
+        costs[s] = valid && frequencies(scaled, desc, s, f) ? data_cost_bits(counts, f) : 1e30;
         best_cost = std::min(best_cost, costs[s]);
     }
     desc.scale_bits = kMaxScaleBits;
@@ -239,25 +275,55 @@ double table_cost_bits(const TableDesc& desc) {
     return bits;
 }
 
-void Encoder::put_bits(uint32_t value, int nbits) {
-    assert(nbits <= kMaxRawBits);
-    if (nbits <= 0) return;
-    uint64_t v = nbits < 32 ? value & ((1u << nbits) - 1) : value;
-    bit_acc_ |= v << bit_fill_;
-    bit_fill_ += nbits;
-    bit_count_ += uint64_t(nbits);
-    while (bit_fill_ >= 8) {
-        bits_.push_back(uint8_t(bit_acc_));
-        bit_acc_ >>= 8;
-        bit_fill_ -= 8;
+EncSymbol EncSymbol::make(uint32_t start, uint32_t freq, int scale_bits) {
+    // ryg_rans RansEncSymbolInit: for freq >= 2, rcp = ceil(2^(shift + 31) / freq) with
+    // shift = ceil(log2(freq)) makes q = floor(x / freq) for all x < 2^31; freq = 1 is handled by
+    // rcp = 2^32 - 1 (q = x - 1) and a bias that adds the missing 2^scale - 1.
+    EncSymbol s;
+    const uint32_t total = 1u << scale_bits;
+    s.x_max = ((kStateLower >> scale_bits) << 8) * freq;
+    s.cmpl_freq = uint16_t(total - freq);
+    if (freq < 2) {
+        s.rcp_freq = ~0u;
+        s.rcp_shift = 0;
+        s.bias = start + total - 1;
+    } else {
+        uint32_t shift = 0;
+        while (freq > (1u << shift)) ++shift;
+        s.rcp_freq = uint32_t(((uint64_t(1) << (shift + 31)) + freq - 1) / freq);
+        s.rcp_shift = uint8_t(shift - 1);
+        s.bias = start;
     }
+    return s;
+}
+
+void EncTable::build(const FreqTable& f) {
+    sym.fill(EncSymbol{});
+    for (int i = 0; i < f.nsym; ++i)
+        if (f.freq[size_t(i)] != 0) sym[size_t(i)] = EncSymbol::make(f.start[size_t(i)], f.freq[size_t(i)], f.scale_bits);
+}
+
+void Encoder::reset() {
+    ops_.clear();
+    sections_.clear();
+    bits_.clear();
+    bit_acc_ = 0;
+    bit_fill_ = 0;
+}
+
+void Encoder::flush_word() {
+    const uint32_t w = uint32_t(bit_acc_);
+    const uint8_t b[4] = {uint8_t(w), uint8_t(w >> 8), uint8_t(w >> 16), uint8_t(w >> 24)};
+    bits_.insert(bits_.end(), b, b + 4);
+    bit_acc_ >>= 32;
+    bit_fill_ -= 32;
 }
 
 void Encoder::put_table(const TableDesc& desc) {
     put_bits(uint32_t(desc.nsym - 1), 5);
     put_bits(uint32_t(desc.scale_bits - kMinScaleBits), 3);
     if (desc.nsym == 1) return;
-    const FreqTable& m = meta().freqs;
+    const EncTable& m = meta().enc;
     int prev = kMaxWeightCode;
     for (int i = 0; i < desc.nsym; ++i) {
         int k = desc.code[size_t(i)];
@@ -286,35 +352,52 @@ void put_varint(std::vector<uint8_t>& out, uint64_t v) {
 }
 }  // namespace
 
-void Encoder::finish(std::vector<uint8_t>& out, std::vector<size_t>* section_bytes) {
-    if (bit_fill_ > 0) {
-        bits_.push_back(uint8_t(bit_acc_));
-        bit_acc_ = 0;
-        bit_fill_ = 0;
+uint8_t* Encoder::encode_ops(size_t first, size_t end, uint32_t state[4], uint8_t* at) const {
+    for (size_t i = end; i-- > first;) {
+        const EncSymbol& op = ops_[i];
+        uint32_t x = state[op.lane];
+        // Renormalise: shift out k = 0, 1 or 2 bytes (x >> 8 >= x_max iff x >= x_max << 8).
+        // Both candidate bytes are stored below `at` unconditionally (the buffer has room) and
+        // the k wanted ones kept, without a branch on the unpredictable k.
+        const uint32_t k = uint32_t(x >= op.x_max) + uint32_t(uint64_t(x) >= uint64_t(op.x_max) << 8);
+        at[-1] = uint8_t(x);
+        at[-2] = uint8_t(x >> 8);
+        at -= k;
+        x = uint32_t(uint64_t(x) >> (8 * k));
+        state[op.lane] = op.update(x);
     }
-    std::vector<uint8_t> rev;
-    rev.reserve(ops_.size() / 2 + 16);
+    return at;
+}
+
+void Encoder::finish(std::vector<uint8_t>& out, std::vector<size_t>* section_bytes) {
+    // Remaining raw bits, the last byte padded with zeros.
+    const uint64_t bits_put = bit_count();
+    for (; bit_fill_ > 0; bit_fill_ -= 8) {
+        bits_.push_back(uint8_t(bit_acc_));
+        bit_acc_ >>= 8;
+    }
+    bit_fill_ = 0;
+    bit_acc_ = 0;
+    // The rANS bytes are produced last to first: written downwards from the end of a buffer of
+    // the largest possible size (2 bytes per symbol) plus the 2 bytes of slack encode_ops needs.
+    rans_bytes_.resize(2 * ops_.size() + 2);
+    uint8_t* const top = rans_bytes_.data() + rans_bytes_.size();
+    uint8_t* at = top;
     uint32_t state[4] = {kStateLower, kStateLower, kStateLower, kStateLower};
     std::vector<size_t> rans_bytes(sections_.size(), 0);
-    size_t section = sections_.size();  // number of sections starting at or before op i
-    for (size_t i = ops_.size(); i-- > 0;) {
-        while (section > 0 && sections_[section - 1].first_op > i) --section;
-        const Op& op = ops_[i];
-        uint32_t& x = state[op.lane];
-        const uint32_t x_max = ((kStateLower >> op.scale) << 8) * op.freq;
-        size_t before = rev.size();
-        while (x >= x_max) {
-            rev.push_back(uint8_t(x));
-            x >>= 8;
-        }
-        x = ((x / op.freq) << op.scale) + (x % op.freq) + op.start;
-        if (section > 0) rans_bytes[section - 1] += rev.size() - before;
+    size_t end = ops_.size();
+    for (size_t k = sections_.size(); k-- > 0;) {
+        uint8_t* before = at;
+        at = encode_ops(sections_[k].first_op, end, state, at);
+        rans_bytes[k] = size_t(before - at);
+        end = sections_[k].first_op;
     }
-    const size_t at = out.size();
+    at = encode_ops(0, end, state, at);  // symbols before the first section (none are counted)
+    const size_t at_out = out.size();
     for (uint32_t x : state)
         for (int k = 0; k < 4; ++k) out.push_back(uint8_t(x >> (8 * k)));
     put_varint(out, bits_.size());
-    out.insert(out.end(), rev.rbegin(), rev.rend());
+    out.insert(out.end(), at, top);
     out.insert(out.end(), bits_.begin(), bits_.end());
     if (section_bytes) {
         // Raw bits per section, rounded so that the total is exact; fixed fields to section 0.
@@ -322,14 +405,14 @@ void Encoder::finish(std::vector<uint8_t>& out, std::vector<size_t>* section_byt
         uint64_t assigned_bits = 0;
         size_t assigned = 0;
         for (size_t k = 0; k < sections_.size(); ++k) {
-            uint64_t end_bit = k + 1 < sections_.size() ? sections_[k + 1].first_bit : bit_count_;
+            uint64_t end_bit = k + 1 < sections_.size() ? sections_[k + 1].first_bit : bits_put;
             uint64_t bits_here = end_bit - sections_[k].first_bit;
             size_t bytes = size_t((assigned_bits + bits_here + 7) / 8) - size_t((assigned_bits + 7) / 8);
             assigned_bits += bits_here;
             (*section_bytes)[k] = rans_bytes[k] + bytes;
             assigned += (*section_bytes)[k];
         }
-        if (!section_bytes->empty()) (*section_bytes)[0] += (out.size() - at) - assigned;
+        if (!section_bytes->empty()) (*section_bytes)[0] += (out.size() - at_out) - assigned;
     }
 }
 

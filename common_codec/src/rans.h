@@ -24,6 +24,7 @@
 // (build_freqs).
 #include <array>
 #include <bit>
+#include <cassert>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -71,16 +72,53 @@ struct DecodeTable {
     void build(const FreqTable& f);
 };
 
+// Encoder form of one symbol: the state update x -> (x / freq) * 2^scale + x % freq + start
+// without a division, by a multiply with a rounded reciprocal (Fabian Giesen's ryg_rans,
+// rans_byte.h; exact for every state the encoder meets, x < 2^31), instead of a 32-bit division
+// per symbol. x_max: renormalise (shift out a byte) while x >= x_max.
+struct EncSymbol {
+    uint32_t x_max = 0;
+    uint32_t rcp_freq = 0;
+    uint32_t bias = 0;
+    uint16_t cmpl_freq = 0;  // 2^scale - freq
+    uint8_t rcp_shift = 0;
+    uint8_t lane = 0;  // filled in by Encoder::put
+
+    static EncSymbol make(uint32_t start, uint32_t freq, int scale_bits);
+    // The coded state for x (requires x < x_max): the same value as the division form.
+    CATPAQ_RANS_INLINE uint32_t update(uint32_t x) const {
+        const uint32_t q = uint32_t((uint64_t(x) * rcp_freq) >> 32) >> rcp_shift;
+        return x + bias + q * cmpl_freq;
+    }
+};
+
+// EncSymbols of a whole FreqTable (symbols absent from it are left zero and must not be put).
+struct EncTable {
+    std::array<EncSymbol, kMaxAlphabet> sym{};
+    void build(const FreqTable& f);
+};
+
 class Encoder {
 public:
+    // Forgets everything put so far but keeps the buffers (an encoder is reused per fragment).
+    void reset();
     // Appends, in decode order, a symbol on `lane` (0..3) / raw bits (nbits <= 32).
-    void put(const FreqTable& t, uint32_t sym, int lane) {
-        ops_.push_back(Op{t.start[sym], uint16_t(t.freq[sym]), uint8_t(t.scale_bits), uint8_t(lane)});
+    void put(const EncTable& t, uint32_t sym, int lane) {
+        EncSymbol s = t.sym[sym];
+        s.lane = uint8_t(lane);
+        ops_.push_back(s);
     }
-    void put_bits(uint32_t value, int nbits);
+    CATPAQ_RANS_INLINE void put_bits(uint32_t value, int nbits) {
+        // Whole 32-bit words are flushed, so 32 more bits always fit in the 64-bit accumulator.
+        assert(nbits >= 0 && nbits <= kMaxRawBits);
+        const uint64_t mask = (uint64_t(1) << nbits) - 1;
+        bit_acc_ |= (uint64_t(value) & mask) << bit_fill_;
+        bit_fill_ += nbits;
+        if (bit_fill_ >= 32) flush_word();
+    }
     void put_table(const TableDesc& desc);
     // Starts a new section (for size reports); sections are numbered from 0 in call order.
-    void begin_section() { sections_.push_back({ops_.size(), bit_count_}); }
+    void begin_section() { sections_.push_back({ops_.size(), bit_count()}); }
 
     // Encodes everything and appends the layout above to `out`. If given, section_bytes[i]
     // receives the bytes attributable to section i (rANS bytes emitted for its symbols plus its
@@ -88,22 +126,22 @@ public:
     void finish(std::vector<uint8_t>& out, std::vector<size_t>* section_bytes);
 
 private:
-    struct Op {
-        uint32_t start;
-        uint16_t freq;
-        uint8_t scale;
-        uint8_t lane;
-    };
     struct Section {
         size_t first_op;
         uint64_t first_bit;
     };
-    std::vector<Op> ops_;
+    uint64_t bit_count() const { return 8 * uint64_t(bits_.size()) + uint64_t(bit_fill_); }
+    void flush_word();
+    // rANS-codes ops_[first, end) backwards, writing bytes downwards from `at`; returns the
+    // new write position.
+    uint8_t* encode_ops(size_t first, size_t end, uint32_t state[4], uint8_t* at) const;
+
+    std::vector<EncSymbol> ops_;
     std::vector<Section> sections_;
     std::vector<uint8_t> bits_;
+    std::vector<uint8_t> rans_bytes_;  // scratch of finish()
     uint64_t bit_acc_ = 0;
     int bit_fill_ = 0;
-    uint64_t bit_count_ = 0;
 };
 
 // Read-only view of a DecodeTable for the hot loops (plain values the compiler keeps in registers).

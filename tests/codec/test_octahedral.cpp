@@ -72,3 +72,76 @@ TEST(Octahedral, DegenerateInputsGiveAValidCode) {
     oct_decode(oct_encode_precise(NAN, 0, 0), d);
     EXPECT_TRUE(std::isfinite(d[0]) && std::isfinite(d[1]) && std::isfinite(d[2]));
 }
+
+// The precise encoder as first written: four scalar oct_decode calls and a search keeping the
+// first strictly better candidate. The library decodes the four candidates at once with SSE and
+// picks the first maximum without branches; both must give the same code for every input.
+static uint16_t reference_precise(float x, float y, float z) {
+    auto sign_not_zero = [](float v) { return v < 0.0f ? -1.0f : 1.0f; };
+    auto clamp127 = [](float f) {
+        int c = int(f);
+        return c < -127 ? -127 : (c > 127 ? 127 : c);
+    };
+    auto pack = [](int cu, int cv) { return uint16_t(uint8_t(int8_t(cu)) | (uint16_t(uint8_t(int8_t(cv))) << 8)); };
+    float u = 0.0f, v = 0.0f;
+    float l1 = std::fabs(x) + std::fabs(y) + std::fabs(z);
+    if (l1 > 0.0f && std::isfinite(l1)) {
+        u = x / l1;
+        v = y / l1;
+        if (z < 0.0f) {
+            float fu = (1.0f - std::fabs(v)) * sign_not_zero(u);
+            float fv = (1.0f - std::fabs(u)) * sign_not_zero(v);
+            u = fu;
+            v = fv;
+        }
+    }
+    float len = std::sqrt(x * x + y * y + z * z);
+    if (!(len > 0.0f) || !std::isfinite(len)) return pack(0, 0);
+    float nx = x / len, ny = y / len, nz = z / len;
+    int base_u = clamp127(std::floor(u * 127.0f)), base_v = clamp127(std::floor(v * 127.0f));
+    uint16_t best = pack(base_u, base_v);
+    float best_dot = -2.0f;
+    for (int du = 0; du <= 1; ++du) {
+        for (int dv = 0; dv <= 1; ++dv) {
+            uint16_t code = pack(clamp127(float(base_u + du)), clamp127(float(base_v + dv)));
+            float d[3];
+            oct_decode(code, d);
+            float dot = d[0] * nx + d[1] * ny + d[2] * nz;
+            if (dot > best_dot) {
+                best_dot = dot;
+                best = code;
+            }
+        }
+    }
+    return best;
+}
+
+TEST(Octahedral, PreciseEncoderMatchesTheScalarSearchOnEightMillionVectors) {
+    std::mt19937_64 rng(99);
+    std::uniform_real_distribution<float> coord(-1.0f, 1.0f), tiny(-1e-6f, 1e-6f);
+    std::uniform_int_distribution<int> code(-127, 127);
+    size_t checked = 0;
+    auto check = [&](float x, float y, float z) {
+        ASSERT_EQ(oct_encode_precise(x, y, z), reference_precise(x, y, z)) << x << " " << y << " " << z;
+        ++checked;
+    };
+    for (int i = 0; i < 2000000; ++i) {
+        // Unit and non-unit vectors in every octant.
+        double v[3];
+        random_unit(rng, v);
+        check(float(v[0]), float(v[1]), float(v[2]));
+        check(coord(rng) * 1000.0f, coord(rng) * 1000.0f, coord(rng) * 1e-3f);
+        // Near the decoded directions of codes (ties between candidates), near the fold
+        // (z ~ 0) and near the axes.
+        float d[3];
+        oct_decode(uint16_t(uint8_t(int8_t(code(rng))) | (uint8_t(int8_t(code(rng))) << 8)), d);
+        check(d[0] + tiny(rng), d[1] + tiny(rng), d[2] + tiny(rng));
+        check(coord(rng), coord(rng), tiny(rng));
+    }
+    // Special values: zeros of both signs, axes, huge, tiny, infinite and NaN components.
+    const float specials[] = {0.0f, -0.0f, 1.0f, -1.0f, 1e-38f, -1e-38f, 1e38f, -1e38f, INFINITY, -INFINITY, NAN};
+    for (float x : specials)
+        for (float y : specials)
+            for (float z : specials) check(x, y, z);
+    EXPECT_EQ(checked, 8000000u + 11u * 11u * 11u);
+}

@@ -4,6 +4,7 @@
 // straightforward definitions, because the encoder's choices, and so its bytes, depend on them.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <random>
@@ -68,5 +69,69 @@ TEST(RansTables, DataCostMatchesLog2OfTheFrequencies) {
         for (int i = 0; i < rans::kMaxAlphabet; ++i)
             if (counts[i]) expected += double(counts[i]) * (double(f.scale_bits) - std::log2(double(f.freq[size_t(i)])));
         EXPECT_EQ(rans::data_cost_bits(counts, f), expected);
+    }
+}
+
+// build_freqs derives every scale's frequencies from one division per symbol (floor(w 2^12 / W)
+// shifted down); this pins it to the direct floor(w 2^s / W) with the same adjustments.
+TEST(RansTables, BuildFreqsMatchesTheDirectDivision) {
+    std::mt19937 rng(5);
+    for (int round = 0; round < 200000; ++round) {
+        rans::TableDesc d;
+        d.nsym = 2 + int(rng() % (rans::kMaxAlphabet - 1));
+        d.scale_bits = rans::kMinScaleBits + int(rng() % (rans::kMaxScaleBits - rans::kMinScaleBits + 1));
+        for (int i = 0; i < d.nsym; ++i) d.code[size_t(i)] = rng() % 3 == 0 ? 0 : uint8_t(1 + rng() % rans::kMaxWeightCode);
+        d.code[size_t(d.nsym - 1)] = uint8_t(1 + rng() % rans::kMaxWeightCode);
+        rans::FreqTable f;
+        ASSERT_TRUE(rans::build_freqs(d, f));
+        const uint32_t total = 1u << d.scale_bits;
+        uint32_t w_total = 0, freq[rans::kMaxAlphabet] = {}, sum = 0;
+        for (int i = 0; i < d.nsym; ++i) w_total += weight_value(d.code[size_t(i)]);
+        for (int i = 0; i < d.nsym; ++i) {
+            const uint32_t w = weight_value(d.code[size_t(i)]);
+            if (w == 0) continue;
+            freq[i] = std::max(1u, uint32_t(uint64_t(w) * total / w_total));
+            sum += freq[i];
+        }
+        auto first_max = [&] { return int(std::max_element(freq, freq + d.nsym) - freq); };
+        if (sum < total) freq[first_max()] += total - sum;
+        for (; sum > total; --sum) --freq[first_max()];
+        uint32_t start = 0;
+        for (int i = 0; i < d.nsym; ++i) {
+            ASSERT_EQ(f.freq[size_t(i)], freq[i]) << "round " << round << " symbol " << i;
+            ASSERT_EQ(f.start[size_t(i)], start);
+            start += freq[i];
+        }
+    }
+}
+
+// The encoder's division-free state update equals (x / freq) * 2^scale + x % freq + start for
+// every frequency at every scale and states across the whole range the encoder meets
+// ([kStateLower, x_max), after renormalisation).
+TEST(RansTables, EncoderReciprocalUpdateEqualsTheDivision) {
+    std::mt19937 rng(3);
+    for (int scale = rans::kMinScaleBits; scale <= rans::kMaxScaleBits; ++scale) {
+        const uint32_t total = 1u << scale;
+        for (uint32_t freq = 1; freq <= total; ++freq) {
+            const uint32_t start = total - freq;
+            const rans::EncSymbol s = rans::EncSymbol::make(start, freq, scale);
+            ASSERT_EQ(uint64_t(s.x_max), ((uint64_t(rans::kStateLower) >> scale) << 8) * freq);
+            auto check = [&](uint32_t x) {
+                const uint32_t expected = ((x / freq) << scale) + x % freq + start;
+                ASSERT_EQ(s.update(x), expected) << "x " << x << " freq " << freq << " scale " << scale;
+            };
+            // Renormalised states lie in [x_max >> 8, x_max) (and never below kStateLower >> 12).
+            const uint32_t lo = std::max<uint32_t>(1, s.x_max >> 8), hi = s.x_max - 1;
+            check(lo);
+            check(hi);
+            for (uint32_t k = 1; k < 64; ++k) check(lo + uint32_t(uint64_t(hi - lo) * k / 64));
+            for (int k = 0; k < 64; ++k) check(lo + rng() % (hi - lo + 1));
+            // Multiples of freq and their neighbours (where x / freq steps).
+            for (int k = 0; k < 16; ++k) {
+                const uint32_t m = (lo / freq + 1 + rng() % ((hi - lo) / freq + 1)) * freq;
+                for (uint32_t x : {m - 1, m, m + 1})
+                    if (x >= lo && x <= hi) check(x);
+            }
+        }
     }
 }
