@@ -639,6 +639,12 @@ void CatpBuild::coarsen_level() {
         WorkFragment gathered, child;
         {
             FragmentWelder welder(gathered);
+            size_t vertices = 0, triangles = 0;
+            for (size_t k = runs[i].first; k < runs[i].second; ++k) {
+                vertices += refs[k].vertices;
+                triangles += refs[k].triangles;
+            }
+            welder.reserve(vertices, triangles);
             for (size_t k = runs[i].first; k < runs[i].second; ++k) {
                 welder.append(fragments_->get(refs[k], child));
                 fragments_->release(refs[k]);

@@ -143,6 +143,8 @@ void FragmentSpill::put(const SlotKey& key, WorkFragment&& fragment) {
     const uint64_t bytes = memory_bytes(fragment);
     SpilledFragment ref;
     ref.key = key;
+    ref.vertices = uint32_t(fragment.positions.size());
+    ref.triangles = uint32_t(fragment.indices.size() / 3);
     {
         std::lock_guard lock(mutex_);
         if (memory_bytes_ + bytes <= memory_cap_) {

@@ -88,6 +88,7 @@ extern template class TriangleBins<TriangleCorners>;
 
 struct SpilledFragment {
     SlotKey key;
+    uint32_t vertices = 0, triangles = 0;  // the fragment's size, known without loading it
     uint32_t bytes = 0;
     int64_t file_offset = -1;  // -1: in memory, at memory_index
     uint32_t memory_index = 0;
