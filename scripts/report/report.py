@@ -295,6 +295,23 @@ def parse_build(text):
     return rows
 
 
+def parse_build_phases(text):
+    """The build bench's second table: seconds per phase and cores used, per input."""
+    rows = []
+    in_table = False
+    for l in text.splitlines():
+        p = l.split()
+        if l.startswith("phases (s)"):
+            in_table = True
+            continue
+        if in_table and len(p) == 8:
+            try:
+                rows.append(dict(input=p[0], phases=[float(x) for x in p[1:7]], cores=float(p[7])))
+            except ValueError:
+                pass
+    return rows
+
+
 def parse_hard_cases(text):
     """Per-case lines of bench/catp/hard_cases (see its header comment)."""
     out = {"cases": [], "settings": ""}
@@ -911,6 +928,15 @@ def write_report(raw, work, docs):
           "are generated scan-like meshes.%s" % (" Short mode: 100k only; the full run adds 1M and 10M."
                                                   if mode == "short" else ""))
         w("")
+        phases = parse_build_phases(read(os.path.join(raw, "build_bench.txt")))
+        if phases:
+            w("Where the time goes, seconds per phase (read the vertices, bin the triangles into blocks, "
+              "clip the leaves, encode the leaf nodes, coarsen, write the file) and cores used (CPU time / "
+              "wall time, 2 cores):")
+            w("")
+            w(md_table(["input", "read", "bin", "clip", "leaf nodes", "coarsen", "write", "cores used"],
+                       [[r["input"]] + ["%.2f" % x for x in r["phases"]] + ["%.2f" % r["cores"]] for r in phases]))
+            w("")
         if len(build) >= 2:
             plot_build(build, os.path.join(resdir, "build_speed.png"))
             w("![build speed](results/build_speed.png)")
