@@ -205,8 +205,9 @@ private:
 // machines (11-13 us measured on the development VM) can cost more than the simplification
 // itself. So a block up to kReuseBytes is the calling thread's, kept from call to call (warm
 // pages; the heap's own reuse was not enough: glibc trims and remaps blocks of this size, and
-// the simplifier made a quarter of the converter's page faults); larger blocks (big meshes) are
-// a LargeBuffer, with huge pages: one fault per 2 MiB.
+// the simplifier made a quarter of the converter's page faults); blocks from kLargeBytes up (big
+// meshes) are a LargeBuffer, with huge pages: one fault per 2 MiB; the sizes between, and a
+// nested call on a thread whose block is in use, take a block from the heap.
 class Arena {
 public:
     Arena() = default;
