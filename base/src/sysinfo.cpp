@@ -1,6 +1,7 @@
 #include "base/sysinfo.h"
 
 #include <chrono>
+#include <ctime>
 #include <fstream>
 #include <sys/resource.h>
 #include <unistd.h>
@@ -36,6 +37,12 @@ double cpu_seconds() {
     rusage u{};
     getrusage(RUSAGE_SELF, &u);
     return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
+double thread_cpu_seconds() {
+    timespec t{};
+    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
+    return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
 }
 
 double now_seconds() {

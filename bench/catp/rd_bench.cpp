@@ -23,18 +23,17 @@
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
-#include <functional>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "base/error.h"
+#include "base/sysinfo.h"
 #include "catp/dataset.h"
 #include "catp/distance.h"
 #include "common_codec/octahedral.h"
@@ -47,17 +46,6 @@ namespace {
 
 using Point = std::array<double, 3>;
 
-double now() { return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count(); }
-
-double best_of(int runs, const std::function<void()>& fn) {
-    double best = 1e300;
-    for (int r = 0; r < runs; ++r) {
-        double t0 = now();
-        fn();
-        best = std::min(best, now() - t0);
-    }
-    return best;
-}
 
 std::vector<int> parse_list(const std::string& text, int lo, int hi, const char* what) {
     std::vector<int> out;

@@ -18,19 +18,18 @@
 
 #include <algorithm>
 #include <array>
-#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
 #include <fstream>
-#include <functional>
 #include <map>
 #include <sstream>
 #include <string>
 #include <vector>
 
 #include "base/error.h"
+#include "base/sysinfo.h"
 #include "common_codec/barycentric.h"
 #include "common_codec/fragment_codec.h"
 #include "common_codec/octahedral.h"
@@ -289,21 +288,6 @@ int choose_grid(const InputMesh& m, const std::vector<Vec3>& normals, double tar
     return best;
 }
 
-// ---- timing ----------------------------------------------------------------------------------
-
-double seconds_now() {
-    return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-double best_of(int runs, const std::function<void()>& fn) {
-    double best = 1e300;
-    for (int r = 0; r < runs; ++r) {
-        double t0 = seconds_now();
-        fn();
-        best = std::min(best, seconds_now() - t0);
-    }
-    return best;
-}
 
 // ---- Draco -----------------------------------------------------------------------------------
 

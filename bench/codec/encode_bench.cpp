@@ -10,7 +10,6 @@
 //              interior, some on faces and edges as in the converter).
 // Each figure is the best of N runs, in CPU time of the thread. A digest (XXH3 of all outputs) is printed per part: two
 // builds whose digests agree produced the same bytes, which is what encoder speed-ups must keep.
-#include <time.h>
 
 #include <algorithm>
 #include <array>
@@ -24,6 +23,7 @@
 
 #include "base/checksum.h"
 #include "base/error.h"
+#include "base/sysinfo.h"
 #include "common_codec/archive.h"
 #include "common_codec/barycentric.h"
 #include "common_codec/fragment_codec.h"
@@ -32,24 +32,6 @@
 using namespace catpaq;
 
 namespace {
-
-// CPU time of this thread: other processes on the (shared, 2-core) machine only steal wall time.
-double seconds_now() {
-    timespec t;
-    clock_gettime(CLOCK_THREAD_CPUTIME_ID, &t);
-    return double(t.tv_sec) + 1e-9 * double(t.tv_nsec);
-}
-
-template <class Fn>
-double best_of(int runs, Fn&& fn) {
-    double best = 1e300;
-    for (int r = 0; r < runs; ++r) {
-        double t0 = seconds_now();
-        fn();
-        best = std::min(best, seconds_now() - t0);
-    }
-    return best;
-}
 
 // Every fragment of a CATP archive. A node is u8 slot mask, then per slot u32 size + fragment.
 std::vector<FragmentMesh> load_fragments(const std::string& path) {
@@ -117,7 +99,7 @@ int main(int argc, char** argv) try {
                 digest = digest * 31 + checksum64(out.data(), out.size());
                 bytes += out.size();
             }
-        });
+        }, thread_cpu_seconds);
         std::printf("encode     %8.1f ms  %6.2f Mtri/s  %zu bytes  digest %016llx\n", s * 1e3,
                     double(triangles) / s / 1e6, bytes, (unsigned long long)digest);
     }
@@ -137,7 +119,7 @@ int main(int argc, char** argv) try {
         const double s = best_of(runs, [&] {
             for (size_t i = 0; i < normals.size(); ++i)
                 codes[i] = oct_encode_precise(normals[i][0], normals[i][1], normals[i][2]);
-        });
+        }, thread_cpu_seconds);
         std::printf("normals    %8.1f ms  %6.1f ns/normal  digest %016llx\n", s * 1e3, s * 1e9 / double(normals.size()),
                     (unsigned long long)checksum64(codes.data(), codes.size() * 2));
     }
@@ -173,7 +155,7 @@ int main(int argc, char** argv) try {
         std::vector<uint32_t> index(points.size());
         const double s = best_of(runs, [&] {
             for (size_t i = 0; i < points.size(); ++i) index[i] = bary_pack(bary_quantize(points[i].p, c, points[i].support));
-        });
+        }, thread_cpu_seconds);
         uint64_t unpacked = 0;  // sum of the weights, so the calls are not optimised away
         const double su = best_of(runs, [&] {
             unpacked = 0;
@@ -182,7 +164,7 @@ int main(int argc, char** argv) try {
                 bary_unpack(index[i], w);
                 unpacked += uint64_t(w[1]) + uint64_t(w[2]) + uint64_t(w[3]);
             }
-        });
+        }, thread_cpu_seconds);
         std::printf("positions  %8.1f ms  %6.1f ns/point  digest %016llx\n", s * 1e3, s * 1e9 / double(points.size()),
                     (unsigned long long)checksum64(index.data(), index.size() * 4));
         std::printf("unpack     %8.1f ms  %6.1f ns/index  sum %llu\n", su * 1e3, su * 1e9 / double(points.size()),

@@ -8,11 +8,20 @@
 
 namespace catpaq {
 
-CutTopology cut_topology(const CatpFile& file, const RefinedSet& refined,
-                         std::unordered_map<uint64_t, DiamondFragments>& cache) {
-    CutTopology out;
-    std::map<std::array<int64_t, 3>, uint32_t> weld;
+namespace {
+
+// A cut decoded and welded by exact integer decoded position: the distinct positions, how many
+// triangles use each undirected edge, and the counts cut_topology reports (all but the border).
+struct WeldedCut {
+    std::vector<std::array<int64_t, 3>> positions;
     std::map<std::pair<uint32_t, uint32_t>, int> edges;
+    CutTopology topology;
+};
+
+WeldedCut weld_cut(const CatpFile& file, const RefinedSet& refined,
+                   std::unordered_map<uint64_t, DiamondFragments>& cache) {
+    WeldedCut out;
+    std::map<std::array<int64_t, 3>, uint32_t> weld;
     std::vector<std::array<int64_t, 3>> positions;
     for (const DrawnSlot& d : drawn_slots(file.index(), refined)) {
         auto it = cache.find(d.entry->key);
@@ -21,19 +30,31 @@ CutTopology cut_topology(const CatpFile& file, const RefinedSet& refined,
         DiamondInfo info = diamond_info(DiamondId{d.entry->key});
         if (!decode_fragment_integer_positions(frag, info, d.slot, positions)) throw std::runtime_error("corrupt vertex");
         std::vector<uint32_t> ids(positions.size());
-        for (size_t v = 0; v < positions.size(); ++v) ids[v] = weld.emplace(positions[v], uint32_t(weld.size())).first->second;
-        out.fragments++;
-        out.max_level = std::max(out.max_level, int(d.entry->level));
-        out.min_level = std::min(out.min_level, int(d.entry->level));
+        for (size_t v = 0; v < positions.size(); ++v) {
+            auto [w, inserted] = weld.emplace(positions[v], uint32_t(out.positions.size()));
+            if (inserted) out.positions.push_back(positions[v]);
+            ids[v] = w->second;
+        }
+        out.topology.fragments++;
+        out.topology.max_level = std::max(out.topology.max_level, int(d.entry->level));
+        out.topology.min_level = std::min(out.topology.min_level, int(d.entry->level));
         for (size_t t = 0; t + 2 < frag.indices.size(); t += 3) {
             uint32_t a = ids[frag.indices[t]], b = ids[frag.indices[t + 1]], c = ids[frag.indices[t + 2]];
             if (a == b || b == c || a == c) continue;
-            out.triangles++;
-            for (auto [u, v] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}}) edges[{std::min(u, v), std::max(u, v)}]++;
+            out.topology.triangles++;
+            for (auto [u, v] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}}) out.edges[{std::min(u, v), std::max(u, v)}]++;
         }
     }
-    for (auto& [e, n] : edges) out.border_edges += n == 1;
     return out;
+}
+
+}  // namespace
+
+CutTopology cut_topology(const CatpFile& file, const RefinedSet& refined,
+                         std::unordered_map<uint64_t, DiamondFragments>& cache) {
+    WeldedCut cut = weld_cut(file, refined, cache);
+    for (auto& [e, n] : cut.edges) cut.topology.border_edges += n == 1;
+    return cut.topology;
 }
 
 RefinedSet random_cut(const CatpIndex& index, std::mt19937_64& rng, bool spatial) {
@@ -89,33 +110,13 @@ size_t border_edges_off_original_border(const CatpFile& file, const RefinedSet& 
         return std::sqrt(best);
     };
     const CatpMeta& meta = file.index().meta();
-    std::map<std::array<int64_t, 3>, uint32_t> weld;
-    std::vector<std::array<int64_t, 3>> welded;
-    std::map<std::pair<uint32_t, uint32_t>, int> edges;
-    std::vector<std::array<int64_t, 3>> positions;
-    for (const DrawnSlot& d : drawn_slots(file.index(), refined)) {
-        auto it = cache.find(d.entry->key);
-        if (it == cache.end()) it = cache.emplace(d.entry->key, file.decode(*d.entry)).first;
-        const FragmentMesh& frag = it->second.slots[d.slot];
-        decode_fragment_integer_positions(frag, diamond_info(DiamondId{d.entry->key}), d.slot, positions);
-        std::vector<uint32_t> ids(positions.size());
-        for (size_t v = 0; v < positions.size(); ++v) {
-            auto [w, inserted] = weld.emplace(positions[v], uint32_t(welded.size()));
-            if (inserted) welded.push_back(positions[v]);
-            ids[v] = w->second;
-        }
-        for (size_t t = 0; t + 2 < frag.indices.size(); t += 3) {
-            uint32_t a = ids[frag.indices[t]], b = ids[frag.indices[t + 1]], c = ids[frag.indices[t + 2]];
-            if (a == b || b == c || a == c) continue;
-            for (auto [u, v] : {std::pair{a, b}, std::pair{b, c}, std::pair{c, a}}) edges[{std::min(u, v), std::max(u, v)}]++;
-        }
-    }
+    WeldedCut cut = weld_cut(file, refined, cache);
     size_t off = 0;
-    for (auto& [e, n] : edges) {
+    for (auto& [e, n] : cut.edges) {
         if (n != 1) continue;
         Vec3d mid;
         for (int i = 0; i < 3; ++i)
-            mid[i] = meta.origin[i] + 0.5 * double(welded[e.first][i] + welded[e.second][i]) / kBaryGrid * meta.cell;
+            mid[i] = meta.origin[i] + 0.5 * double(cut.positions[e.first][i] + cut.positions[e.second][i]) / kBaryGrid * meta.cell;
         off += distance_to_border(mid) > tolerance;
     }
     return off;

@@ -209,6 +209,19 @@ for p in orbit zoom; do
         --camera-path "$WORK/path_$p.json" --size 640x480 --tolerance 1.5 --no-converge \
         --stats "$RAW/stream_$p.jsonl" --out "$WORK/frames_$p"
 done
+# A fresh client renders one view of a scan path until it converges: its stats and the whole
+# command's wall time. cold_start DATASET PATH VIEW
+cold_start() {
+    local dataset=$1 path=$2 view=$3 s e
+    log "render $dataset $path $view view over HTTP (cold start, converged)"
+    s=$(date +%s%N)
+    required "cold start $dataset $path $view" "$RAW/cold_render_${dataset}_${path}_$view.txt" "$CATPAQ" render \
+        "${URL}api/datasets/$dataset" --camera-path "$WORK/scanpaths/path_${path}_$view.json" \
+        --tolerance 1.5 --timeout 300 --stats "$RAW/cold_${dataset}_${path}_$view.jsonl"
+    e=$(date +%s%N)
+    echo "$(( (e - s) / 1000000 ))" > "$RAW/cold_${dataset}_${path}_${view}_wall_ms.txt"
+}
+
 for p in $SCAN_PATHS; do
     # Progressive: one streaming step per frame from a cold start (fresh client, empty caches).
     log "render scan $p over HTTP (progressive)"
@@ -217,22 +230,9 @@ for p in $SCAN_PATHS; do
         --stats "$RAW/stream_scan_$p.jsonl" --out "$WORK/frames_scan_$p"
     # Cold start on the path's first view alone, and on its last view alone, waiting until it
     # converges: bytes and time to reach the tolerance (the whole command's wall time too).
-    for view in first last; do
-        log "render scan $p $view view over HTTP (cold start, converged)"
-        s=$(date +%s%N)
-        required "cold start scan $p $view" "$RAW/cold_render_scan_${p}_$view.txt" "$CATPAQ" render \
-            "${URL}api/datasets/scan" --camera-path "$WORK/scanpaths/path_${p}_$view.json" \
-            --tolerance 1.5 --timeout 300 --stats "$RAW/cold_scan_${p}_$view.jsonl"
-        e=$(date +%s%N)
-        echo "$(( (e - s) / 1000000 ))" > "$RAW/cold_scan_${p}_${view}_wall_ms.txt"
-    done
-    log "render scan $p last view over HTTP, fine nodes (cold start, converged)"
-    s=$(date +%s%N)
-    required "cold start scanfine $p last" "$RAW/cold_render_scanfine_${p}_last.txt" "$CATPAQ" render \
-        "${URL}api/datasets/scanfine" --camera-path "$WORK/scanpaths/path_${p}_last.json" \
-        --tolerance 1.5 --timeout 300 --stats "$RAW/cold_scanfine_${p}_last.jsonl"
-    e=$(date +%s%N)
-    echo "$(( (e - s) / 1000000 ))" > "$RAW/cold_scanfine_${p}_last_wall_ms.txt"
+    cold_start scan "$p" first
+    cold_start scan "$p" last
+    cold_start scanfine "$p" last
     required "image error scan $p" "$RAW/imgerr_scan_$p.txt" "$PYTHON" "$REPORT_PY" compare \
         --ref "$WORK/ref_scan_$p" --frames "$WORK/frames_scan_$p" --out "$RAW/imgerr_scan_$p.jsonl"
 done

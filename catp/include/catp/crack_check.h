@@ -35,7 +35,8 @@ RefinedSet random_cut(const CatpIndex& index, std::mt19937_64& rng, bool spatial
 // original mesh's border. An edge counts as on the border when its midpoint is within `tolerance`
 // (world units) of an original border edge. A crack between fragments shows up here: it opens
 // border edges along tetrahedron faces, away from the original border. For a closed original
-// every border edge of the cut counts.
+// every border edge of the cut counts. Throws std::runtime_error on a corrupt
+// vertex, as cut_topology does.
 size_t border_edges_off_original_border(const CatpFile& file, const RefinedSet& refined, const Mesh& original,
                                         double tolerance, std::unordered_map<uint64_t, DiamondFragments>& cache);
 
