@@ -1,8 +1,11 @@
 #include "base/large_buffer.h"
 
+#include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <cstdlib>
 #include <new>
+#include <thread>
 #include <utility>
 
 #ifdef __linux__
@@ -11,7 +14,35 @@
 
 namespace catpaq {
 
-LargeBuffer::LargeBuffer(size_t bytes) : bytes_(bytes) {
+// Maps the pages of [data, data + bytes) front to back, a huge page at a time, until done or
+// stopped. A kernel without MADV_POPULATE_WRITE (before Linux 5.14) refuses the first call:
+// the owner then faults the pages in itself, as without a populator.
+struct LargeBuffer::Populator {
+    std::atomic<bool> stop{false};
+    std::thread thread;
+
+    Populator(std::byte* data, size_t bytes) {
+        thread = std::thread([this, data, bytes] {
+#if defined(__linux__) && defined(MADV_POPULATE_WRITE)
+            constexpr size_t kStep = size_t(2) << 20;
+            for (size_t at = 0; at < bytes && !stop.load(std::memory_order_relaxed); at += kStep)
+                if (madvise(data + at, std::min(kStep, bytes - at), MADV_POPULATE_WRITE) != 0) break;
+#else
+            (void)data;
+            (void)bytes;
+#endif
+        });
+    }
+    ~Populator() {
+        stop = true;
+        thread.join();
+    }
+};
+
+LargeBuffer::LargeBuffer() = default;
+
+LargeBuffer::LargeBuffer(size_t bytes, Populate populate) : bytes_(bytes) {
+    (void)populate;  // only mapped blocks are populated ahead
     if (bytes == 0) return;
 #ifdef __linux__
     constexpr size_t kHuge = size_t(2) << 20;
@@ -25,6 +56,7 @@ LargeBuffer::LargeBuffer(size_t bytes) : bytes_(bytes) {
             const uintptr_t start = (reinterpret_cast<uintptr_t>(map) + kHuge - 1) / kHuge * kHuge;
             data_ = static_cast<std::byte*>(map) + (start - reinterpret_cast<uintptr_t>(map));
             madvise(data_, map_bytes - kHuge, MADV_HUGEPAGE);  // a hint: failure is harmless
+            if (populate == Populate::kAhead) populator_ = std::make_unique<Populator>(data_, bytes);
             return;
         }
     }
@@ -36,6 +68,7 @@ LargeBuffer::LargeBuffer(size_t bytes) : bytes_(bytes) {
 }
 
 void LargeBuffer::release() {
+    populator_.reset();
 #ifdef __linux__
     if (map_) munmap(map_, map_bytes_);
 #endif
@@ -59,6 +92,7 @@ LargeBuffer& LargeBuffer::operator=(LargeBuffer&& other) noexcept {
         std::swap(map_, other.map_);
         std::swap(map_bytes_, other.map_bytes_);
         std::swap(heap_, other.heap_);
+        std::swap(populator_, other.populator_);
     }
     return *this;
 }

@@ -665,7 +665,9 @@ void CatpBuild::coarsen_level() {
     });
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_ = std::move(next);
-    return_free_memory();
+    // No return_free_memory() here: the next level reuses what this one freed, and trimming
+    // every level made it fault all of it in again (250k page faults instead of 97k on the 10M
+    // scan, 9% of the build's time; the peak was the same).
     diamond_error_.clear();
     for (size_t i = 0; i < runs.size(); ++i) diamond_error_[parent_of[runs[i].first]] = produced_error[i];
 }

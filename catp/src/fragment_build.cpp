@@ -4,6 +4,7 @@
 #include <cassert>
 #include <cmath>
 #include <cstring>
+#include <limits>
 #include <memory>
 #if defined(__SSE__)
 #include <xmmintrin.h>
@@ -301,6 +302,65 @@ struct CellEntry {
     uint32_t cell, triangle;
 };
 
+// The arrays of a GridDistance. Each thread keeps one set from grid to grid, up to kKeepBytes:
+// fresh memory costs a page fault per 4 KiB page on first touch (13 us on the development VM),
+// and freshly allocated grids made 15% of the converter's page faults. A grid built while its
+// thread's set is in use gets a set of its own.
+struct GridArrays {
+    std::vector<TriangleProbe> probes;
+    std::vector<Sphere> spheres;
+    std::vector<float> settle_margin;
+    std::vector<uint32_t> start, items;
+    std::vector<CellEntry> entries;
+    bool in_use = false;
+
+    // Within the converter's per-thread allowance (kMemoryPerThread), beside the simplifier's
+    // block: a grid over 20k triangles (the gathered mesh of a typical diamond) takes 2.5 MiB.
+    static constexpr size_t kKeepBytes = size_t(8) << 20;
+
+    size_t bytes() const {
+        return probes.capacity() * sizeof(TriangleProbe) + spheres.capacity() * sizeof(Sphere) + settle_margin.capacity() * sizeof(float) +
+               (start.capacity() + items.capacity()) * sizeof(uint32_t) + entries.capacity() * sizeof(CellEntry);
+    }
+    // Grows an array to at least n elements (never shrinks it: elements are overwritten, so
+    // what lies beyond n is left alone).
+    template <class T>
+    static T* at_least(std::vector<T>& v, size_t n) {
+        if (v.size() < n) v.resize(n);
+        return v.data();
+    }
+
+    // The calling thread's set (or a set of its own), given back when the lease ends.
+    class Lease {
+    public:
+        Lease() {
+            GridArrays& mine = thread_arrays();
+            if (mine.in_use) {
+                own_ = std::make_unique<GridArrays>();
+                arrays_ = own_.get();
+            } else {
+                arrays_ = &mine;
+            }
+            arrays_->in_use = true;
+        }
+        ~Lease() {
+            arrays_->in_use = false;
+            if (!own_ && arrays_->bytes() > kKeepBytes) *arrays_ = GridArrays();
+        }
+        Lease(const Lease&) = delete;
+        Lease& operator=(const Lease&) = delete;
+        GridArrays* operator->() const { return arrays_; }
+
+    private:
+        static GridArrays& thread_arrays() {
+            thread_local GridArrays arrays;
+            return arrays;
+        }
+        GridArrays* arrays_ = nullptr;
+        std::unique_ptr<GridArrays> own_;
+    };
+};
+
 // Distance from points to a small triangle mesh through a uniform grid of its triangles' boxes.
 // (CGAL's AABB tree took half of the converter's time here: a diamond has a few thousand
 // triangles and each query lies close to the surface, which a grid answers in a cell or two.)
@@ -360,11 +420,14 @@ private:
         // Float rounding of the probes and spheres is below 1e-6 of the extent.
         probe_slack_ = float(extent * 1e-5);
         const size_t cells = size_t(dims_[0]) * dims_[1] * dims_[2];
-        // Not zero-filled (new T[n] of these types leaves them alone): every element is written.
-        probes_.reset(new TriangleProbe[triangles_]);
-        spheres_.reset(new Sphere[triangles_]);
-        start_.assign(cells + 1, 0);
-        std::vector<CellEntry> entries;
+        // Every element of the probes, spheres and items is written below.
+        probes_ = GridArrays::at_least(arrays_->probes, triangles_);
+        spheres_ = GridArrays::at_least(arrays_->spheres, triangles_);
+        settle_margin_ = GridArrays::at_least(arrays_->settle_margin, triangles_);
+        arrays_->start.assign(cells + 1, 0);
+        start_ = arrays_->start.data();
+        std::vector<CellEntry>& entries = arrays_->entries;
+        entries.clear();
         entries.reserve(3 * triangles_);
         // One pass over the triangles: probe, sphere, and an entry per cell that the triangle's
         // box overlaps, counted per cell (for a counting sort of the entries by cell). The
@@ -374,6 +437,7 @@ private:
             const Float4 a = relative(corner(t, 0)), b = relative(corner(t, 1)), c = relative(corner(t, 2));
             probes_[t] = make_probe(a, b, c);
             spheres_[t] = make_sphere(a, b, c);
+            settle_margin_[t] = settle_margin(a, b, c, float(extent));
             int r[6];
             cell_range(a, b, c, r);
             for (int z = r[2]; z <= r[5]; ++z)
@@ -387,26 +451,35 @@ private:
         // Inclusive prefix sums: start_[c] is the end of cell c until the fill below.
         for (size_t c = 1; c < cells; ++c) start_[c] += start_[c - 1];
         start_[cells] = start_[cells - 1];
-        items_.reset(new uint32_t[entries.size()]);
+        items_ = GridArrays::at_least(arrays_->items, entries.size());
         // Fill back to front, decrementing the end of each cell: the ends become the starts.
         for (size_t k = entries.size(); k-- > 0;) items_[--start_[entries[k].cell]] = entries[k].triangle;
     }
 
     // Whether a triangle of `cell` over which p lies (its projection inside the triangle), near
     // its plane, is within `enough` of p (q: p relative to the grid's corner). For a point on or
-    // near the surface, nearly always the first such candidate is: 1.03 exact distances per
-    // query, where testing bounding spheres and planes (the previous pre-pass) took 2.5. One
-    // probe is a few SSE instructions and one well-predicted branch.
+    // near the surface, nearly always the first such candidate is: 1.03 candidates per query,
+    // where testing bounding spheres and planes (the previous pre-pass) took 2.5. One probe is a
+    // few SSE instructions and one well-predicted branch.
+    //
+    // A candidate's exact distance is only computed when the probe cannot vouch for it: the
+    // probe settles a candidate whose height is below 0.99 enough less the triangle's
+    // settle_margin, which bounds both the probe's rounding and how far p may project outside
+    // the triangle (its exact distance then is at most its height plus that much). The answer
+    // is the one the exact test (point_triangle_distance2, in doubles) gives.
     bool over_in_cell(const Vec3d& p, Float4 q, size_t cell, double enough) const {
         const double enough2 = enough * enough;
         const float limit = float(enough) + probe_slack_;
         constexpr float kTolerance = 1e-4f;  // barycentric: a point on an edge is over both sides
         const Float4 low = {-limit, -kTolerance, -kTolerance, -kTolerance}, high = {limit, 2.0f, 2.0f, 2.0f};
+        const float sure = float(enough) * 0.99f;
         for (uint32_t k = start_[cell], end = start_[cell + 1]; k < end; ++k) {
             const uint32_t t = items_[k];
             const TriangleProbe& probe = probes_[t];
             const Float4 hits = probe.x * q[0] + probe.y * q[1] + probe.z * q[2] - probe.constant;  // (h, u, v, w)
-            if (all_lanes((hits >= low) & (hits <= high)) && triangle_distance2(p, t) <= enough2) return true;
+            if (!all_lanes((hits >= low) & (hits <= high))) continue;
+            if (std::fabs(hits[0]) <= sure - settle_margin_[t]) return true;
+            if (triangle_distance2(p, t) <= enough2) return true;
         }
         return false;
     }
@@ -519,6 +592,23 @@ private:
         probe.constant = probe.x * a[0] + probe.y * a[1] + probe.z * a[2] - Float4{0.0f, 0.0f, 0.0f, 1.0f};
         return probe;
     }
+    // How far below `enough` a candidate's height must be for its probe to settle it
+    // (over_in_cell), for triangle a, b, c (relative, in floats): infinite unless the triangle
+    // is well shaped (no side more than 10 times its smallest height, that height at least 1e-3
+    // of the grid's extent). Float rounding of the corners and of a query (6e-8 of the extent
+    // each) then tilts and shifts the probe's plane by less than 1e-6 of the extent within the
+    // grid (probe_slack_ is ten times that) and moves its barycentric coordinates by less than
+    // 1e-3: a candidate (coordinates at least -1e-4) projects at most 2.2e-3 of the longest side
+    // outside the triangle.
+    float settle_margin(Float4 a, Float4 b, Float4 c, float extent) const {
+        const Float4 u = b - a, v = c - a, w = c - b;
+        const Float4 n = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0], 0.0f};
+        const float longest2 = std::max({dot3(u, u), dot3(v, v), dot3(w, w)});
+        const float height2_times_longest2 = dot3(n, n);  // (2 area)^2 = smallest height^2 longest^2
+        if (!(height2_times_longest2 >= longest2 * std::max(1e-6f * extent * extent, 1e-2f * longest2)))
+            return std::numeric_limits<float>::infinity();
+        return probe_slack_ + 3e-3f * std::sqrt(longest2);
+    }
     // First and last cell per axis (x, y, z, then x, y, z) of the box of a, b, c (relative, in
     // floats), clamped to the grid: in floats, not doubles, as that cut the grid's construction
     // by a tenth; their rounding may put a corner up to 3e-5 cells off, which the slack covers.
@@ -546,11 +636,14 @@ private:
     Float4 inv_cell4_, last_cell4_;   // 1 / cell and the last cell per axis, for cell_range
     int dims_[3] = {1, 1, 1};
     int max_dim_ = 1;
-    std::unique_ptr<TriangleProbe[]> probes_;
-    std::unique_ptr<Sphere[]> spheres_;
+    GridArrays::Lease arrays_;
+    // Views into arrays_, set by build().
+    TriangleProbe* probes_ = nullptr;
+    Sphere* spheres_ = nullptr;
+    float* settle_margin_ = nullptr;  // per triangle, see settle_margin()
     // Cell c lists items_[start_[c] .. start_[c + 1]).
-    std::vector<uint32_t> start_;
-    std::unique_ptr<uint32_t[]> items_;
+    uint32_t* start_ = nullptr;
+    uint32_t* items_ = nullptr;
 };
 
 // Largest distance from the vertices that the simplification removed to the simplified surface.

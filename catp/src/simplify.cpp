@@ -203,11 +203,12 @@ private:
 // All working memory of one call lives in one block, carved into arrays: one allocation and one
 // free per call. Fresh memory costs a page fault per 4 KiB page on first touch, which on virtual
 // machines (11-13 us measured on the development VM) can cost more than the simplification
-// itself. So a block up to kReuseBytes is the calling thread's, kept from call to call (warm
-// pages; the heap's own reuse was not enough: glibc trims and remaps blocks of this size, and
-// the simplifier made a quarter of the converter's page faults); blocks from kLargeBytes up (big
-// meshes) are a LargeBuffer, with huge pages: one fault per 2 MiB; the sizes between, and a
-// nested call on a thread whose block is in use, take a block from the heap.
+// itself. So a block up to kReuseBytes (a diamond of about 90k gathered triangles) is the
+// calling thread's, kept from call to call (warm pages; the heap's own reuse was not enough:
+// glibc trims and remaps blocks of this size, and the simplifier made a quarter of the
+// converter's page faults); larger blocks (big meshes) are a LargeBuffer, with huge pages (one
+// fault per 2 MiB, though each still costs about 4 ms on the development VM); a nested call on a
+// thread whose block is in use takes a block from the heap, or a LargeBuffer from kLargeBytes.
 class Arena {
 public:
     Arena() = default;
@@ -267,8 +268,8 @@ private:
         return block;
     }
     static constexpr size_t kMaxSlots = 16;
-    // Kept per thread: within the converter's per-thread memory allowance (8 MiB).
-    static constexpr size_t kReuseBytes = size_t(6) << 20;
+    // Kept per thread: within the converter's per-thread memory allowance (kMemoryPerThread).
+    static constexpr size_t kReuseBytes = size_t(12) << 20;
     static constexpr size_t kLargeBytes = size_t(8) << 20;
     Slot slots_[kMaxSlots];
     size_t count_ = 0;

@@ -31,9 +31,9 @@ public:
         uint64_t fit = cache_bytes / (kPageRecords * sizeof(T));
         slots_.resize(size_t(std::max<uint64_t>(2, std::min(pages, fit))));
         slot_of_page_.assign(size_t(pages), -1);
-        // All slots in one block (zero-filled, huge pages): a page allocated at a time cost a
-        // page fault per 4 KiB.
-        storage_ = LargeBuffer(slots_.size() * kPageRecords * sizeof(T));
+        // All slots in one block (zero-filled, huge pages, mapped ahead of the writer): a page
+        // allocated at a time cost a page fault per 4 KiB.
+        storage_ = LargeBuffer(slots_.size() * kPageRecords * sizeof(T), LargeBuffer::Populate::kAhead);
     }
 
     uint64_t size() const { return size_; }

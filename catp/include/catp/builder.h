@@ -35,9 +35,10 @@ struct CatpBuildSettings {
     uint64_t memory_budget = 0;
 };
 
-// Working memory the converter reserves per worker thread (the simplifier's working set on one
-// diamond) and needs at least beyond that.
-constexpr uint64_t kMemoryPerThread = uint64_t(8) << 20;
+// Working memory the converter reserves per worker thread (what the simplifier and the error
+// measurement keep from diamond to diamond, up to 12 and 8 MiB, plus slack) and needs at least
+// beyond that.
+constexpr uint64_t kMemoryPerThread = uint64_t(24) << 20;
 constexpr uint64_t kMinimumDataMemory = uint64_t(4) << 20;
 // The smallest budget for `threads` workers (0: as many as cores).
 uint64_t minimum_memory_budget(unsigned threads = 0);
