@@ -269,6 +269,16 @@ Box bounding_box(const std::vector<Vec3d>& points) {
 using Float4 = float __attribute__((vector_size(16)));
 using Int4 = int32_t __attribute__((vector_size(16)));
 
+// Square root of x >= 0 as one instruction: std::sqrt keeps a branch to the library for
+// negative input (errno), and the grid's construction takes three roots per triangle.
+float root(float x) {
+#if defined(__SSE__)
+    return _mm_cvtss_f32(_mm_sqrt_ss(_mm_set_ss(x)));
+#else
+    return std::sqrt(x);
+#endif
+}
+
 Float4 min4(Float4 a, Float4 b) { return a < b ? a : b; }
 Float4 max4(Float4 a, Float4 b) { return a > b ? a : b; }
 
@@ -435,9 +445,10 @@ private:
         // ranges mispredicted their exits).
         for (size_t t = 0; t < triangles_; ++t) {
             const Float4 a = relative(corner(t, 0)), b = relative(corner(t, 1)), c = relative(corner(t, 2));
-            probes_[t] = make_probe(a, b, c);
+            EdgeProducts e;
+            probes_[t] = make_probe(a, b, c, e);
             spheres_[t] = make_sphere(a, b, c);
-            settle_margin_[t] = settle_margin(a, b, c, float(extent));
+            settle_margin_[t] = settle_margin(e, float(extent));
             int r[6];
             cell_range(a, b, c, r);
             for (int z = r[2]; z <= r[5]; ++z)
@@ -569,19 +580,25 @@ private:
         const Float4 da = a - centre, db = b - centre, dc = c - centre;
         Sphere s;
         for (int i = 0; i < 3; ++i) s.centre[i] = centre[i];
-        s.radius = std::sqrt(std::max({dot3(da, da), dot3(db, db), dot3(dc, dc)}));
+        s.radius = root(std::max({dot3(da, da), dot3(db, db), dot3(dc, dc)}));
         return s;
     }
+    // Products of a triangle's edges u = b - a, v = c - a (n = u x v), as make_probe computes
+    // them, for settle_margin.
+    struct EdgeProducts {
+        float nn, uu, uv, vv;
+    };
     // With u, v the edges from a and n = u x v, the probe's rows are the unit normal n / |n|,
     // the dual basis g0 = (|v|^2 u - (u.v) v) / |n|^2 (g0 . u = 1, g0 . v = 0) and
     // g1 = (|u|^2 v - (u.v) u) / |n|^2, and g2 = -g0 - g1: each column is a combination of n, u
     // and v. The constants make a's coordinates (h, u, v, w) = (0, 0, 0, 1). Degenerate
     // triangles get zero rows: every point lies on their plane and over them.
-    static TriangleProbe make_probe(Float4 a, Float4 b, Float4 c) {
+    static TriangleProbe make_probe(Float4 a, Float4 b, Float4 c, EdgeProducts& e) {
         const Float4 u = b - a, v = c - a;
         const Float4 n = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0], 0.0f};
         const float nn = dot3(n, n), uu = dot3(u, u), uv = dot3(u, v), vv = dot3(v, v);
-        const float inv_nn = nn > 0 ? 1.0f / nn : 0.0f, inv_len = std::sqrt(inv_nn);
+        e = {nn, uu, uv, vv};
+        const float inv_nn = nn > 0 ? 1.0f / nn : 0.0f, inv_len = root(inv_nn);
         const Float4 along_n = {inv_len, 0.0f, 0.0f, 0.0f};
         const Float4 along_u = Float4{0.0f, vv, -uv, uv - vv} * inv_nn;
         const Float4 along_v = Float4{0.0f, -uv, uu, uv - uu} * inv_nn;
@@ -593,21 +610,19 @@ private:
         return probe;
     }
     // How far below `enough` a candidate's height must be for its probe to settle it
-    // (over_in_cell), for triangle a, b, c (relative, in floats): infinite unless the triangle
+    // (over_in_cell), for a triangle with edge products e: infinite unless the triangle
     // is well shaped (no side more than 10 times its smallest height, that height at least 1e-3
     // of the grid's extent). Float rounding of the corners and of a query (6e-8 of the extent
     // each) then tilts and shifts the probe's plane by less than 1e-6 of the extent within the
     // grid (probe_slack_ is ten times that) and moves its barycentric coordinates by less than
     // 1e-3: a candidate (coordinates at least -1e-4) projects at most 2.2e-3 of the longest side
     // outside the triangle.
-    float settle_margin(Float4 a, Float4 b, Float4 c, float extent) const {
-        const Float4 u = b - a, v = c - a, w = c - b;
-        const Float4 n = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0], 0.0f};
-        const float longest2 = std::max({dot3(u, u), dot3(v, v), dot3(w, w)});
-        const float height2_times_longest2 = dot3(n, n);  // (2 area)^2 = smallest height^2 longest^2
+    float settle_margin(const EdgeProducts& e, float extent) const {
+        const float longest2 = std::max({e.uu, e.vv, e.uu + e.vv - 2 * e.uv});  // |c - b|^2 = |v - u|^2
+        const float height2_times_longest2 = e.nn;  // (2 area)^2 = smallest height^2 longest^2
         if (!(height2_times_longest2 >= longest2 * std::max(1e-6f * extent * extent, 1e-2f * longest2)))
             return std::numeric_limits<float>::infinity();
-        return probe_slack_ + 3e-3f * std::sqrt(longest2);
+        return probe_slack_ + 3e-3f * root(longest2);
     }
     // First and last cell per axis (x, y, z, then x, y, z) of the box of a, b, c (relative, in
     // floats), clamped to the grid: in floats, not doubles, as that cut the grid's construction
