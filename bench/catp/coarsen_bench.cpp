@@ -4,9 +4,13 @@
 //
 // Steps, per gathered (input) triangle: simplify_mesh to half the triangles (border locked, as a
 // diamond's outer faces are), the simplification error measurement (measured_simplification_error,
-// both directions), and quantize + encode of the simplified mesh as one fragment.
+// both directions), and quantize + encode of the simplified mesh as one fragment. Each is also
+// given relative to meshoptimizer's meshopt_simplify (to half, float positions) on the same
+// piece in the same run, as this machine's speed drifts by a fifth from run to run.
 //
 // Usage: coarsen_bench [triangles per piece ...]   (default 4000 20000 60000)
+#include <meshoptimizer.h>
+
 #include <algorithm>
 #include <cstdio>
 #include <cstdlib>
@@ -61,8 +65,9 @@ int main(int argc, char** argv) {
     // One thread: the measurement's two directions would otherwise run on two, and thread CPU
     // time would see one of them.
     tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
-    std::printf("thread CPU time per gathered triangle (ns), best of %d\n\n", kRuns);
-    std::printf("%10s %12s %12s %12s %12s\n", "triangles", "simplify", "measure", "encode", "sum");
+    std::printf("thread CPU time per gathered triangle (ns), best of %d; in brackets: relative to meshopt_simplify\n\n",
+                kRuns);
+    std::printf("%10s %10s %18s %18s %18s %18s\n", "triangles", "meshopt", "simplify", "measure", "encode", "sum");
     for (size_t n : sizes) {
         Piece piece = make_piece(n, 7);
         const WorkFragment& g = piece.gathered;
@@ -88,10 +93,18 @@ int main(int argc, char** argv) {
             bytes.clear();
             fragment_encode(mesh, bytes);
         }, thread_cpu_seconds);
+        std::vector<float> floats;
+        for (const Vec3d& p : g.positions) floats.insert(floats.end(), {float(p[0]), float(p[1]), float(p[2])});
+        std::vector<uint32_t> kept(g.indices.size());
+        const double t_meshopt = best_of(kRuns, [&] {
+            meshopt_simplify(kept.data(), g.indices.data(), g.indices.size(), floats.data(), g.positions.size(),
+                             3 * sizeof(float), triangles / 2 * 3, 1e-2f, 0, nullptr);
+        }, thread_cpu_seconds);
         const double scale = 1e9 / double(triangles);
-        std::printf("%10zu %12.1f %12.1f %12.1f %12.1f   (error %.3g, %zu bytes)\n", triangles, t_simplify * scale,
-                    t_measure * scale, t_encode * scale, (t_simplify + t_measure + t_encode) * scale, error,
-                    bytes.size());
+        auto column = [&](double t) { std::printf(" %10.1f (%5.2f)", t * scale, t / t_meshopt); };
+        std::printf("%10zu %10.1f", triangles, t_meshopt * scale);
+        for (double t : {t_simplify, t_measure, t_encode, t_simplify + t_measure + t_encode}) column(t);
+        std::printf("   error %.3g, %zu bytes\n", error, bytes.size());
     }
     return 0;
 }
