@@ -770,7 +770,8 @@ private:
     std::vector<int8_t> sides_;
 };
 
-// Clips the simplified triangles by the diamond's interior faces into its slots' fragments.
+}  // namespace
+
 void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const std::vector<uint32_t>& simplified,
                      std::array<WorkFragment, 8>& out) {
     const uint8_t slots = existing_slots(d);
@@ -806,8 +807,6 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
         }
     }
 }
-
-}  // namespace
 
 double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
     for (auto& f : out) f = WorkFragment{};

@@ -79,6 +79,11 @@ double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, 
 // simplified triangles' centroids and edge midpoints to the gathered surface (lattice units).
 double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified);
 
+// Clips the simplified triangles (indexing gathered's vertices) by the diamond's interior faces
+// into its slots' fragments (appended to out[slot]): the last part of coarsen_diamond.
+void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const std::vector<uint32_t>& simplified,
+                     std::array<WorkFragment, 8>& out);
+
 // One coarsening step: `gathered` holds the welded fragments of the diamond's child tetrahedra.
 // Simplifies to about half with every vertex on the diamond's outer faces locked, then clips by
 // the interior faces into one fragment per slot. Returns the simplification error (lattice units).
