@@ -117,16 +117,35 @@ void FragmentWelder::append(const WorkFragment& other) {
         triangle(remap[other.indices[i]], remap[other.indices[i + 1]], remap[other.indices[i + 2]]);
 }
 
+uint32_t FragmentWelder::add_corner(int k, const uint32_t* source, uint32_t* welded, const Vec3d& position,
+                                    const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors) {
+    if (!welded) return add(position, normals[k], colors[k]);
+    uint32_t& id = welded[source[k]];
+    if (id == kNotWelded) id = add(position, normals[k], colors[k]);
+    return id;
+}
+
 void FragmentWelder::add_whole(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
                                const std::array<Rgb8, 3>& colors) {
+    add_whole(nullptr, nullptr, tri, normals, colors);
+}
+
+void FragmentWelder::add_whole(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
+                               const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors) {
     if (!has_area(tri)) return;
     uint32_t ids[3];
-    for (int k = 0; k < 3; ++k) ids[k] = add(tri[k], normals[k], colors[k]);
+    for (int k = 0; k < 3; ++k) ids[k] = add_corner(k, source, welded, tri[k], normals, colors);
     triangle(ids[0], ids[1], ids[2]);
 }
 
 void FragmentWelder::add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
                                  const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes) {
+    add_clipped(nullptr, nullptr, tri, normals, colors, planes);
+}
+
+void FragmentWelder::add_clipped(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
+                                 const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors,
+                                 const std::vector<ClipPlane>& planes) {
     clip_triangle(tri, planes, polygon_);
     if (polygon_.size() < 3) return;
     pieces_.clear();
@@ -139,7 +158,12 @@ void FragmentWelder::add_clipped(const std::array<Vec3d, 3>& tri, const std::arr
         for (int j = 0; j < 3; ++j)
             if (cv.weights[j] == 1.0) corner = j;
         if (corner >= 0) {
-            ids[k] = add(cv.position, normals[corner], colors[corner]);
+            // A construction can have a corner's weight 1 at a snapped position of its own:
+            // only the corner's exact position is the source vertex.
+            const Vec3d& p = tri[corner];
+            const bool at_corner = cv.position[0] == p[0] && cv.position[1] == p[1] && cv.position[2] == p[2];
+            ids[k] = at_corner ? add_corner(corner, source, welded, cv.position, normals, colors)
+                               : add(cv.position, normals[corner], colors[corner]);
             continue;
         }
         float n[3] = {0, 0, 0}, c[3] = {0, 0, 0};
@@ -792,6 +816,10 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     // outside the others, and those need no clipping. (With this, clip_triangle's share of the
     // 1M-triangle scan's profile fell by half.)
     SlotSides sides(gathered.positions, simplified, slot_planes);
+    // Per slot, the fragment vertex each gathered vertex became: a vertex is shared by about six
+    // triangles, and only the first of them welds it by position.
+    const size_t vertex_count = gathered.positions.size();
+    std::vector<uint32_t> welded(size_t(n) * vertex_count, FragmentWelder::kNotWelded);
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const uint32_t* f = &simplified[i];
         std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
@@ -799,10 +827,13 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
         std::array<Rgb8, 3> colors = {gathered.colors[f[0]], gathered.colors[f[1]], gathered.colors[f[2]]};
         for (int s = 0; s < n; ++s) {
             if (slot_planes[s].empty()) continue;
+            uint32_t* slot_welded = &welded[size_t(s) * vertex_count];
             switch (sides.classify(f, s)) {
                 case SlotSides::kOutside: break;
-                case SlotSides::kInside: welders[s].add_whole(tri, normals, colors); break;
-                case SlotSides::kCut: welders[s].add_clipped(tri, normals, colors, slot_planes[s]); break;
+                case SlotSides::kInside: welders[s].add_whole(f, slot_welded, tri, normals, colors); break;
+                case SlotSides::kCut:
+                    welders[s].add_clipped(f, slot_welded, tri, normals, colors, slot_planes[s]);
+                    break;
             }
         }
     }
