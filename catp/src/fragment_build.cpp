@@ -759,18 +759,32 @@ public:
     SlotSides(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices,
               const std::vector<std::vector<ClipPlane>>& slot_planes)
         : slot_planes_(slot_planes), stride_(0) {
+        // Neighbouring slots share an interior face (with opposite keep sides), so a diamond has
+        // only about half as many distinct planes as slot planes: each vertex is tested against
+        // the distinct ones (plane_side was most of this constructor's time).
+        std::vector<const LatticePlane*> distinct;
+        struct Use { size_t plane; int sign; };  // slot plane side = distinct side * sign
+        std::vector<Use> uses;
         for (size_t s = 0; s < slot_planes.size(); ++s) {
             first_.push_back(stride_);
             stride_ += slot_planes[s].size();
+            for (const ClipPlane& cp : slot_planes[s]) {
+                size_t u = 0;
+                while (u < distinct.size() && !(*distinct[u] == cp.plane)) ++u;
+                if (u == distinct.size()) distinct.push_back(&cp.plane);
+                uses.push_back({u, cp.sign * same_direction(*distinct[u], cp.plane)});
+            }
         }
         sides_.assign(positions.size() * stride_, 0);
         std::vector<uint8_t> seen(positions.size(), 0);
+        int8_t side[16];
+        assert(distinct.size() <= 16);  // 8 slots with 2 interior faces each
         for (uint32_t v : indices) {
             if (seen[v]) continue;
             seen[v] = 1;
+            for (size_t u = 0; u < distinct.size(); ++u) side[u] = int8_t(plane_side(*distinct[u], positions[v]));
             int8_t* out = &sides_[size_t(v) * stride_];
-            for (size_t s = 0; s < slot_planes.size(); ++s)
-                for (const ClipPlane& cp : slot_planes[s]) *out++ = int8_t(plane_side(cp.plane, positions[v]) * cp.sign);
+            for (const Use& use : uses) *out++ = int8_t(side[use.plane] * use.sign);
         }
     }
 
@@ -788,6 +802,14 @@ public:
     }
 
 private:
+    // +1 if b's plane_side agrees with a's (the same plane, as LatticePlane::operator== tests,
+    // with the normal the same way), -1 if it is the opposite. plane_side is the sign of n.p - d
+    // and n, d are a's or their negation.
+    static int same_direction(const LatticePlane& a, const LatticePlane& b) {
+        assert(a == b && (a.n == b.n || (a.n[0] == -b.n[0] && a.n[1] == -b.n[1] && a.n[2] == -b.n[2])));
+        return a.n == b.n ? 1 : -1;
+    }
+
     const std::vector<std::vector<ClipPlane>>& slot_planes_;
     size_t stride_;
     std::vector<size_t> first_;
