@@ -47,13 +47,8 @@ LatticePlane make_plane(LatticePoint a, LatticePoint b, LatticePoint c) {
     return plane;
 }
 
-int plane_side(const LatticePlane& plane, const Vec3d& p) {
-    // Floating-point filter: n has entries in {-1,0,1} and |p|, |d| < 2^22, so n.p - d is computed
-    // with an absolute error below 2^-28; outside that band its sign is certain. Inside it, the
-    // exact predicate decides (this filter removes almost every CGAL call from clipping).
-    double value = plane.n[0] * p[0] + plane.n[1] * p[1] + plane.n[2] * p[2] - double(plane.d);
-    if (value > 1e-8) return 1;
-    if (value < -1e-8) return -1;
+int plane_side_exact(const LatticePlane& plane, const Vec3d& p) {
+    // plane_side's floating-point filter removes almost every call of this from clipping.
     Vec3d a = to_vec(plane.points[0]), b = to_vec(plane.points[1]), c = to_vec(plane.points[2]);
     return plane.orientation * orient3d(a.data(), b.data(), c.data(), p.data());
 }
