@@ -47,13 +47,8 @@ LatticePlane make_plane(LatticePoint a, LatticePoint b, LatticePoint c) {
     return plane;
 }
 
-int plane_side(const LatticePlane& plane, const Vec3d& p) {
-    // Floating-point filter: n has entries in {-1,0,1} and |p|, |d| < 2^22, so n.p - d is computed
-    // with an absolute error below 2^-28; outside that band its sign is certain. Inside it, the
-    // exact predicate decides (this filter removes almost every CGAL call from clipping).
-    double value = plane.n[0] * p[0] + plane.n[1] * p[1] + plane.n[2] * p[2] - double(plane.d);
-    if (value > 1e-8) return 1;
-    if (value < -1e-8) return -1;
+int plane_side_exact(const LatticePlane& plane, const Vec3d& p) {
+    // plane_side's floating-point filter removes almost every call of this from clipping.
     Vec3d a = to_vec(plane.points[0]), b = to_vec(plane.points[1]), c = to_vec(plane.points[2]);
     return plane.orientation * orient3d(a.data(), b.data(), c.data(), p.data());
 }
@@ -348,7 +343,25 @@ double triangle_quality(const Vec3d& p, const Vec3d& q, const Vec3d& r) {
     return edges > 0 ? area2 / edges : 0.0;
 }
 
-bool has_area(const std::array<Vec3d, 3>& tri) { return triangle_quality(tri[0], tri[1], tri[2]) > 0.0; }
+bool has_area(const std::array<Vec3d, 3>& tri) {
+    // triangle_quality's filter without its square root and division (has_area runs for every
+    // whole triangle the converter adds; weld_bench: leaves 6%, clip 4% faster): |u x v|^2 >
+    // 2e-24 edges^2 implies |u x v| > 1e-12 edges however the square root rounds, so the quality
+    // is positive. Everything else goes to triangle_quality, which decides as before.
+    const Vec3d &p = tri[0], &q = tri[1], &r = tri[2];
+    double u[3], v[3], w[3];
+    for (int i = 0; i < 3; ++i) {
+        u[i] = q[i] - p[i];
+        v[i] = r[i] - p[i];
+        w[i] = r[i] - q[i];
+    }
+    double cx = u[1] * v[2] - u[2] * v[1], cy = u[2] * v[0] - u[0] * v[2], cz = u[0] * v[1] - u[1] * v[0];
+    double area2_squared = cx * cx + cy * cy + cz * cz;
+    double edges = u[0] * u[0] + u[1] * u[1] + u[2] * u[2] + v[0] * v[0] + v[1] * v[1] + v[2] * v[2] +
+                   w[0] * w[0] + w[1] * w[1] + w[2] * w[2];
+    if (edges > 0 && area2_squared > 2e-24 * edges * edges) return true;
+    return triangle_quality(p, q, r) > 0.0;
+}
 
 void triangulate_polygon(const std::vector<ClipVertex>& polygon, std::vector<std::array<int, 3>>& out) {
     int n = int(polygon.size());

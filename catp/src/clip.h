@@ -29,8 +29,18 @@ struct LatticePlane {
     bool operator==(const LatticePlane& o) const { return points == o.points; }
 };
 LatticePlane make_plane(LatticePoint a, LatticePoint b, LatticePoint c);
-// Exact side of p: +1, 0, -1 (sign of orient3d with the canonical points).
-int plane_side(const LatticePlane& plane, const Vec3d& p);
+// Exact side of p: +1, 0, -1 (sign of orient3d with the canonical points). Inline: the
+// floating-point filter decides almost every call, and the clipper and clip_into_slots make
+// several per vertex; only points near the plane call the exact predicate.
+int plane_side_exact(const LatticePlane& plane, const Vec3d& p);
+inline int plane_side(const LatticePlane& plane, const Vec3d& p) {
+    // n has entries in {-1,0,1} and |p|, |d| < 2^22, so n.p - d is computed with an absolute
+    // error below 2^-28; outside that band its sign is certain.
+    double value = plane.n[0] * p[0] + plane.n[1] * p[1] + plane.n[2] * p[2] - double(plane.d);
+    if (value > 1e-8) return 1;
+    if (value < -1e-8) return -1;
+    return plane_side_exact(plane, p);
+}
 
 // Moves p exactly onto the plane (p must be on the 2^-32 grid; the result is too).
 Vec3d snap_onto_plane(const LatticePlane& plane, const Vec3d& p);

@@ -117,16 +117,35 @@ void FragmentWelder::append(const WorkFragment& other) {
         triangle(remap[other.indices[i]], remap[other.indices[i + 1]], remap[other.indices[i + 2]]);
 }
 
+uint32_t FragmentWelder::add_corner(int k, const uint32_t* source, uint32_t* welded, const Vec3d& position,
+                                    const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors) {
+    if (!welded) return add(position, normals[k], colors[k]);
+    uint32_t& id = welded[source[k]];
+    if (id == kNotWelded) id = add(position, normals[k], colors[k]);
+    return id;
+}
+
 void FragmentWelder::add_whole(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
                                const std::array<Rgb8, 3>& colors) {
+    add_whole(nullptr, nullptr, tri, normals, colors);
+}
+
+void FragmentWelder::add_whole(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
+                               const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors) {
     if (!has_area(tri)) return;
     uint32_t ids[3];
-    for (int k = 0; k < 3; ++k) ids[k] = add(tri[k], normals[k], colors[k]);
+    for (int k = 0; k < 3; ++k) ids[k] = add_corner(k, source, welded, tri[k], normals, colors);
     triangle(ids[0], ids[1], ids[2]);
 }
 
 void FragmentWelder::add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
                                  const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes) {
+    add_clipped(nullptr, nullptr, tri, normals, colors, planes);
+}
+
+void FragmentWelder::add_clipped(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
+                                 const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors,
+                                 const std::vector<ClipPlane>& planes) {
     clip_triangle(tri, planes, polygon_);
     if (polygon_.size() < 3) return;
     pieces_.clear();
@@ -139,7 +158,12 @@ void FragmentWelder::add_clipped(const std::array<Vec3d, 3>& tri, const std::arr
         for (int j = 0; j < 3; ++j)
             if (cv.weights[j] == 1.0) corner = j;
         if (corner >= 0) {
-            ids[k] = add(cv.position, normals[corner], colors[corner]);
+            // A construction can have a corner's weight 1 at a snapped position of its own:
+            // only the corner's exact position is the source vertex.
+            const Vec3d& p = tri[corner];
+            const bool at_corner = cv.position[0] == p[0] && cv.position[1] == p[1] && cv.position[2] == p[2];
+            ids[k] = at_corner ? add_corner(corner, source, welded, cv.position, normals, colors)
+                               : add(cv.position, normals[corner], colors[corner]);
             continue;
         }
         float n[3] = {0, 0, 0}, c[3] = {0, 0, 0};
@@ -750,18 +774,32 @@ public:
     SlotSides(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices,
               const std::vector<std::vector<ClipPlane>>& slot_planes)
         : slot_planes_(slot_planes), stride_(0) {
+        // Neighbouring slots share an interior face (with opposite keep sides), so a diamond has
+        // only about half as many distinct planes as slot planes: each vertex is tested against
+        // the distinct ones (plane_side was most of this constructor's time).
+        std::vector<const LatticePlane*> distinct;
+        struct Use { size_t plane; int sign; };  // slot plane side = distinct side * sign
+        std::vector<Use> uses;
         for (size_t s = 0; s < slot_planes.size(); ++s) {
             first_.push_back(stride_);
             stride_ += slot_planes[s].size();
+            for (const ClipPlane& cp : slot_planes[s]) {
+                size_t u = 0;
+                while (u < distinct.size() && !(*distinct[u] == cp.plane)) ++u;
+                if (u == distinct.size()) distinct.push_back(&cp.plane);
+                uses.push_back({u, cp.sign * same_direction(*distinct[u], cp.plane)});
+            }
         }
         sides_.assign(positions.size() * stride_, 0);
         std::vector<uint8_t> seen(positions.size(), 0);
+        int8_t side[16];
+        assert(distinct.size() <= 16);  // 8 slots with 2 interior faces each
         for (uint32_t v : indices) {
             if (seen[v]) continue;
             seen[v] = 1;
+            for (size_t u = 0; u < distinct.size(); ++u) side[u] = int8_t(plane_side(*distinct[u], positions[v]));
             int8_t* out = &sides_[size_t(v) * stride_];
-            for (size_t s = 0; s < slot_planes.size(); ++s)
-                for (const ClipPlane& cp : slot_planes[s]) *out++ = int8_t(plane_side(cp.plane, positions[v]) * cp.sign);
+            for (const Use& use : uses) *out++ = int8_t(side[use.plane] * use.sign);
         }
     }
 
@@ -779,13 +817,22 @@ public:
     }
 
 private:
+    // +1 if b's plane_side agrees with a's (the same plane, as LatticePlane::operator== tests,
+    // with the normal the same way), -1 if it is the opposite. plane_side is the sign of n.p - d
+    // and n, d are a's or their negation.
+    static int same_direction(const LatticePlane& a, const LatticePlane& b) {
+        assert(a == b && (a.n == b.n || (a.n[0] == -b.n[0] && a.n[1] == -b.n[1] && a.n[2] == -b.n[2])));
+        return a.n == b.n ? 1 : -1;
+    }
+
     const std::vector<std::vector<ClipPlane>>& slot_planes_;
     size_t stride_;
     std::vector<size_t> first_;
     std::vector<int8_t> sides_;
 };
 
-// Clips the simplified triangles by the diamond's interior faces into its slots' fragments.
+}  // namespace
+
 void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const std::vector<uint32_t>& simplified,
                      std::array<WorkFragment, 8>& out) {
     const uint8_t slots = existing_slots(d);
@@ -806,6 +853,10 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     // outside the others, and those need no clipping. (With this, clip_triangle's share of the
     // 1M-triangle scan's profile fell by half.)
     SlotSides sides(gathered.positions, simplified, slot_planes);
+    // Per slot, the fragment vertex each gathered vertex became: a vertex is shared by about six
+    // triangles, and only the first of them welds it by position.
+    const size_t vertex_count = gathered.positions.size();
+    std::vector<uint32_t> welded(size_t(n) * vertex_count, FragmentWelder::kNotWelded);
     for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
         const uint32_t* f = &simplified[i];
         std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
@@ -813,16 +864,17 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
         std::array<Rgb8, 3> colors = {gathered.colors[f[0]], gathered.colors[f[1]], gathered.colors[f[2]]};
         for (int s = 0; s < n; ++s) {
             if (slot_planes[s].empty()) continue;
+            uint32_t* slot_welded = &welded[size_t(s) * vertex_count];
             switch (sides.classify(f, s)) {
                 case SlotSides::kOutside: break;
-                case SlotSides::kInside: welders[s].add_whole(tri, normals, colors); break;
-                case SlotSides::kCut: welders[s].add_clipped(tri, normals, colors, slot_planes[s]); break;
+                case SlotSides::kInside: welders[s].add_whole(f, slot_welded, tri, normals, colors); break;
+                case SlotSides::kCut:
+                    welders[s].add_clipped(f, slot_welded, tri, normals, colors, slot_planes[s]);
+                    break;
             }
         }
     }
 }
-
-}  // namespace
 
 double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
     for (auto& f : out) f = WorkFragment{};

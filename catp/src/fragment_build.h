@@ -48,17 +48,35 @@ public:
     void add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
                      const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes);
 
+    // The same for triangles of a source mesh with numbered vertices: `source` holds the corners'
+    // vertex indices and `welded` (one entry per source vertex, kNotWelded at first, kept
+    // between calls) the fragment vertex each corner became. A source vertex is then welded by
+    // position once, not once per triangle using it. `welded` only caches what the position
+    // lookup answers, so the fragment is the same as without it.
+    static constexpr uint32_t kNotWelded = ~0u;
+    void add_whole(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
+                   const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors);
+    void add_clipped(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
+                     const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors,
+                     const std::vector<ClipPlane>& planes);
+
 private:
     // Open addressing on vertex indices (a std::unordered_map allocated per insert and was a
     // measured hot spot of the converter).
     uint32_t find_or_insert(const Vec3d& position, bool& inserted);
     void grow();
     void rehash(size_t capacity);  // a power of two
+    // Corner k of a source triangle at `position` (tri[k] exactly): through `welded` if given.
+    uint32_t add_corner(int k, const uint32_t* source, uint32_t* welded, const Vec3d& position,
+                        const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors);
+    // A table entry: the hash's upper half as a tag (compared before the position is loaded)
+    // and the vertex index + 1 (0 = empty).
+    static uint64_t entry(uint64_t hash, uint32_t index) { return (hash >> 32 << 32) | (uint64_t(index) + 1); }
 
     WorkFragment& f_;
     std::vector<ClipVertex> polygon_;  // scratch for add_clipped
     std::vector<std::array<int, 3>> pieces_;
-    std::vector<uint32_t> table_;  // vertex index + 1, 0 = empty
+    std::vector<uint32_t> table_;  // entry(): hash tag and vertex index + 1, 0 = empty
     size_t mask_ = 0;
 };
 
@@ -78,6 +96,11 @@ double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, 
 // gathered.positions), both ways: the removed vertices to the simplified surface, and the
 // simplified triangles' centroids and edge midpoints to the gathered surface (lattice units).
 double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified);
+
+// Clips the simplified triangles (indexing gathered's vertices) by the diamond's interior faces
+// into its slots' fragments (appended to out[slot]): the last part of coarsen_diamond.
+void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const std::vector<uint32_t>& simplified,
+                     std::array<WorkFragment, 8>& out);
 
 // One coarsening step: `gathered` holds the welded fragments of the diamond's child tetrahedra.
 // Simplifies to about half with every vertex on the diamond's outer faces locked, then clips by
