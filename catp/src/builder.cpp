@@ -101,23 +101,30 @@ int choose_leaf_level(const std::vector<Vec3d>& sample, uint64_t triangles, size
         }
     double per_point = double(triangles) / double(std::max<size_t>(1, points.size()));
     std::vector<uint64_t> keys(points.size());
+    // Parallel over the points: the read phase is otherwise single-threaded, and tracking 50k
+    // points down 15 levels took 0.13 s of it.
+    auto over_points = [&](auto&& fn) {
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i != r.end(); ++i) fn(i);
+        });
+    };
     for (int level = 0; level < kMaxLevel - 3; ++level) {
-        for (size_t i = 0; i < points.size(); ++i) {
+        over_points([&](size_t i) {
             Tetrahedron k = canonical_tetrahedron(points[i].t);
             uint64_t h = 1469598103934665603ull;
             for (auto& p : k)
                 for (int v : p) h = (h ^ uint64_t(uint32_t(v))) * 1099511628211ull;
             keys[i] = h;
-        }
-        std::sort(keys.begin(), keys.end());
+        });
+        tbb::parallel_sort(keys.begin(), keys.end());
         size_t distinct = size_t(std::unique(keys.begin(), keys.end()) - keys.begin());
         if (per_point * double(points.size()) / double(std::max<size_t>(1, distinct)) <= double(leaf_target) * 1.4142)
             return level;
-        for (Tracked& tp : points) {
+        over_points([&](size_t i) {
             Tetrahedron a, b;
-            bisect(tp.t, a, b);
-            tp.t = separated(a, &tp.p, 1) ? b : a;
-        }
+            bisect(points[i].t, a, b);
+            points[i].t = separated(a, &points[i].p, 1) ? b : a;
+        });
     }
     return kMaxLevel - 3;
 }
