@@ -80,6 +80,10 @@
 #include <cmath>
 #include <cstring>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "base/checksum.h"
 #include "common_codec/octahedral.h"
 #include "rans.h"
@@ -658,7 +662,8 @@ bool fit_normal_matrix(const EncoderState& st, const NormalSum* acc, std::array<
 struct EncoderWorkspace {
     std::vector<uint32_t> regular, degenerate;  // triangle ids
     std::vector<uint32_t> first, fill, cursor;  // half-edge CSR
-    std::vector<std::pair<uint32_t, uint32_t>> half;
+    std::vector<uint32_t> half_to, half_tri;       // target and triangle of each half-edge
+    std::vector<std::pair<uint32_t, uint32_t>> group;  // scratch for sorting a large group
     std::vector<uint8_t> visited;
     std::vector<uint32_t> new_id, old_of_new, indices;
     std::vector<Pred> pred;
@@ -674,6 +679,29 @@ struct EncoderWorkspace {
     std::vector<size_t> section_bytes;
 };
 constexpr size_t kEncodeKeepVertices = size_t(1) << 16;
+
+// The triangle of the first half-edge h in [lo, hi) with half_to[h] == to whose triangle is not
+// visited, or kNone. Four targets per comparison (half_to has three readable entries past hi):
+// the scalar loop's exit, at an unpredictable entry, was mispredicted about once per lookup.
+CATPAQ_RANS_INLINE uint32_t first_unvisited(const uint32_t* half_to, const uint32_t* half_tri, const uint8_t* visited,
+                                            uint32_t lo, uint32_t hi, uint32_t to) {
+#if defined(__SSE2__)
+    const __m128i key = _mm_set1_epi32(int32_t(to));
+    for (uint32_t h = lo; h < hi; h += 4) {
+        const __m128i targets = _mm_loadu_si128(reinterpret_cast<const __m128i*>(half_to + h));
+        uint32_t match = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(targets, key))));
+        if (hi - h < 4) match &= (1u << (hi - h)) - 1;
+        for (; match != 0; match &= match - 1) {
+            const uint32_t t = half_tri[h + uint32_t(__builtin_ctz(match))];
+            if (!visited[t]) return t;
+        }
+    }
+#else
+    for (uint32_t h = lo; h < hi; ++h)
+        if (half_to[h] == to && !visited[half_tri[h]]) return half_tri[h];
+#endif
+    return kNone;
+}
 
 // Adds the histogram of symbols[0, n) (each < kConnSymbols) to counts. Four partial
 // histograms: with one, runs of the same symbol (NEW follows NEW most of the time) made every
@@ -699,61 +727,76 @@ void encode_connectivity(const FragmentMesh& mesh, EncoderWorkspace& ws) {
     regular.clear();
     degenerate.clear();
     // Every index must be below V (asserted here rather than in a pass of its own over the
-    // indices, which was 1.6% of encode_bench's profile; three comparisons OR-ed cost little).
-    bool out_of_range = false;
-    for (uint32_t t = 0; t < T; ++t) {
-        uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
-        out_of_range |= (a >= V) | (b >= V) | (c >= V);
-        (a == b || b == c || c == a ? degenerate : regular).push_back(t);
-    }
-    assert(!out_of_range);
-    (void)out_of_range;
-    const uint32_t R = uint32_t(regular.size());
-
-    // Directed half-edges of regular triangles by origin vertex (CSR): (target, triangle), in
-    // triangle order. A lookup wants the first unvisited triangle with a given directed edge.
-    // Vertices of degree up to kScanDegree (nearly all) are scanned linearly. Larger groups are
-    // sorted by (target, triangle): a lookup binary-searches the target and scans that group
-    // from a cursor that skips visited triangles, so even pathological fans and stacks of
-    // duplicate triangles cost O(log degree) amortised per lookup. (Sorting every vertex's
-    // entries and binary-searching them were the traversal's hottest spots, in perf.)
-    constexpr uint32_t kScanDegree = 16;
+    // indices, which was 1.6% of encode_bench's profile). The degrees of the half-edge CSR below
+    // are counted in the same pass (a pass of its own over the regular triangles' indices was
+    // 3.5% of encode_connectivity, in perf).
     std::vector<uint32_t>& first = ws.first;
     first.assign(size_t(V) + 1, 0);
-    for (uint32_t t : regular)
-        for (int k = 0; k < 3; ++k) ++first[idx[3 * t + k] + 1];
+    uint32_t* const degree = first.data() + 1;  // first[v + 1] counts v's half-edges for now
+    for (uint32_t t = 0; t < T; ++t) {
+        uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
+        assert(a < V && b < V && c < V);
+        if (a == b || b == c || c == a) [[unlikely]] {
+            degenerate.push_back(t);
+            continue;
+        }
+        regular.push_back(t);
+        ++degree[a], ++degree[b], ++degree[c];
+    }
+    const uint32_t R = uint32_t(regular.size());
+
+    // Directed half-edges of regular triangles by origin vertex (CSR): target and triangle, in
+    // triangle order. A lookup wants the first unvisited triangle with a given directed edge.
+    // Vertices of degree up to kScanDegree (nearly all) are scanned linearly, four targets per
+    // SSE2 comparison. Larger groups are sorted by (target, triangle): a lookup binary-searches
+    // the target and scans that group from a cursor that skips visited triangles, so even
+    // pathological fans and stacks of duplicate triangles cost O(log degree) amortised per
+    // lookup. (Sorting every vertex's entries and binary-searching them were the traversal's
+    // hottest spots, in perf.)
+    constexpr uint32_t kScanDegree = 16;
     for (uint32_t v = 0; v < V; ++v) first[v + 1] += first[v];
-    std::vector<std::pair<uint32_t, uint32_t>>& half = ws.half;
-    half.resize(size_t(first[V]));
+    const uint32_t H = first[V];
+    // Three entries of slack: the scan reads whole groups of four.
+    ws.half_to.resize(size_t(H) + 3);
+    ws.half_tri.resize(size_t(H) + 3);
+    uint32_t* const half_to = ws.half_to.data();
+    uint32_t* const half_tri = ws.half_tri.data();
     std::vector<uint32_t>& cursor = ws.cursor;  // at a sorted group's first entry: where to resume
-    cursor.resize(half.size());
+    cursor.resize(H);
     {
-        ws.fill.assign(first.begin(), first.end() - 1);
+        ws.fill.assign(first.begin(), first.begin() + V);
         uint32_t* fill = ws.fill.data();
         for (uint32_t t : regular)
-            for (int k = 0; k < 3; ++k) half[fill[idx[3 * t + k]]++] = {idx[3 * t + (k + 1) % 3], t};
+            for (int k = 0; k < 3; ++k) {
+                const uint32_t h = fill[idx[3 * t + k]]++;
+                half_to[h] = idx[3 * t + (k + 1) % 3];
+                half_tri[h] = t;
+            }
         for (uint32_t v = 0; v < V; ++v) {
             if (first[v + 1] - first[v] <= kScanDegree) continue;
-            std::sort(half.begin() + first[v], half.begin() + first[v + 1]);
-            for (uint32_t h = first[v]; h < first[v + 1]; ++h) cursor[h] = h;
+            std::vector<std::pair<uint32_t, uint32_t>>& group = ws.group;
+            group.clear();
+            for (uint32_t h = first[v]; h < first[v + 1]; ++h) group.push_back({half_to[h], half_tri[h]});
+            std::sort(group.begin(), group.end());
+            for (uint32_t h = first[v]; h < first[v + 1]; ++h) {
+                half_to[h] = group[h - first[v]].first;
+                half_tri[h] = group[h - first[v]].second;
+                cursor[h] = h;
+            }
         }
     }
     std::vector<uint8_t>& visited = ws.visited;
     visited.assign(T, 0);
     auto find_across = [&](uint32_t from, uint32_t to) -> uint32_t {
         const uint32_t lo = first[from], hi = first[from + 1];
-        if (hi - lo <= kScanDegree) [[likely]] {
-            for (uint32_t h = lo; h < hi; ++h)
-                if (half[h].first == to && !visited[half[h].second]) return half[h].second;
-            return kNone;
-        }
-        auto g = std::lower_bound(half.begin() + lo, half.begin() + hi, std::pair<uint32_t, uint32_t>{to, 0});
-        if (g == half.begin() + hi || g->first != to) return kNone;
-        const uint32_t group = uint32_t(g - half.begin());
-        uint32_t h = cursor[group];
-        while (h < hi && half[h].first == to && visited[half[h].second]) ++h;
-        cursor[group] = h;
-        if (h < hi && half[h].first == to) return half[h].second;
+        if (hi - lo <= kScanDegree) [[likely]]
+            return first_unvisited(half_to, half_tri, visited.data(), lo, hi, to);
+        const uint32_t g = uint32_t(std::lower_bound(half_to + lo, half_to + hi, to) - half_to);
+        if (g == hi || half_to[g] != to) return kNone;
+        uint32_t h = cursor[g];
+        while (h < hi && half_to[h] == to && visited[half_tri[h]]) ++h;
+        cursor[g] = h;
+        if (h < hi && half_to[h] == to) return half_tri[h];
         return kNone;
     };
 
