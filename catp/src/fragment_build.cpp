@@ -195,42 +195,71 @@ std::vector<ClipPlane> tetrahedron_clip_planes(const Tetrahedron& t, unsigned fa
     return planes;
 }
 
-void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, FragmentMesh& out) {
-    out.vertices.clear();
-    out.indices.clear();
+// The 24-bit barycentric position index of every vertex of `in` (quantize_fragment's first pass).
+static void quantize_positions(const WorkFragment& in, const Tetrahedron& corners, uint32_t* index) {
     LatticePlane faces[4];
     for (int f = 0; f < 4; ++f) faces[f] = make_plane(corners[(f + 1) % 4], corners[(f + 2) % 4], corners[(f + 3) % 4]);
     std::array<LatticePoint, 4> c = {corners[0], corners[1], corners[2], corners[3]};
-    // Vertices closer than a grid step quantize to the same position: merge them (keeping the
-    // first one's normal and colour) and drop the triangles that collapse.
-    std::vector<uint32_t> remap(in.positions.size());
-    // Open addressing on the 24-bit position index (std::unordered_map allocates a node per
-    // vertex; quantize_fragment was 6% of the converter's CPU time with it, in perf).
-    size_t capacity = 16;
-    while (capacity < in.positions.size() * 2) capacity *= 2;
-    const size_t mask = capacity - 1;
-    constexpr uint32_t kEmpty = UINT32_MAX;  // no 24-bit index
-    std::vector<std::pair<uint32_t, uint32_t>> by_position(capacity, {kEmpty, 0});  // index, vertex
     for (size_t v = 0; v < in.positions.size(); ++v) {
         const Vec3d& p = in.positions[v];
         SupportMask support = 0;
         for (int f = 0; f < 4; ++f)
             if (plane_side(faces[f], p) != 0) support |= SupportMask(1 << f);
         if (support == 0) support = 0xf;  // cannot happen for a point in the tetrahedron
-        BaryWeights w = bary_quantize(p.data(), c, support);
-        uint32_t index = bary_pack(w);
+        index[v] = bary_pack(bary_quantize(p.data(), c, support));
+    }
+}
+
+void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, FragmentMesh& out) {
+    out.vertices.clear();
+    out.indices.clear();
+    // Three passes: position indices; merging by index; the new vertices' normals. The merge
+    // probes a hash table at random, and interleaved with the quantization (which fills the
+    // out-of-order window) every probe's cache miss stalled the loop: that load was 65% of
+    // quantize_fragment's own time in perf. Alone in a short loop, with prefetching, the
+    // misses overlap.
+    const size_t n = in.positions.size();
+    // remap first holds each vertex's position index, then its vertex in `out`.
+    std::vector<uint32_t> remap(n);
+    quantize_positions(in, corners, remap.data());
+
+    // Vertices closer than a grid step quantize to the same position: merge them (keeping the
+    // first one's normal and colour) and drop the triangles that collapse.
+    // Open addressing on the 24-bit position index (std::unordered_map allocates a node per
+    // vertex; quantize_fragment was 6% of the converter's CPU time with it, in perf).
+    size_t capacity = 16;
+    while (capacity < n * 2) capacity *= 2;
+    const size_t mask = capacity - 1;
+    constexpr uint32_t kEmpty = UINT32_MAX;  // no 24-bit index
+    std::vector<std::pair<uint32_t, uint32_t>> by_position(capacity, {kEmpty, 0});  // index, vertex
+    auto slot_of = [mask](uint32_t index) {
         const uint64_t k = uint64_t(index) * 0x9E3779B97F4A7C15ull;
-        size_t h = size_t(k ^ (k >> 32)) & mask;
+        return size_t(k ^ (k >> 32)) & mask;
+    };
+    constexpr size_t kPrefetchAhead = 8;
+    std::vector<uint32_t> first_of;  // the input vertex of each output vertex
+    first_of.reserve(n);
+    out.vertices.reserve(n);
+    for (size_t v = 0; v < n; ++v) {
+        if (v + kPrefetchAhead < n) __builtin_prefetch(&by_position[slot_of(remap[v + kPrefetchAhead])]);
+        const uint32_t index = remap[v];
+        size_t h = slot_of(index);
         while (by_position[h].first != kEmpty && by_position[h].first != index) h = (h + 1) & mask;
         if (by_position[h].first == index) {
             remap[v] = by_position[h].second;
             continue;
         }
-        by_position[h] = {index, uint32_t(out.vertices.size())};
-        remap[v] = uint32_t(out.vertices.size());
-        const Vec3f& n = in.normals[v];
-        out.vertices.push_back(PackedVertex::make(index, oct_encode_precise(n[0], n[1], n[2]), in.colors[v][0],
-                                                  in.colors[v][1], in.colors[v][2]));
+        by_position[h] = {index, uint32_t(first_of.size())};
+        remap[v] = uint32_t(first_of.size());
+        first_of.push_back(uint32_t(v));
+        out.vertices.push_back(PackedVertex::make(index, 0, 0, 0, 0));
+    }
+
+    for (size_t i = 0; i < first_of.size(); ++i) {
+        const uint32_t v = first_of[i];
+        const Vec3f& nv = in.normals[v];
+        out.vertices[i] = PackedVertex::make(out.vertices[i].position_index(), oct_encode_precise(nv[0], nv[1], nv[2]),
+                                             in.colors[v][0], in.colors[v][1], in.colors[v][2]);
     }
     for (size_t i = 0; i + 2 < in.indices.size(); i += 3) {
         uint32_t a = remap[in.indices[i]], b = remap[in.indices[i + 1]], d = remap[in.indices[i + 2]];

@@ -80,6 +80,10 @@
 #include <cmath>
 #include <cstring>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "base/checksum.h"
 #include "common_codec/octahedral.h"
 #include "rans.h"
@@ -590,23 +594,40 @@ void emit_colors(const EncoderState& st, bool parallelogram, bool decorrelate, O
 // Fits M (normals ~ M * geometric normal) by least squares over unit vectors; false if
 // degenerate.
 bool fit_normal_matrix(const EncoderState& st, const NormalSum* acc, std::array<int8_t, 9>& m) {
-    double g[3][3] = {}, h[3][3] = {};
+    // Sums over the vertices of g[i][j] = n[i] n[j] (upper half; the lower half mirrors it)
+    // and h[i][j] = t[i] n[j], t the vertex's decoded normal, in pairs of doubles: each lane
+    // does exactly the scalar multiply and add in the same vertex order, so the sums are the
+    // same bits, with half the instructions (the scalar loop spilled its 15 accumulators;
+    // fit_normal_matrix was a third of choose_normals in perf; encode_bench 2% faster).
+    using Double2 = double __attribute__((vector_size(16)));
+    Double2 g00_01 = {0, 0}, g02_12 = {0, 0}, g11_22 = {0, 0};
+    Double2 h0_01 = {0, 0}, h1_01 = {0, 0}, h2_01 = {0, 0}, h01_2 = {0, 0};  // h[i][0..1]; h[0..1][2]
+    double h22 = 0;
     size_t used = 0;
     for (uint32_t v = 0; v < st.V; ++v) {
-        double n[3] = {double(acc[v][0]), double(acc[v][1]), double(acc[v][2])};
-        double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+        const double x = double(acc[v][0]), y = double(acc[v][1]), z = double(acc[v][2]);
+        const double len = std::sqrt(x * x + y * y + z * z);
         if (!(len > 0.0)) continue;
-        for (double& x : n) x /= len;
+        const Double2 n01 = Double2{x, y} / len;
+        const double n2 = z / len;
         float t[3];
         oct_decode(st.verts[v].normal(), t);
-        for (int i = 0; i < 3; ++i) {
-            for (int j = i; j < 3; ++j) g[i][j] += n[i] * n[j];  // symmetric: the lower half below
-            for (int j = 0; j < 3; ++j) h[i][j] += double(t[i]) * n[j];
-        }
+        const double t0 = double(t[0]), t1 = double(t[1]), t2 = double(t[2]);
+        g00_01 += n01[0] * n01;
+        g02_12 += n01 * n2;
+        g11_22 += Double2{n01[1], n2} * Double2{n01[1], n2};
+        h0_01 += t0 * n01;
+        h1_01 += t1 * n01;
+        h2_01 += t2 * n01;
+        h01_2 += Double2{t0, t1} * n2;
+        h22 += t2 * n2;
         ++used;
     }
     // n[i] * n[j] and n[j] * n[i] round alike, so the mirrored sums are the ones summed directly.
-    g[1][0] = g[0][1], g[2][0] = g[0][2], g[2][1] = g[1][2];
+    const double g[3][3] = {{g00_01[0], g00_01[1], g02_12[0]},
+                            {g00_01[1], g11_22[0], g02_12[1]},
+                            {g02_12[0], g02_12[1], g11_22[1]}};
+    const double h[3][3] = {{h0_01[0], h0_01[1], h01_2[0]}, {h1_01[0], h1_01[1], h01_2[1]}, {h2_01[0], h2_01[1], h22}};
     if (used < 3) return false;
     // M = H G^-1.
     double det = g[0][0] * (g[1][1] * g[2][2] - g[1][2] * g[2][1]) - g[0][1] * (g[1][0] * g[2][2] - g[1][2] * g[2][0]) +
@@ -641,7 +662,8 @@ bool fit_normal_matrix(const EncoderState& st, const NormalSum* acc, std::array<
 struct EncoderWorkspace {
     std::vector<uint32_t> regular, degenerate;  // triangle ids
     std::vector<uint32_t> first, fill, cursor;  // half-edge CSR
-    std::vector<std::pair<uint32_t, uint32_t>> half;
+    std::vector<uint32_t> half_to, half_tri;       // target and triangle of each half-edge
+    std::vector<std::pair<uint32_t, uint32_t>> group;  // scratch for sorting a large group
     std::vector<uint8_t> visited;
     std::vector<uint32_t> new_id, old_of_new, indices;
     std::vector<Pred> pred;
@@ -658,6 +680,41 @@ struct EncoderWorkspace {
 };
 constexpr size_t kEncodeKeepVertices = size_t(1) << 16;
 
+// The triangle of the first half-edge h in [lo, hi) with half_to[h] == to whose triangle is not
+// visited, or kNone. Four targets per comparison (half_to has three readable entries past hi):
+// the scalar loop's exit, at an unpredictable entry, was mispredicted about once per lookup.
+CATPAQ_RANS_INLINE uint32_t first_unvisited(const uint32_t* half_to, const uint32_t* half_tri, const uint8_t* visited,
+                                            uint32_t lo, uint32_t hi, uint32_t to) {
+#if defined(__SSE2__)
+    const __m128i key = _mm_set1_epi32(int32_t(to));
+    for (uint32_t h = lo; h < hi; h += 4) {
+        const __m128i targets = _mm_loadu_si128(reinterpret_cast<const __m128i*>(half_to + h));
+        uint32_t match = uint32_t(_mm_movemask_ps(_mm_castsi128_ps(_mm_cmpeq_epi32(targets, key))));
+        if (hi - h < 4) match &= (1u << (hi - h)) - 1;
+        for (; match != 0; match &= match - 1) {
+            const uint32_t t = half_tri[h + uint32_t(__builtin_ctz(match))];
+            if (!visited[t]) return t;
+        }
+    }
+#else
+    for (uint32_t h = lo; h < hi; ++h)
+        if (half_to[h] == to && !visited[half_tri[h]]) return half_tri[h];
+#endif
+    return kNone;
+}
+
+// Adds the histogram of symbols[0, n) (each < kConnSymbols) to counts. Four partial
+// histograms: with one, runs of the same symbol (NEW follows NEW most of the time) made every
+// increment wait for the previous one's store (4.5% of encode_connectivity, in perf).
+void count_symbols(const uint8_t* symbols, uint32_t n, uint32_t* counts) {
+    uint32_t part[4][kConnSymbols] = {};
+    uint32_t k = 0;
+    for (; k + 4 <= n; k += 4)
+        for (int j = 0; j < 4; ++j) ++part[j][symbols[k + uint32_t(j)]];
+    for (; k < n; ++k) ++part[0][symbols[k]];
+    for (uint32_t s = 0; s < kConnSymbols; ++s) counts[s] += part[0][s] + part[1][s] + part[2][s] + part[3][s];
+}
+
 // Connectivity traversal (see the top of this file): fills ws.conn, ws.pred, ws.old_of_new and
 // ws.indices (new numbering, regular triangles then degenerate ones) and ws.degenerate.
 void encode_connectivity(const FragmentMesh& mesh, EncoderWorkspace& ws) {
@@ -669,56 +726,77 @@ void encode_connectivity(const FragmentMesh& mesh, EncoderWorkspace& ws) {
     std::vector<uint32_t>& degenerate = ws.degenerate;
     regular.clear();
     degenerate.clear();
+    // Every index must be below V (asserted here rather than in a pass of its own over the
+    // indices, which was 1.6% of encode_bench's profile). The degrees of the half-edge CSR below
+    // are counted in the same pass (a pass of its own over the regular triangles' indices was
+    // 3.5% of encode_connectivity, in perf).
+    std::vector<uint32_t>& first = ws.first;
+    first.assign(size_t(V) + 1, 0);
+    uint32_t* const degree = first.data() + 1;  // first[v + 1] counts v's half-edges for now
     for (uint32_t t = 0; t < T; ++t) {
         uint32_t a = idx[3 * t], b = idx[3 * t + 1], c = idx[3 * t + 2];
-        (a == b || b == c || c == a ? degenerate : regular).push_back(t);
+        assert(a < V && b < V && c < V);
+        if (a == b || b == c || c == a) [[unlikely]] {
+            degenerate.push_back(t);
+            continue;
+        }
+        regular.push_back(t);
+        ++degree[a], ++degree[b], ++degree[c];
     }
     const uint32_t R = uint32_t(regular.size());
 
-    // Directed half-edges of regular triangles by origin vertex (CSR): (target, triangle), in
+    // Directed half-edges of regular triangles by origin vertex (CSR): target and triangle, in
     // triangle order. A lookup wants the first unvisited triangle with a given directed edge.
-    // Vertices of degree up to kScanDegree (nearly all) are scanned linearly. Larger groups are
-    // sorted by (target, triangle): a lookup binary-searches the target and scans that group
-    // from a cursor that skips visited triangles, so even pathological fans and stacks of
-    // duplicate triangles cost O(log degree) amortised per lookup. (Sorting every vertex's
-    // entries and binary-searching them were the traversal's hottest spots, in perf.)
+    // Vertices of degree up to kScanDegree (nearly all) are scanned linearly, four targets per
+    // SSE2 comparison. Larger groups are sorted by (target, triangle): a lookup binary-searches
+    // the target and scans that group from a cursor that skips visited triangles, so even
+    // pathological fans and stacks of duplicate triangles cost O(log degree) amortised per
+    // lookup. (Sorting every vertex's entries and binary-searching them were the traversal's
+    // hottest spots, in perf.)
     constexpr uint32_t kScanDegree = 16;
-    std::vector<uint32_t>& first = ws.first;
-    first.assign(size_t(V) + 1, 0);
-    for (uint32_t t : regular)
-        for (int k = 0; k < 3; ++k) ++first[idx[3 * t + k] + 1];
     for (uint32_t v = 0; v < V; ++v) first[v + 1] += first[v];
-    std::vector<std::pair<uint32_t, uint32_t>>& half = ws.half;
-    half.resize(size_t(first[V]));
+    const uint32_t H = first[V];
+    // Three entries of slack: the scan reads whole groups of four.
+    ws.half_to.resize(size_t(H) + 3);
+    ws.half_tri.resize(size_t(H) + 3);
+    uint32_t* const half_to = ws.half_to.data();
+    uint32_t* const half_tri = ws.half_tri.data();
     std::vector<uint32_t>& cursor = ws.cursor;  // at a sorted group's first entry: where to resume
-    cursor.resize(half.size());
+    cursor.resize(H);
     {
-        ws.fill.assign(first.begin(), first.end() - 1);
+        ws.fill.assign(first.begin(), first.begin() + V);
         uint32_t* fill = ws.fill.data();
         for (uint32_t t : regular)
-            for (int k = 0; k < 3; ++k) half[fill[idx[3 * t + k]]++] = {idx[3 * t + (k + 1) % 3], t};
+            for (int k = 0; k < 3; ++k) {
+                const uint32_t h = fill[idx[3 * t + k]]++;
+                half_to[h] = idx[3 * t + (k + 1) % 3];
+                half_tri[h] = t;
+            }
         for (uint32_t v = 0; v < V; ++v) {
             if (first[v + 1] - first[v] <= kScanDegree) continue;
-            std::sort(half.begin() + first[v], half.begin() + first[v + 1]);
-            for (uint32_t h = first[v]; h < first[v + 1]; ++h) cursor[h] = h;
+            std::vector<std::pair<uint32_t, uint32_t>>& group = ws.group;
+            group.clear();
+            for (uint32_t h = first[v]; h < first[v + 1]; ++h) group.push_back({half_to[h], half_tri[h]});
+            std::sort(group.begin(), group.end());
+            for (uint32_t h = first[v]; h < first[v + 1]; ++h) {
+                half_to[h] = group[h - first[v]].first;
+                half_tri[h] = group[h - first[v]].second;
+                cursor[h] = h;
+            }
         }
     }
     std::vector<uint8_t>& visited = ws.visited;
     visited.assign(T, 0);
     auto find_across = [&](uint32_t from, uint32_t to) -> uint32_t {
         const uint32_t lo = first[from], hi = first[from + 1];
-        if (hi - lo <= kScanDegree) [[likely]] {
-            for (uint32_t h = lo; h < hi; ++h)
-                if (half[h].first == to && !visited[half[h].second]) return half[h].second;
-            return kNone;
-        }
-        auto g = std::lower_bound(half.begin() + lo, half.begin() + hi, std::pair<uint32_t, uint32_t>{to, 0});
-        if (g == half.begin() + hi || g->first != to) return kNone;
-        const uint32_t group = uint32_t(g - half.begin());
-        uint32_t h = cursor[group];
-        while (h < hi && half[h].first == to && visited[half[h].second]) ++h;
-        cursor[group] = h;
-        if (h < hi && half[h].first == to) return half[h].second;
+        if (hi - lo <= kScanDegree) [[likely]]
+            return first_unvisited(half_to, half_tri, visited.data(), lo, hi, to);
+        const uint32_t g = uint32_t(std::lower_bound(half_to + lo, half_to + hi, to) - half_to);
+        if (g == hi || half_to[g] != to) return kNone;
+        uint32_t h = cursor[g];
+        while (h < hi && half_to[h] == to && visited[half_tri[h]]) ++h;
+        cursor[g] = h;
+        if (h < hi && half_to[h] == to) return half_tri[h];
         return kNone;
     };
 
@@ -814,7 +892,7 @@ void encode_connectivity(const FragmentMesh& mesh, EncoderWorkspace& ws) {
     }
     assert(nsym <= ws.conn.symbols.size());
     ws.conn.symbols.resize(nsym);
-    for (uint32_t k = 0; k < nsym; ++k) ++ws.conn.counts[symbols[k]];
+    count_symbols(symbols, nsym, ws.conn.counts.data());
     // Vertices outside regular triangles, in original order.
     for (uint32_t v = 0; v < V; ++v)
         if (new_id[v] == kNone) number(v, previous_pred());
@@ -941,12 +1019,7 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     assert(mesh.indices.size() % 3 == 0);
     assert(V_size <= kFragmentMaxVertices && T_size <= kFragmentMaxTriangles);
     const uint32_t V = uint32_t(V_size), T = uint32_t(T_size);
-#ifndef NDEBUG
-    // One maximum (vectorised) instead of an assertion per index.
-    uint32_t largest = 0;
-    for (uint32_t i : mesh.indices) largest = std::max(largest, i);
-    assert(mesh.indices.empty() || largest < V);
-#endif
+    // Indices are checked (asserted) by encode_connectivity, which reads them all anyway.
 
     encode_connectivity(mesh, ws);
     ws.verts.resize(size_t(V) + 1);
