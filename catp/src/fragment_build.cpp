@@ -382,8 +382,9 @@ struct GridArrays {
     static constexpr size_t kKeepBytes = size_t(8) << 20;
 
     size_t bytes() const {
-        return probes.capacity() * sizeof(TriangleProbe) + spheres.capacity() * sizeof(Sphere) + settle_margin.capacity() * sizeof(float) +
-               (start.capacity() + items.capacity()) * sizeof(uint32_t) + entries.capacity() * sizeof(CellEntry);
+        return probes.capacity() * sizeof(TriangleProbe) + spheres.capacity() * sizeof(Sphere) +
+               settle_margin.capacity() * sizeof(float) + (start.capacity() + items.capacity()) * sizeof(uint32_t) +
+               entries.capacity() * sizeof(CellEntry);
     }
     // Grows an array to at least n elements (never shrinks it: elements are overwritten, so
     // what lies beyond n is left alone).
@@ -483,7 +484,7 @@ private:
         // Float rounding of the probes and spheres is below 1e-6 of the extent.
         probe_slack_ = float(extent * 1e-5);
         const size_t cells = size_t(dims_[0]) * dims_[1] * dims_[2];
-        // Every element of the probes, spheres and items is written below.
+        // Every element of the probes, spheres, settle margins and items is written below.
         probes_ = GridArrays::at_least(arrays_->probes, triangles_);
         spheres_ = GridArrays::at_least(arrays_->spheres, triangles_);
         settle_margin_ = GridArrays::at_least(arrays_->settle_margin, triangles_);
