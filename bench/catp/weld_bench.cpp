@@ -2,7 +2,7 @@
 // surface placed in the lattice, single-threaded (thread CPU time, best of runs):
 //
 // - route: what CatpBuild::build_leaves does first per block: route every triangle to its leaf
-//   tetrahedra (single_leaf, else for_each_leaf_slot) and group the hits by leaf (LeafGroups);
+//   tetrahedra (single_leaf, else search_leaf_slots) and group the hits by leaf (LeafGroups);
 // - leaves: then it welds each leaf's triangles into its fragment (FragmentWelder::add_whole,
 //   or add_clipped by the leaf's four faces), by position (with TriangleRecords);
 // - by index: the same through a SourceVertexMap of the input vertex indices (with
@@ -78,7 +78,7 @@ void route(const WorkFragment& s, int level, const BlockCube& block, std::vector
             out.push_back({key, t, true});
             continue;
         }
-        for_each_leaf_slot(tri, level, block, [&](SlotKey k) { out.push_back({k, t, false}); });
+        search_leaf_slots(tri, level, block, [&](SlotKey k) { out.push_back({k, t, false}); });
     }
     groups.build(hits);
 }

@@ -222,7 +222,7 @@ private:
     template <typename Record>
     void bin_triangles(TriangleBins<Record>& bins);
     template <typename Record>
-    void load_block(TriangleBins<Record>& bins, size_t b, std::vector<TriangleRecord>& records);
+    size_t load_block(TriangleBins<Record>& bins, size_t b, std::vector<TriangleRecord>& records);
     template <typename Record>
     void build_leaves(TriangleBins<Record>& bins);
     void write_leaf_nodes();
@@ -444,16 +444,19 @@ void CatpBuild::bin_triangles(TriangleBins<Record>& bins) {
 }
 
 // Loads block b's triangles as records (resolving corner indices, in parallel, from the
-// vertices in memory).
+// vertices in memory) into the first elements of `records`; returns how many.
 template <>
-void CatpBuild::load_block(TriangleBins<TriangleRecord>& bins, size_t b, std::vector<TriangleRecord>& records) {
+size_t CatpBuild::load_block(TriangleBins<TriangleRecord>& bins, size_t b, std::vector<TriangleRecord>& records) {
     bins.load(b, records);
+    return records.size();
 }
 template <>
-void CatpBuild::load_block(TriangleBins<TriangleCorners>& bins, size_t b, std::vector<TriangleRecord>& records) {
+size_t CatpBuild::load_block(TriangleBins<TriangleCorners>& bins, size_t b, std::vector<TriangleRecord>& records) {
     std::vector<TriangleCorners>& corners = block_corners_;  // reused: fresh memory costs page faults
     bins.load(b, corners);
-    records.resize(corners.size());
+    // Never shrunk: growing a vector zero-fills the new records before they are overwritten,
+    // and after every smaller block that cost 1.4% of the leaf phase (perf, 10M scan).
+    if (records.size() < corners.size()) records.resize(corners.size());
     const PagedArray<VertexRecord>& vertices = *vertices_;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
         for (size_t i = r.begin(); i != r.end(); ++i)
@@ -464,6 +467,7 @@ void CatpBuild::load_block(TriangleBins<TriangleCorners>& bins, size_t b, std::v
                 records[i].colors[k] = v.color;
             }
     });
+    return corners.size();
 }
 
 // Clips each block's triangles by its leaf tetrahedra; the leaf fragments go to the spill.
@@ -482,15 +486,15 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     LeafGroups groups;
     tbb::enumerable_thread_specific<SourceVertexMap> source_maps;  // reused: see SourceVertexMap::clear
     for (size_t b : order) {
-        load_block(bins, b, records);
+        const size_t count = load_block(bins, b, records);
         BlockCube block = BlockCube::from_key(levels_.block_octave, bins.block_key(b));
         int leaf_level = levels_.leaf_level;
-        const size_t chunks = (records.size() + kRouteChunk - 1) / kRouteChunk;
+        const size_t chunks = (count + kRouteChunk - 1) / kRouteChunk;
         if (chunk_hits.size() < chunks) chunk_hits.resize(chunks);
         for (std::vector<LeafHit>& h : chunk_hits) h.clear();
         tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
             std::vector<LeafHit>& out = chunk_hits[c];
-            const size_t end = std::min(records.size(), (c + 1) * kRouteChunk);
+            const size_t end = std::min(count, (c + 1) * kRouteChunk);
             for (size_t i = c * kRouteChunk; i != end; ++i) {
                 const Vec3d* corners = records[i].positions.data();
                 SlotKey key;
@@ -498,7 +502,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
                     out.push_back({key, uint32_t(i), true});
                     continue;
                 }
-                for_each_leaf_slot(corners, leaf_level, block, [&](SlotKey k) { out.push_back({k, uint32_t(i), false}); });
+                search_leaf_slots(corners, leaf_level, block, [&](SlotKey k) { out.push_back({k, uint32_t(i), false}); });
             }
         });
         groups.build(chunk_hits);
@@ -535,7 +539,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
             }
             if (!fragment.indices.empty()) fragments_->put(key, std::move(fragment));
         });
-        progress_->add(records.size() * kLeavesShare / 100);
+        progress_->add(count * kLeavesShare / 100);
     }
     bytes_spilled_ += bins.bytes_spilled();
     return_free_memory();

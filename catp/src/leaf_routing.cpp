@@ -360,7 +360,11 @@ void for_each_leaf_slot(const Vec3d tri[3], int level, const BlockCube& within, 
         sink(key);
         return;
     }
-    // The general search: the cubes of the leaves' octave that the box touches, in the block.
+    search_leaf_slots(tri, level, within, sink);
+}
+
+void search_leaf_slots(const Vec3d tri[3], int level, const BlockCube& within, SlotSink sink) {
+    // The cubes of the leaves' octave that the box touches, in the block.
     const int octave = level / 3, bisections = level % 3;
     const int32_t side = kLatticeSize >> octave;
     int32_t lo[3], hi[3];
