@@ -32,6 +32,7 @@ struct PositionHash {
 // for a diamond's gathered vertices). Open addressing on the source index.
 class SourceVertexMap {
 public:
+    SourceVertexMap() { clear(0); }
     // Empties the map, sized for about `vertices` entries (it grows as needed).
     void clear(size_t vertices);
     // The entry of source vertex `source`: FragmentWelder::kNotWelded when it is new. Valid
