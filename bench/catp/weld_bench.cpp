@@ -1,9 +1,12 @@
 // weld_bench: the converter's clipping and welding paths, timed one by one on a scan-like
 // surface placed in the lattice, single-threaded (thread CPU time, best of runs):
 //
-// - leaves: what CatpBuild::build_leaves does per block: route every triangle to its leaf
-//   tetrahedra (single_leaf, else for_each_leaf_slot) and weld each leaf's triangles into its
-//   fragment (FragmentWelder::add_whole, or add_clipped by the leaf's four faces);
+// - route: what CatpBuild::build_leaves does first per block: route every triangle to its leaf
+//   tetrahedra (single_leaf, else search_leaf_slots) and group the hits by leaf (LeafGroups);
+// - leaves: then it welds each leaf's triangles into its fragment (FragmentWelder::add_whole,
+//   or add_clipped by the leaf's four faces), by position (with TriangleRecords);
+// - by index: the same through a SourceVertexMap of the input vertex indices (with
+//   TriangleCorners, the usual case); its checksum must be the leaves column's;
 // - clip: clip_into_slots on the root diamond (the mesh as the "simplified" surface), the last
 //   step of every coarsening;
 // - gather: the clip's slot fragments appended into one welder (FragmentWelder::append), as
@@ -61,56 +64,74 @@ uint64_t checksum(uint64_t h, const WorkFragment& f) {
     return fnv(h, f.indices.data(), f.indices.size() * sizeof(uint32_t));
 }
 
-struct Hit {
-    SlotKey key;
-    uint32_t triangle;
-    bool whole;
-};
-
-// The leaf routing of every triangle, sorted by leaf (as build_leaves sorts its hits).
-std::vector<Hit> route(const WorkFragment& s, int level, const BlockCube& block) {
-    std::vector<Hit> hits;
+// The leaf routing of every triangle, grouped by leaf (as build_leaves groups its hits).
+void route(const WorkFragment& s, int level, const BlockCube& block, std::vector<std::vector<LeafHit>>& hits,
+           LeafGroups& groups) {
+    hits.resize(1);
+    std::vector<LeafHit>& out = hits[0];
+    out.clear();
     for (uint32_t t = 0; t * 3 < s.indices.size(); ++t) {
         const Vec3d tri[3] = {s.positions[s.indices[3 * t]], s.positions[s.indices[3 * t + 1]],
                               s.positions[s.indices[3 * t + 2]]};
         SlotKey key;
         if (single_leaf(tri, level, block, key)) {
-            hits.push_back({key, t, true});
+            out.push_back({key, t, true});
             continue;
         }
-        for_each_leaf_slot(tri, level, block, [&](SlotKey k) { hits.push_back({k, t, false}); });
+        search_leaf_slots(tri, level, block, [&](SlotKey k) { out.push_back({k, t, false}); });
     }
-    std::sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) {
-        return a.key < b.key || (a.key == b.key && a.triangle < b.triangle);
-    });
-    return hits;
+    groups.build(hits);
 }
 
-// build_leaves' welding of the routed triangles, leaf by leaf; returns the fragments' checksum.
-uint64_t weld_leaves(const WorkFragment& s, const std::vector<Hit>& hits) {
-    uint64_t h = 0xcbf29ce484222325ull;
-    for (size_t begin = 0; begin < hits.size();) {
-        size_t end = begin + 1;
-        while (end < hits.size() && hits[end].key == hits[begin].key) ++end;
+// The groups in key order: the order of the checksum (kept from when the hits were sorted).
+std::vector<size_t> key_order(const LeafGroups& groups) {
+    std::vector<size_t> order(groups.size());
+    for (size_t g = 0; g < order.size(); ++g) order[g] = g;
+    std::sort(order.begin(), order.end(), [&](size_t a, size_t b) { return groups.key(a) < groups.key(b); });
+    return order;
+}
+
+// build_leaves' welding of the routed triangles into one fragment per leaf (kept, as the
+// converter keeps them). by_index: welds through a SourceVertexMap on the surface's vertex
+// indices, as build_leaves does when the input vertices stay in memory (else by position alone,
+// as with TriangleRecords).
+void weld_leaves(const WorkFragment& s, const LeafGroups& groups, const std::vector<size_t>& order, bool by_index,
+                 std::vector<WorkFragment>& fragments) {
+    fragments.clear();
+    fragments.reserve(order.size());
+    SourceVertexMap welded;
+    for (size_t g : order) {
         std::vector<ClipPlane> planes = tetrahedron_clip_planes(
-            diamond_tetrahedron(diamond_info(DiamondId{hits[begin].key.diamond}), hits[begin].key.slot), 0xf);
-        WorkFragment fragment;
+            diamond_tetrahedron(diamond_info(DiamondId{groups.key(g).diamond}), groups.key(g).slot), 0xf);
+        WorkFragment& fragment = fragments.emplace_back();
         FragmentWelder welder(fragment);
-        const size_t triangles = end - begin;
+        const size_t triangles = size_t(groups.end(g) - groups.begin(g));
         welder.reserve(triangles * 5 / 8 + 64, triangles * 9 / 8 + 16);
-        for (size_t i = begin; i < end; ++i) {
-            const uint32_t* f = &s.indices[3 * size_t(hits[i].triangle)];
+        welded.clear(triangles * 5 / 8 + 64);
+        for (const LeafGroups::Entry* e = groups.begin(g); e != groups.end(g); ++e) {
+            const uint32_t* f = &s.indices[3 * size_t(e->triangle)];
             const std::array<Vec3d, 3> tri = {s.positions[f[0]], s.positions[f[1]], s.positions[f[2]]};
             const std::array<Vec3f, 3> normals = {s.normals[f[0]], s.normals[f[1]], s.normals[f[2]]};
             const std::array<Rgb8, 3> colors = {s.colors[f[0]], s.colors[f[1]], s.colors[f[2]]};
-            if (hits[i].whole)
+            if (by_index) {
+                if (e->whole)
+                    welder.add_whole(f, welded, tri, normals, colors);
+                else
+                    welder.add_clipped(f, welded, tri, normals, colors, planes);
+            } else if (e->whole) {
                 welder.add_whole(tri, normals, colors);
-            else
+            } else {
                 welder.add_clipped(tri, normals, colors, planes);
+            }
         }
-        h = checksum(h, fragment);
-        begin = end;
     }
+}
+
+// The checksum of fragments in order (outside the timing: byte-wise, it took a third of the
+// welding's time).
+uint64_t checksum(const std::vector<WorkFragment>& fragments) {
+    uint64_t h = 0xcbf29ce484222325ull;
+    for (const WorkFragment& f : fragments) h = checksum(h, f);
     return h;
 }
 
@@ -122,24 +143,28 @@ int main(int argc, char** argv) {
     if (sizes.empty()) sizes = {200000};
     const int kRuns = 7;
     std::printf("thread CPU time per input triangle (ns), best of %d\n\n", kRuns);
-    std::printf("%10s %6s %9s %9s %9s %9s %9s   %s\n", "triangles", "level", "tri/leaf", "route", "leaves", "clip",
-                "gather", "checksum");
+    std::printf("%10s %6s %9s %9s %9s %9s %9s %9s   %s\n", "triangles", "level", "tri/leaf", "route", "leaves",
+                "by index", "clip", "gather", "checksum");
     for (size_t n : sizes) {
         const WorkFragment surface = make_surface(n);
         const size_t triangles = surface.indices.size() / 3;
         // The leaf level the converter would pick: about 2000 triangles per leaf.
         BlockCube block;  // the whole lattice cube as one block (octave 0)
         int level = 3;
-        std::vector<Hit> hits = route(surface, level, block);
-        auto leaves = [&] {
-            size_t count = 0;
-            for (size_t i = 0; i < hits.size(); ++i) count += i == 0 || !(hits[i].key == hits[i - 1].key);
-            return count;
-        };
-        while (hits.size() / leaves() > 2000 && level < kMaxLevel) hits = route(surface, ++level, block);
-        const double t_route = best_of(kRuns, [&] { hits = route(surface, level, block); }, thread_cpu_seconds);
-        uint64_t h_leaves = 0;
-        const double t_leaves = best_of(kRuns, [&] { h_leaves = weld_leaves(surface, hits); }, thread_cpu_seconds);
+        std::vector<std::vector<LeafHit>> hits;
+        LeafGroups groups;
+        route(surface, level, block, hits, groups);
+        while (hits[0].size() / groups.size() > 2000 && level < kMaxLevel) route(surface, ++level, block, hits, groups);
+        const double t_route = best_of(kRuns, [&] { route(surface, level, block, hits, groups); }, thread_cpu_seconds);
+        const std::vector<size_t> order = key_order(groups);
+        std::vector<WorkFragment> fragments;
+        const double t_leaves =
+            best_of(kRuns, [&] { weld_leaves(surface, groups, order, false, fragments); }, thread_cpu_seconds);
+        const uint64_t h_leaves = checksum(fragments);
+        const double t_index =
+            best_of(kRuns, [&] { weld_leaves(surface, groups, order, true, fragments); }, thread_cpu_seconds);
+        const uint64_t h_index = checksum(fragments);
+        if (h_index != h_leaves) std::printf("welding by index changed the leaves' fragments\n");
 
         const DiamondInfo root = diamond_info(root_diamond());
         std::array<WorkFragment, 8> slots;
@@ -165,8 +190,9 @@ int main(int argc, char** argv) {
         const uint64_t h_gather = checksum(0xcbf29ce484222325ull, gathered);
 
         const double scale = 1e9 / double(triangles);
-        std::printf("%10zu %6d %9zu %9.1f %9.1f %9.1f %9.1f   %016llx %016llx %016llx\n", triangles, level,
-                    hits.size() / leaves(), t_route * scale, t_leaves * scale, t_clip * scale, t_gather * scale,
+        std::printf("%10zu %6d %9zu %9.1f %9.1f %9.1f %9.1f %9.1f   %016llx %016llx %016llx\n", triangles, level,
+                    hits[0].size() / groups.size(), t_route * scale, t_leaves * scale, t_index * scale,
+                    t_clip * scale, t_gather * scale,
                     (unsigned long long)h_leaves, (unsigned long long)h_clip, (unsigned long long)h_gather);
     }
     return 0;

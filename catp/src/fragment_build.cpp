@@ -117,35 +117,24 @@ void FragmentWelder::append(const WorkFragment& other) {
         triangle(remap[other.indices[i]], remap[other.indices[i + 1]], remap[other.indices[i + 2]]);
 }
 
-uint32_t FragmentWelder::add_corner(int k, const uint32_t* source, uint32_t* welded, const Vec3d& position,
-                                    const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors) {
-    if (!welded) return add(position, normals[k], colors[k]);
-    uint32_t& id = welded[source[k]];
-    if (id == kNotWelded) id = add(position, normals[k], colors[k]);
-    return id;
+uint32_t FragmentWelder::add_corner(uint32_t* cached, const Vec3d& position, const Vec3f& normal, const Rgb8& color) {
+    if (!cached) return add(position, normal, color);
+    if (*cached == kNotWelded) *cached = add(position, normal, color);
+    return *cached;
 }
 
-void FragmentWelder::add_whole(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
-                               const std::array<Rgb8, 3>& colors) {
-    add_whole(nullptr, nullptr, tri, normals, colors);
-}
-
-void FragmentWelder::add_whole(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
-                               const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors) {
+template <class Cache>
+void FragmentWelder::whole(const Cache& cached, const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                           const std::array<Rgb8, 3>& colors) {
     if (!has_area(tri)) return;
     uint32_t ids[3];
-    for (int k = 0; k < 3; ++k) ids[k] = add_corner(k, source, welded, tri[k], normals, colors);
+    for (int k = 0; k < 3; ++k) ids[k] = add_corner(cached(k), tri[k], normals[k], colors[k]);
     triangle(ids[0], ids[1], ids[2]);
 }
 
-void FragmentWelder::add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
-                                 const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes) {
-    add_clipped(nullptr, nullptr, tri, normals, colors, planes);
-}
-
-void FragmentWelder::add_clipped(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
-                                 const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors,
-                                 const std::vector<ClipPlane>& planes) {
+template <class Cache>
+void FragmentWelder::clipped(const Cache& cached, const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                             const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes) {
     clip_triangle(tri, planes, polygon_);
     if (polygon_.size() < 3) return;
     pieces_.clear();
@@ -162,8 +151,7 @@ void FragmentWelder::add_clipped(const uint32_t source[3], uint32_t* welded, con
             // only the corner's exact position is the source vertex.
             const Vec3d& p = tri[corner];
             const bool at_corner = cv.position[0] == p[0] && cv.position[1] == p[1] && cv.position[2] == p[2];
-            ids[k] = at_corner ? add_corner(corner, source, welded, cv.position, normals, colors)
-                               : add(cv.position, normals[corner], colors[corner]);
+            ids[k] = add_corner(at_corner ? cached(corner) : nullptr, cv.position, normals[corner], colors[corner]);
             continue;
         }
         float n[3] = {0, 0, 0}, c[3] = {0, 0, 0};
@@ -175,6 +163,98 @@ void FragmentWelder::add_clipped(const uint32_t source[3], uint32_t* welded, con
         ids[k] = add(cv.position, n, c);
     }
     for (auto& piece : pieces_) triangle(ids[piece[0]], ids[piece[1]], ids[piece[2]]);
+}
+
+namespace {
+
+// The caches of add_whole and add_clipped: none, an array by source index, a SourceVertexMap.
+struct NoCache {
+    uint32_t* operator()(int) const { return nullptr; }
+};
+struct ArrayCache {
+    const uint32_t* source;
+    uint32_t* welded;  // null: no cache
+    uint32_t* operator()(int k) const { return welded ? &welded[source[k]] : nullptr; }
+};
+struct MapCache {
+    const uint32_t* source;
+    SourceVertexMap& welded;
+    uint32_t* operator()(int k) const { return &welded[source[k]]; }
+};
+
+}  // namespace
+
+void FragmentWelder::add_whole(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                               const std::array<Rgb8, 3>& colors) {
+    whole(NoCache{}, tri, normals, colors);
+}
+
+void FragmentWelder::add_whole(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
+                               const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors) {
+    whole(ArrayCache{source, welded}, tri, normals, colors);
+}
+
+void FragmentWelder::add_whole(const uint32_t source[3], SourceVertexMap& welded, const std::array<Vec3d, 3>& tri,
+                               const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors) {
+    whole(MapCache{source, welded}, tri, normals, colors);
+}
+
+void FragmentWelder::add_clipped(const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                                 const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes) {
+    clipped(NoCache{}, tri, normals, colors, planes);
+}
+
+void FragmentWelder::add_clipped(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
+                                 const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors,
+                                 const std::vector<ClipPlane>& planes) {
+    clipped(ArrayCache{source, welded}, tri, normals, colors, planes);
+}
+
+void FragmentWelder::add_clipped(const uint32_t source[3], SourceVertexMap& welded, const std::array<Vec3d, 3>& tri,
+                                 const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors,
+                                 const std::vector<ClipPlane>& planes) {
+    clipped(MapCache{source, welded}, tri, normals, colors, planes);
+}
+
+void SourceVertexMap::clear(size_t vertices) {
+    size_t capacity = 64;
+    while (capacity < 2 * vertices) capacity *= 2;
+    size_ = 0;
+    // Reuses the table when it is big enough: only its entries need clearing.
+    if (table_.size() >= capacity && table_.size() <= 4 * capacity) {
+        std::fill(table_.begin(), table_.end(), Slot{0, 0});
+        return;
+    }
+    table_.assign(capacity, Slot{0, 0});
+    mask_ = capacity - 1;
+}
+
+void SourceVertexMap::rehash(size_t capacity) {
+    std::vector<Slot> old(capacity, Slot{0, 0});
+    old.swap(table_);
+    mask_ = capacity - 1;
+    for (const Slot& e : old) {
+        if (e.key == 0) continue;
+        size_t h = size_t((uint64_t(e.key) * 0x9E3779B97F4A7C15ull) >> 32) & mask_;
+        while (table_[h].key != 0) h = (h + 1) & mask_;
+        table_[h] = e;
+    }
+}
+
+uint32_t& SourceVertexMap::operator[](uint32_t source) {
+    const uint32_t key = source + 1;
+    size_t h = size_t((uint64_t(key) * 0x9E3779B97F4A7C15ull) >> 32) & mask_;
+    while (table_[h].key != 0) {
+        if (table_[h].key == key) return table_[h].value;
+        h = (h + 1) & mask_;
+    }
+    if (2 * (size_ + 1) > table_.size()) {
+        rehash(2 * table_.size());
+        return (*this)[source];
+    }
+    ++size_;
+    table_[h] = {key, FragmentWelder::kNotWelded};
+    return table_[h].value;
 }
 
 static ClipPlane face_clip_plane(const LatticePoint& a, const LatticePoint& b, const LatticePoint& c,

@@ -27,6 +27,29 @@ struct PositionHash {
 
 // Adds vertices to a fragment, merging those at exactly the same position (the clipper makes
 // shared vertices bit-identical, so exact welding is the right test).
+// Which fragment vertex each source vertex became, for source vertices numbered globally (the
+// converter's input vertices: far too many for an array per fragment, as clip_into_slots keeps
+// for a diamond's gathered vertices). Open addressing on the source index.
+class SourceVertexMap {
+public:
+    SourceVertexMap() { clear(0); }
+    // Empties the map, sized for about `vertices` entries (it grows as needed).
+    void clear(size_t vertices);
+    // The entry of source vertex `source`: FragmentWelder::kNotWelded when it is new. Valid
+    // until the next call (an insert may move the table).
+    uint32_t& operator[](uint32_t source);
+
+private:
+    struct Slot {
+        uint32_t key;    // source index + 1, 0 = empty
+        uint32_t value;  // fragment vertex
+    };
+    void rehash(size_t capacity);  // a power of two
+
+    std::vector<Slot> table_;
+    size_t size_ = 0, mask_ = 0;
+};
+
 class FragmentWelder {
 public:
     explicit FragmentWelder(WorkFragment& fragment);
@@ -59,6 +82,12 @@ public:
     void add_clipped(const uint32_t source[3], uint32_t* welded, const std::array<Vec3d, 3>& tri,
                      const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors,
                      const std::vector<ClipPlane>& planes);
+    // The same with the cache as a SourceVertexMap, for globally numbered source vertices.
+    void add_whole(const uint32_t source[3], SourceVertexMap& welded, const std::array<Vec3d, 3>& tri,
+                   const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors);
+    void add_clipped(const uint32_t source[3], SourceVertexMap& welded, const std::array<Vec3d, 3>& tri,
+                     const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors,
+                     const std::vector<ClipPlane>& planes);
 
 private:
     // Open addressing on vertex indices (a std::unordered_map allocated per insert and was a
@@ -66,9 +95,16 @@ private:
     uint32_t find_or_insert(const Vec3d& position, bool& inserted);
     void grow();
     void rehash(size_t capacity);  // a power of two
-    // Corner k of a source triangle at `position` (tri[k] exactly): through `welded` if given.
-    uint32_t add_corner(int k, const uint32_t* source, uint32_t* welded, const Vec3d& position,
-                        const std::array<Vec3f, 3>& normals, const std::array<Rgb8, 3>& colors);
+    // A source triangle's corner at `position` with its normal and colour: through its cache
+    // entry `cached` if given (null: by position only).
+    uint32_t add_corner(uint32_t* cached, const Vec3d& position, const Vec3f& normal, const Rgb8& color);
+    // add_whole and add_clipped for any cache: cached(k) gives corner k's cache entry or null.
+    template <class Cache>
+    void whole(const Cache& cached, const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+               const std::array<Rgb8, 3>& colors);
+    template <class Cache>
+    void clipped(const Cache& cached, const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
+                 const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes);
     // A table entry: the hash's upper half as a tag (compared before the position is loaded)
     // and the vertex index + 1 (0 = empty).
     static uint64_t entry(uint64_t hash, uint32_t index) { return (hash >> 32 << 32) | (uint64_t(index) + 1); }

@@ -360,7 +360,11 @@ void for_each_leaf_slot(const Vec3d tri[3], int level, const BlockCube& within, 
         sink(key);
         return;
     }
-    // The general search: the cubes of the leaves' octave that the box touches, in the block.
+    search_leaf_slots(tri, level, within, sink);
+}
+
+void search_leaf_slots(const Vec3d tri[3], int level, const BlockCube& within, SlotSink sink) {
+    // The cubes of the leaves' octave that the box touches, in the block.
     const int octave = level / 3, bisections = level % 3;
     const int32_t side = kLatticeSize >> octave;
     int32_t lo[3], hi[3];
@@ -378,6 +382,66 @@ void for_each_leaf_slot(const Vec3d tri[3], int level, const BlockCube& within, 
                 const LocalTriangle t(tri, index, side);
                 for (int slot = 0; slot < 6; ++slot) descend_cube(tables, bisections, 0, slot, t, sink);
             }
+}
+
+
+// ----------------------------------------------------------------------------------------------
+// Grouping by leaf.
+
+namespace {
+
+size_t slot_key_hash(const SlotKey& k) {
+    const uint64_t h = (k.diamond ^ uint64_t(k.slot) << 61) * 0x9E3779B97F4A7C15ull;
+    return size_t(h ^ (h >> 29));
+}
+
+}  // namespace
+
+void LeafGroups::build(const std::vector<std::vector<LeafHit>>& parts) {
+    keys_.clear();
+    table_.assign(256, 0);
+    last_ = UINT32_MAX;
+    leaf_of_hit_.clear();
+    fill_.clear();
+    for (const std::vector<LeafHit>& part : parts)
+        for (const LeafHit& h : part) {
+            const uint32_t leaf = number(h.key);
+            if (leaf == fill_.size()) fill_.push_back(0);
+            ++fill_[leaf];
+            leaf_of_hit_.push_back(leaf);
+        }
+    start_.assign(keys_.size() + 1, 0);
+    for (size_t g = 0; g < keys_.size(); ++g) {
+        start_[g + 1] = start_[g] + fill_[g];
+        fill_[g] = uint32_t(start_[g]);
+    }
+    // A stable scatter: each group keeps the hits' order.
+    entries_.resize(leaf_of_hit_.size());
+    size_t i = 0;
+    for (const std::vector<LeafHit>& part : parts)
+        for (const LeafHit& h : part) entries_[fill_[leaf_of_hit_[i++]]++] = {h.triangle, h.whole};
+}
+
+uint32_t LeafGroups::number(const SlotKey& key) {
+    if (last_ != UINT32_MAX && keys_[last_] == key) return last_;
+    if (2 * (keys_.size() + 1) > table_.size()) rehash(2 * table_.size());
+    const size_t mask = table_.size() - 1;
+    size_t h = slot_key_hash(key) & mask;
+    while (table_[h] != 0 && !(keys_[table_[h] - 1] == key)) h = (h + 1) & mask;
+    if (table_[h] == 0) {
+        keys_.push_back(key);
+        table_[h] = uint32_t(keys_.size());
+    }
+    return last_ = table_[h] - 1;
+}
+
+void LeafGroups::rehash(size_t capacity) {
+    table_.assign(capacity, 0);
+    for (uint32_t n = 0; n < keys_.size(); ++n) {
+        size_t h = slot_key_hash(keys_[n]) & (capacity - 1);
+        while (table_[h] != 0) h = (h + 1) & (capacity - 1);
+        table_[h] = n + 1;
+    }
 }
 
 }  // namespace catpaq
