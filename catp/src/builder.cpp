@@ -16,6 +16,7 @@
 #include <tbb/info.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
+#include <tbb/parallel_sort.h>
 
 #include "base/error.h"
 #include "base/progress.h"
