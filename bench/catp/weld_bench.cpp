@@ -12,10 +12,15 @@
 // - gather: the clip's slot fragments appended into one welder (FragmentWelder::append), as
 //   coarsening gathers a diamond's children.
 //
-// Each column is CPU time per input triangle (ns). The checksum covers every fragment built (the
-// vertex and triangle order included), so that a change can be checked to keep the output.
+// Each column is CPU time per input triangle (ns); "ratio" is route + leaves + clip relative to
+// meshoptimizer's meshopt_simplify (to half, float positions) on the same surface in the same
+// run, as this machine's speed drifts by a fifth from run to run. The checksum covers every
+// fragment built (the vertex and triangle order included), so that a change can be checked to
+// keep the output; welding by index must give the leaves' checksum (exit status 1 otherwise).
 //
 // Usage: weld_bench [triangles ...]   (default 200000)
+#include <meshoptimizer.h>
+
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
@@ -143,8 +148,9 @@ int main(int argc, char** argv) {
     if (sizes.empty()) sizes = {200000};
     const int kRuns = 7;
     std::printf("thread CPU time per input triangle (ns), best of %d\n\n", kRuns);
-    std::printf("%10s %6s %9s %9s %9s %9s %9s %9s   %s\n", "triangles", "level", "tri/leaf", "route", "leaves",
-                "by index", "clip", "gather", "checksum");
+    std::printf("%10s %6s %9s %9s %9s %9s %9s %9s %9s %7s   %s\n", "triangles", "level", "tri/leaf", "route",
+                "leaves", "by index", "clip", "gather", "meshopt", "ratio", "checksum");
+    bool same = true;
     for (size_t n : sizes) {
         const WorkFragment surface = make_surface(n);
         const size_t triangles = surface.indices.size() / 3;
@@ -164,7 +170,10 @@ int main(int argc, char** argv) {
         const double t_index =
             best_of(kRuns, [&] { weld_leaves(surface, groups, order, true, fragments); }, thread_cpu_seconds);
         const uint64_t h_index = checksum(fragments);
-        if (h_index != h_leaves) std::printf("welding by index changed the leaves' fragments\n");
+        if (h_index != h_leaves) {
+            std::printf("welding by index changed the leaves' fragments\n");
+            same = false;
+        }
 
         const DiamondInfo root = diamond_info(root_diamond());
         std::array<WorkFragment, 8> slots;
@@ -189,11 +198,19 @@ int main(int argc, char** argv) {
         }, thread_cpu_seconds);
         const uint64_t h_gather = checksum(0xcbf29ce484222325ull, gathered);
 
+        std::vector<float> floats;
+        for (const Vec3d& p : surface.positions) floats.insert(floats.end(), {float(p[0]), float(p[1]), float(p[2])});
+        std::vector<uint32_t> kept(surface.indices.size());
+        const double t_meshopt = best_of(kRuns, [&] {
+            meshopt_simplify(kept.data(), surface.indices.data(), surface.indices.size(), floats.data(),
+                             surface.positions.size(), 3 * sizeof(float), triangles / 2 * 3, 1e-2f, 0, nullptr);
+        }, thread_cpu_seconds);
+
         const double scale = 1e9 / double(triangles);
-        std::printf("%10zu %6d %9zu %9.1f %9.1f %9.1f %9.1f %9.1f   %016llx %016llx %016llx\n", triangles, level,
-                    hits[0].size() / groups.size(), t_route * scale, t_leaves * scale, t_index * scale,
-                    t_clip * scale, t_gather * scale,
+        std::printf("%10zu %6d %9zu %9.1f %9.1f %9.1f %9.1f %9.1f %9.1f %7.2f   %016llx %016llx %016llx\n", triangles,
+                    level, hits[0].size() / groups.size(), t_route * scale, t_leaves * scale, t_index * scale,
+                    t_clip * scale, t_gather * scale, t_meshopt * scale, (t_route + t_leaves + t_clip) / t_meshopt,
                     (unsigned long long)h_leaves, (unsigned long long)h_clip, (unsigned long long)h_gather);
     }
-    return 0;
+    return same ? 0 : 1;
 }

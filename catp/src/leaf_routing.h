@@ -87,7 +87,6 @@ void for_each_leaf_slot(const Vec3d tri[3], int level, const BlockCube& within, 
 // to place (the converter tries single_leaf first; trying it again cost 1% of the leaf phase).
 void search_leaf_slots(const Vec3d tri[3], int level, const BlockCube& within, SlotSink sink);
 
-
 // A leaf tetrahedron that routing sends a triangle (numbered by the caller: a block's record)
 // to. whole: the triangle lies strictly inside the leaf (single_leaf), so clipping would keep it
 // as it is: it is added without the clipper.
