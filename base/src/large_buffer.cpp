@@ -5,6 +5,7 @@
 #include <cstdint>
 #include <cstdlib>
 #include <new>
+#include <system_error>
 #include <thread>
 #include <utility>
 
@@ -56,7 +57,13 @@ LargeBuffer::LargeBuffer(size_t bytes, Populate populate) : bytes_(bytes) {
             const uintptr_t start = (reinterpret_cast<uintptr_t>(map) + kHuge - 1) / kHuge * kHuge;
             data_ = static_cast<std::byte*>(map) + (start - reinterpret_cast<uintptr_t>(map));
             madvise(data_, map_bytes - kHuge, MADV_HUGEPAGE);  // a hint: failure is harmless
-            if (populate == Populate::kAhead) populator_ = std::make_unique<Populator>(data_, bytes);
+            if (populate == Populate::kAhead) {
+                try {
+                    populator_ = std::make_unique<Populator>(data_, bytes);
+                } catch (const std::system_error&) {
+                    // No thread to spare: the owner faults the pages in itself.
+                }
+            }
             return;
         }
     }
