@@ -2,11 +2,12 @@
 // diamond-sized pieces of a scan-like surface, single-threaded (thread CPU time, best of runs),
 // so that a change to one step can be measured without the noise of a whole build.
 //
-// Steps, per gathered (input) triangle: simplify_mesh to half the triangles (border locked, as a
-// diamond's outer faces are), the simplification error measurement (measured_simplification_error,
-// both directions), and quantize + encode of the simplified mesh as one fragment. Each is also
-// given relative to meshoptimizer's meshopt_simplify (to half, float positions) on the same
-// piece in the same run, as this machine's speed drifts by a fifth from run to run.
+// Steps, per gathered (input) triangle: simplify_mesh to half the triangles (no vertex locked: the
+// piece is a closed surface, where a diamond locks its outer faces' vertices), the simplification
+// error measurement (measured_simplification_error, both directions), and quantize + encode of
+// the simplified mesh as one fragment. Each is also given relative to meshoptimizer's
+// meshopt_simplify (to half, float positions) on the same piece in the same run, as this
+// machine's speed drifts by a fifth from run to run.
 //
 // Usage: coarsen_bench [triangles per piece ...]   (default 4000 20000 60000)
 #include <meshoptimizer.h>
@@ -30,7 +31,7 @@ namespace {
 
 // A scan-like surface of about `triangles` triangles, scaled into the lattice box [1, 3]^3
 // (positions on the converter's snapping grid are not needed for timing), as a WorkFragment
-// with its border vertices locked.
+// with its lock flags (all clear).
 struct Piece {
     WorkFragment gathered;
     std::vector<uint8_t> locked;

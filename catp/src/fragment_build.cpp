@@ -173,8 +173,8 @@ struct NoCache {
 };
 struct ArrayCache {
     const uint32_t* source;
-    uint32_t* welded;  // null: no cache
-    uint32_t* operator()(int k) const { return welded ? &welded[source[k]] : nullptr; }
+    uint32_t* welded;
+    uint32_t* operator()(int k) const { return &welded[source[k]]; }
 };
 struct MapCache {
     const uint32_t* source;

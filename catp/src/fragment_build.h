@@ -25,8 +25,6 @@ struct PositionHash {
     size_t operator()(const Vec3d& p) const;
 };
 
-// Adds vertices to a fragment, merging those at exactly the same position (the clipper makes
-// shared vertices bit-identical, so exact welding is the right test).
 // Which fragment vertex each source vertex became, for source vertices numbered globally (the
 // converter's input vertices: far too many for an array per fragment, as clip_into_slots keeps
 // for a diamond's gathered vertices). Open addressing on the source index.
@@ -50,6 +48,8 @@ private:
     size_t size_ = 0, mask_ = 0;
 };
 
+// Adds vertices to a fragment, merging those at exactly the same position (the clipper makes
+// shared vertices bit-identical, so exact welding is the right test).
 class FragmentWelder {
 public:
     explicit FragmentWelder(WorkFragment& fragment);
@@ -105,14 +105,11 @@ private:
     template <class Cache>
     void clipped(const Cache& cached, const std::array<Vec3d, 3>& tri, const std::array<Vec3f, 3>& normals,
                  const std::array<Rgb8, 3>& colors, const std::vector<ClipPlane>& planes);
-    // A table entry: the hash's upper half as a tag (compared before the position is loaded)
-    // and the vertex index + 1 (0 = empty).
-    static uint64_t entry(uint64_t hash, uint32_t index) { return (hash >> 32 << 32) | (uint64_t(index) + 1); }
 
     WorkFragment& f_;
     std::vector<ClipVertex> polygon_;  // scratch for add_clipped
     std::vector<std::array<int, 3>> pieces_;
-    std::vector<uint32_t> table_;  // entry(): hash tag and vertex index + 1, 0 = empty
+    std::vector<uint32_t> table_;  // vertex index + 1, 0 = empty
     size_t mask_ = 0;
 };
 
