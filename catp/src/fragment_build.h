@@ -127,7 +127,7 @@ double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, 
 
 // Distance between the gathered surface of a diamond and its simplification (triangles indexing
 // gathered.positions), both ways: the removed vertices to the simplified surface, and the
-// simplified triangles' centroids and edge midpoints to the gathered surface (lattice units).
+// midpoints of the simplified edges to the gathered surface (lattice units).
 double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified);
 
 // Clips the simplified triangles (indexing gathered's vertices) by the diamond's interior faces

@@ -60,7 +60,7 @@ double mesh_distance_exact(const Vec3d& p, const std::vector<Vec3d>& pos, const 
     return std::sqrt(best);
 }
 
-// The same sample points as the converter: removed vertices, simplified centroids and edge
+// The same sample points as the converter: removed vertices and the simplified edges'
 // midpoints; `distance` from a point to a mesh.
 template <class Distance>
 double brute_force_error(const WorkFragment& g, const std::vector<uint32_t>& s, Distance distance) {
@@ -71,8 +71,7 @@ double brute_force_error(const WorkFragment& g, const std::vector<uint32_t>& s, 
         if (!kept[v]) error = std::max(error, distance(g.positions[v], g.positions, s));
     for (size_t i = 0; i + 2 < s.size(); i += 3) {
         const Vec3d &a = g.positions[s[i]], &b = g.positions[s[i + 1]], &c = g.positions[s[i + 2]];
-        Vec3d points[4] = {{(a[0] + b[0] + c[0]) / 3, (a[1] + b[1] + c[1]) / 3, (a[2] + b[2] + c[2]) / 3},
-                           {(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2},
+        Vec3d points[3] = {{(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2},
                            {(b[0] + c[0]) / 2, (b[1] + c[1]) / 2, (b[2] + c[2]) / 2},
                            {(a[0] + c[0]) / 2, (a[1] + c[1]) / 2, (a[2] + c[2]) / 2}};
         for (const Vec3d& p : points) error = std::max(error, distance(p, g.positions, g.indices));
