@@ -457,10 +457,10 @@ struct Candidate {
     double cost(int streams) {
         double bits_total = double(raw_bits);
         for (int k = 0; k < streams; ++k) {
-            desc[size_t(k)] = rans::describe_counts(counts[size_t(k)].data(), rans::kMaxAlphabet);
-            rans::build_freqs(desc[size_t(k)], freqs[size_t(k)]);
-            bits_total += rans::data_cost_bits(counts[size_t(k)].data(), freqs[size_t(k)]) +
-                          rans::table_cost_bits(desc[size_t(k)]);
+            double data_bits = 0;
+            desc[size_t(k)] =
+                rans::describe_counts(counts[size_t(k)].data(), rans::kMaxAlphabet, &freqs[size_t(k)], &data_bits);
+            bits_total += data_bits + rans::table_cost_bits(desc[size_t(k)]);
         }
         return bits_total;
     }

@@ -56,7 +56,9 @@ struct FreqTable {
 };
 
 // Chooses a description for the given symbol counts (nsym <= kMaxAlphabet, counts may be all zero).
-TableDesc describe_counts(const uint32_t* counts, int nsym);
+// When `freqs` is given it receives build_freqs() of the description and, when `data_bits` is
+// given too, that receives data_cost_bits(counts, *freqs) (both known here already).
+TableDesc describe_counts(const uint32_t* counts, int nsym, FreqTable* freqs = nullptr, double* data_bits = nullptr);
 // Derives frequencies; returns false if the description is invalid (corrupt data).
 bool build_freqs(const TableDesc& desc, FreqTable& out);
 // Estimated cost in bits of coding `counts` with `freqs`.
