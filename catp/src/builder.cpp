@@ -19,6 +19,7 @@
 #include <tbb/parallel_sort.h>
 
 #include "base/error.h"
+#include "base/heap_warmup.h"
 #include "base/progress.h"
 #include "base/paged_array.h"
 #include "base/sysinfo.h"
@@ -179,7 +180,23 @@ struct VertexRecord {
 // Gives freed heap memory back to the system between phases. glibc keeps freed blocks in its
 // per-thread arenas; without this the resident size only grows, and a later phase's peak adds
 // to an earlier phase's leftovers (measured: 89 MiB instead of 64 on a 1M-triangle build).
-void return_free_memory() { malloc_trim(0); }
+// Not while a HeapWarmup is in place: trimming would hand its warm pages back.
+void return_free_memory(const HeapWarmup* warm) {
+    if (!warm) malloc_trim(0);
+}
+
+// A warm heap (see base/heap_warmup.h) when the budget is ample: at least 100 bytes per input
+// triangle (a mesh has about two triangles per vertex), twice the peak of a 10M-triangle scan's
+// build. The heap is then not trimmed between phases, which costs some memory. It warms 32 bytes
+// per triangle, less than the heap holds at its peak. 10M scan at 1 GiB, three alternating pairs
+// against no warm-up: wall time x0.96 (system time 1.8 -> 1.1 s), page faults that trap
+// 118k -> 32k, peak 497 -> 542 MiB (24 bytes: 528 MiB, fewer faults saved; 40 bytes: 608 MiB
+// for little more).
+std::unique_ptr<HeapWarmup> make_heap_warmup(uint64_t budget, uint64_t vertices) {
+    const uint64_t triangles = 2 * vertices;
+    if (budget < triangles * 100) return nullptr;
+    return std::make_unique<HeapWarmup>(size_t(triangles * 32));
+}
 
 unsigned worker_threads(unsigned requested) {
     return requested ? requested : unsigned(std::max(1, tbb::info::default_concurrency()));
@@ -252,6 +269,7 @@ private:
     uint64_t budget_ = 0;
     std::unique_ptr<BudgetShares> shares_;
     std::unique_ptr<Progress> progress_;
+    std::unique_ptr<HeapWarmup> warm_heap_;  // see make_heap_warmup
 
     Bounds bounds_;
     Placement place_{};
@@ -550,7 +568,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
         progress_->add(count * kLeavesShare / 100);
     }
     bytes_spilled_ += bins.bytes_spilled();
-    return_free_memory();
+    return_free_memory(warm_heap_.get());
 }
 
 double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const {
@@ -723,6 +741,7 @@ CatpBuildReport CatpBuild::run() {
     shares_ = std::make_unique<BudgetShares>(budget_ - (minimum - kMinimumDataMemory));
     report_.memory_budget = budget_;
     report_.input_vertices = in_.vertex_count();
+    warm_heap_ = make_heap_warmup(budget_, in_.vertex_count());
     bool needs_normals = !in_.has_normals();
     // Progress counts input triangles, each phase adding its share of every triangle, so the
     // rate shown is input triangles per second.
@@ -768,7 +787,7 @@ CatpBuildReport CatpBuild::run() {
         if (triangles_ == 0) fail("the mesh has no triangles");
         if (records_carry_vertices) {
             vertices_.reset();  // free the cache before the blocks are loaded
-            return_free_memory();
+            return_free_memory(warm_heap_.get());
         }
         report_.input_triangles = triangles_;
         report_.blocks = bins.block_count();

@@ -64,10 +64,10 @@ void expect_failure(const std::string& args, const std::string& message_part) {
 TEST(Cli, ConvertThenVerifySucceedsOnAGeneratedSphere) {
     fs::path in = scratch() / "sphere.ply", out = scratch() / "sphere.cpq";
     write_ply(in.string(), make_sphere(5000, 2));
-    ToolRun c = run("convert " + in.string() + " -o " + out.string() + " --leaf-triangles 300 --memory 64M");
+    ToolRun c = run("convert " + in.string() + " -o " + out.string() + " --leaf-triangles 300 --memory 80M");
     ASSERT_EQ(c.status, 0) << c.output;
     EXPECT_NE(c.output.find("input triangles/s"), std::string::npos);
-    EXPECT_NE(c.output.find("of a 64 MiB budget"), std::string::npos) << c.output;
+    EXPECT_NE(c.output.find("of a 80 MiB budget"), std::string::npos) << c.output;
     ToolRun v = run("verify " + out.string() + " --mesh " + in.string() + " --samples 2000");
     EXPECT_EQ(v.status, 0) << v.output;
     EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
