@@ -378,6 +378,14 @@ bool CatpBuild::choose_bins(uint64_t triangle_estimate) const {
 
 namespace {
 
+// Empties a fragment whose arrays are to be filled again.
+void clear_keeping_capacity(WorkFragment& f) {
+    f.positions.clear();
+    f.normals.clear();
+    f.colors.clear();
+    f.indices.clear();
+}
+
 // A binned triangle's corners, in lattice units.
 void corner_positions(const TriangleRecord& r, const PagedArray<VertexRecord>&, Vec3d out[3]) {
     for (int k = 0; k < 3; ++k) out[k] = r.positions[k];
@@ -666,6 +674,13 @@ void CatpBuild::coarsen_level() {
     auto runs = group_runs(refs.size(), [&](size_t i) { return parent_of[i]; });
     auto next = std::make_unique<FragmentSpill>(output_, shares_->coarse_fragments_in_memory);
     std::vector<double> produced_error(runs.size(), 0.0);
+    // Each thread's gathered and child fragments, cleared from diamond to diamond but kept for
+    // the level: fresh arrays for every diamond made malloc search its bins of free chunks for
+    // them (3.5% of the 10M scan's build, most of it cache misses on chunk headers).
+    struct Scratch {
+        WorkFragment gathered, child;
+    };
+    tbb::enumerable_thread_specific<Scratch> scratches;
     tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
         DiamondId id{parent_of[runs[i].first]};
         DiamondInfo info = diamond_info(id);
@@ -676,7 +691,9 @@ void CatpBuild::coarsen_level() {
             auto it = diamond_error_.find(child.bits);
             if (it != diamond_error_.end()) child_error = std::max(child_error, it->second);
         }
-        WorkFragment gathered, child;
+        Scratch& scratch = scratches.local();
+        WorkFragment &gathered = scratch.gathered, &child = scratch.child;
+        clear_keeping_capacity(gathered);
         {
             FragmentWelder welder(gathered);
             size_t vertices = 0, triangles = 0;

@@ -109,6 +109,7 @@ private:
     WorkFragment& f_;
     std::vector<ClipVertex> polygon_;  // scratch for add_clipped
     std::vector<std::array<int, 3>> pieces_;
+    std::vector<uint32_t> remap_;  // scratch for append
     std::vector<uint32_t> table_;  // vertex index + 1, 0 = empty
     size_t mask_ = 0;
 };
@@ -127,8 +128,11 @@ double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, 
 
 // Distance between the gathered surface of a diamond and its simplification (triangles indexing
 // gathered.positions), both ways: the removed vertices to the simplified surface, and the
-// midpoints of the simplified edges to the gathered surface (lattice units).
-double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified);
+// midpoints of the simplified edges to the gathered surface (lattice units). sources: null, or
+// the simplification's SimplifyResult::sources, which lets it skip the edges left unchanged (the
+// result is the same, up to the rounding of distances that are 0).
+double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified,
+                                     const std::vector<uint32_t>* sources = nullptr);
 
 // Clips the simplified triangles (indexing gathered's vertices) by the diamond's interior faces
 // into its slots' fragments (appended to out[slot]): the last part of coarsen_diamond.
