@@ -81,7 +81,7 @@ int main(int argc, char** argv) {
                                        piece.locked.data(), settings);
         }, thread_cpu_seconds);
         double error = 0;
-        const double t_measure = best_of(kRuns, [&] { error = measured_simplification_error(g, simplified.indices); },
+        const double t_measure = best_of(kRuns, [&] { error = measured_simplification_error(g, simplified.indices, &simplified.sources); },
                                          thread_cpu_seconds);
         WorkFragment out = g;
         out.indices = simplified.indices;

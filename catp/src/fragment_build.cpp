@@ -110,7 +110,8 @@ void FragmentWelder::triangle(uint32_t a, uint32_t b, uint32_t c) {
 }
 
 void FragmentWelder::append(const WorkFragment& other) {
-    std::vector<uint32_t> remap(other.positions.size());
+    std::vector<uint32_t>& remap = remap_;  // a member: one allocation for all appended fragments
+    remap.resize(other.positions.size());
     for (size_t v = 0; v < other.positions.size(); ++v)
         remap[v] = add(other.positions[v], other.normals[v], other.colors[v]);
     for (size_t i = 0; i + 2 < other.indices.size(); i += 3)
@@ -810,26 +811,49 @@ double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<u
 // centroids were sampled too until they proved not worth their queries: on the 10M-triangle
 // scan they raised a diamond's maximum in 3 diamonds of 1800, by at most 3%, and took a fifth
 // of the measurement's time.)
+//
+// With `sources` (SimplifyResult::sources), edges that the simplification left as they were are
+// not queried: both ends of such an edge are unchanged corners of its source triangle, so it is
+// an edge of the gathered surface and its midpoint lies on it (distance 0, which cannot raise
+// the maximum). That is more than half of the edges, and their queries and bucketing were a
+// tenth of the measurement's time.
 double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& gathered,
-                               const std::vector<uint32_t>& simplified, const Box& box) {
-    GridDistance to_gathered(pos, gathered, box);
-    double error = 0;
+                               const std::vector<uint32_t>& simplified, const std::vector<uint32_t>* sources,
+                               const Box& box) {
+    // Bit k of changed(t): the edge from corner k to corner k + 1 of simplified triangle t may
+    // not be a gathered edge.
+    auto changed = [&](size_t t) -> unsigned {
+        if (!sources) return 7;
+        const uint32_t* in = &gathered[3 * size_t((*sources)[t])];
+        const uint32_t* out = &simplified[3 * t];
+        const unsigned same = unsigned(in[0] == out[0]) | unsigned(in[1] == out[1]) << 1 | unsigned(in[2] == out[2]) << 2;
+        const unsigned same_next = (same >> 1 | same << 2) & 7;  // bit k: corner k + 1 unchanged
+        return ~(same & same_next) & 7;
+    };
     // Edges, each once: bucketed by their smaller vertex (a counting sort; sorting 64-bit edge
     // keys cost a third as much as the queries it saved), duplicates found within a bucket.
     std::vector<uint32_t> first(pos.size() + 1, 0);
-    for (size_t i = 0; i < simplified.size(); ++i) {
-        const uint32_t u = simplified[i], w = simplified[i % 3 == 2 ? i - 2 : i + 1];
-        first[std::min(u, w) + 1]++;
-    }
+    size_t edges = 0;
+    for (size_t t = 0; 3 * t < simplified.size(); ++t)
+        for (unsigned bits = changed(t), k = 0; k < 3; ++k)
+            if (bits >> k & 1) {
+                first[std::min(simplified[3 * t + k], simplified[3 * t + (k + 1) % 3]) + 1]++;
+                ++edges;
+            }
+    if (edges == 0) return 0.0;
     for (size_t v = 1; v < first.size(); ++v) first[v] += first[v - 1];
-    std::vector<uint32_t> other(simplified.size());
+    std::vector<uint32_t> other(edges);
     {
         std::vector<uint32_t> fill(first.begin(), first.end() - 1);
-        for (size_t i = 0; i < simplified.size(); ++i) {
-            const uint32_t u = simplified[i], w = simplified[i % 3 == 2 ? i - 2 : i + 1];
-            other[fill[std::min(u, w)]++] = std::max(u, w);
-        }
+        for (size_t t = 0; 3 * t < simplified.size(); ++t)
+            for (unsigned bits = changed(t), k = 0; k < 3; ++k)
+                if (bits >> k & 1) {
+                    const uint32_t u = simplified[3 * t + k], w = simplified[3 * t + (k + 1) % 3];
+                    other[fill[std::min(u, w)]++] = std::max(u, w);
+                }
     }
+    GridDistance to_gathered(pos, gathered, box);
+    double error = 0;
     for (size_t u = 0; u < pos.size(); ++u)
         for (uint32_t k = first[u]; k < first[u + 1]; ++k) {
             const uint32_t w = other[k];
@@ -852,7 +876,8 @@ double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<
 // running maximum as its `enough`, so a query is only cut short when its distance cannot raise
 // the maximum; and an edge shared by two simplified triangles has one midpoint, measured once
 // (the same point, bit for bit, as (a + b) / 2 is symmetric).
-double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified) {
+double measured_simplification_error(const WorkFragment& gathered, const std::vector<uint32_t>& simplified,
+                                     const std::vector<uint32_t>* sources) {
     if (simplified.size() == gathered.indices.size()) return 0.0;
     // The two directions are independent (each is the exact maximum over its own points), so
     // they may run side by side.
@@ -861,7 +886,7 @@ double measured_simplification_error(const WorkFragment& gathered, const std::ve
     // lies between gathered positions.
     const Box box = bounding_box(gathered.positions);
     tbb::parallel_invoke([&] { removed = removed_vertices_error(gathered.positions, simplified, box); },
-                         [&] { points = simplified_points_error(gathered.positions, gathered.indices, simplified, box); });
+                         [&] { points = simplified_points_error(gathered.positions, gathered.indices, simplified, sources, box); });
     return std::max(removed, points);
 }
 
@@ -1016,7 +1041,7 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
     // The measurement and the clipping only read the gathered and simplified meshes: run them
     // side by side (the coarsest levels have fewer diamonds than cores).
     double error = 0;
-    tbb::parallel_invoke([&] { error = measured_simplification_error(gathered, simplified.indices); },
+    tbb::parallel_invoke([&] { error = measured_simplification_error(gathered, simplified.indices, &simplified.sources); },
                          [&] { clip_into_slots(d, gathered, simplified.indices, out); });
     return error;
 }

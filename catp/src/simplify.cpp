@@ -289,6 +289,7 @@ public:
         : settings_(settings), vertex_count_(uint32_t(vertex_count)) {
         const size_t v = vertex_count;
         arena_.reserve(tris_, index_count);
+        arena_.reserve(source_, index_count / 3);
         arena_.reserve(pairs_, index_count);
         arena_.reserve(start_, v + 1);
         arena_.reserve(valence_, v);
@@ -324,6 +325,7 @@ private:
     const uint32_t vertex_count_;
     Arena arena_;
     uint32_t* tris_ = nullptr;  // live triangles, 3 indices each
+    uint32_t* source_ = nullptr;  // per live triangle, its index in the input
     size_t tri_count_ = 0;      // in the buffer; live_ counts them within a pass
     // Adjacency of the current pass: the pairs of v are [start_[v], start_[v + 1]).
     Pair* pairs_ = nullptr;
@@ -354,6 +356,7 @@ void Simplifier::load(const double* positions, const uint32_t* indices, size_t i
         tris_[w] = a;
         tris_[w + 1] = b;
         tris_[w + 2] = c;
+        source_[w / 3] = uint32_t(i / 3);
         w += (a != b && b != c && a != c) ? 3 : 0;
     }
     tri_count_ = w / 3;
@@ -456,8 +459,10 @@ void Simplifier::remove_duplicate_triangles() {
         if (std::equal(keys[i].v, keys[i].v + 3, keys[i - 1].v)) keep[keys[i].t] = 0;
     size_t w = 0;
     for (size_t t = 0; t < n; ++t)
-        if (keep[t])
+        if (keep[t]) {
+            source_[w / 3] = source_[t];
             for (int j = 0; j < 3; ++j) tris_[w++] = tris_[3 * t + j];
+        }
     tri_count_ = w / 3;
 }
 
@@ -782,6 +787,7 @@ void Simplifier::compact() {
         tris_[w] = a;
         tris_[w + 1] = b;
         tris_[w + 2] = c;
+        source_[w / 3] = source_[t / 3];
         w += (a != b && b != c && a != c) ? 3 : 0;
     }
     tri_count_ = w / 3;
@@ -820,6 +826,7 @@ SimplifyResult Simplifier::run() {
     }
     SimplifyResult result;
     result.indices.assign(tris_, tris_ + tri_count_ * 3);
+    result.sources.assign(source_, source_ + tri_count_);
     result.error = std::sqrt(error2_);
     return result;
 }

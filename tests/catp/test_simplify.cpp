@@ -353,6 +353,34 @@ TEST(Simplify, NoDegenerateOrDuplicateTrianglesEvenFromDirtyInput) {
     EXPECT_TRUE(ok);
 }
 
+TEST(Simplify, SourcesNameEachOutputTrianglesInputTriangleWithItsCornersKeptOrCollapsed) {
+    // Dirty input first (dropped triangles shift the numbering), then simplification.
+    TestMesh m = icosphere(3, 0.03);
+    m.indices.insert(m.indices.begin(), {0, 0, 1, 3, 4, 5, 5, 3, 4});  // degenerate, then a duplicate pair
+    for (size_t target : {m.triangles(), m.triangles() / 2, m.triangles() / 8}) {
+        const SimplifyResult r = run(m, target);
+        ASSERT_EQ(r.sources.size() * 3, r.indices.size());
+        const std::set<uint32_t> kept = referenced(r.indices);
+        for (size_t t = 0; t < r.sources.size(); ++t) {
+            const uint32_t s = r.sources[t];
+            ASSERT_LT(size_t(s), m.triangles());
+            if (t > 0) {
+                EXPECT_LT(r.sources[t - 1], s) << "input order";
+            }
+            for (int k = 0; k < 3; ++k) {
+                const uint32_t in = m.indices[3 * s + k], out = r.indices[3 * t + k];
+                EXPECT_TRUE(in == out || !kept.count(in)) << "corner " << k << " of triangle " << t
+                                                          << ": changed, yet its input vertex is still there";
+            }
+        }
+        if (target == m.triangles()) {
+            EXPECT_EQ(r.sources.front(), 1u) << "the degenerate triangle is dropped";
+            for (size_t t = 0; t < r.sources.size(); ++t)
+                for (int k = 0; k < 3; ++k) EXPECT_EQ(m.indices[3 * r.sources[t] + k], r.indices[3 * t + k]);
+        }
+    }
+}
+
 TEST(Simplify, NoNormalFlipsOnBumpyHeightField) {
     // Slopes up to about 1.3: steep enough that careless collapses fold triangles over.
     const auto f = [](double x, double y) {

@@ -57,6 +57,10 @@ struct SimplifyResult {
     // Triangles (3 indices each) referencing the input vertices; winding as in the input.
     // Surviving triangles keep their input order.
     std::vector<uint32_t> indices;
+    // For each output triangle, the input triangle it was (index into the input's triangles):
+    // the same corners in the same order, each either unchanged or replaced by the vertex it
+    // collapsed onto.
+    std::vector<uint32_t> sources;
     // Largest error of any collapse performed: the square root of its quadric cost, a distance in
     // object units (about the rms distance of the removed region's planes to the kept vertex).
     // 0 when nothing was collapsed.
