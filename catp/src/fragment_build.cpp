@@ -988,15 +988,34 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     // triangles, and only the first of them welds it by position.
     const size_t vertex_count = gathered.positions.size();
     std::vector<uint32_t> welded(size_t(n) * vertex_count, FragmentWelder::kNotWelded);
-    for (size_t i = 0; i + 2 < simplified.size(); i += 3) {
-        const uint32_t* f = &simplified[i];
+    // Every triangle's fate in every slot first, so that each slot's arrays are allocated once
+    // at about their final size (grown push by push, they were copied and faulted in anew at
+    // each doubling, and kept up to twice the memory they needed in the spill).
+    const size_t triangles = simplified.size() / 3;
+    std::vector<uint8_t> fates(triangles * size_t(n));
+    std::array<size_t, 8> whole{}, cut{};
+    for (size_t t = 0; t < triangles; ++t)
+        for (int s = 0; s < n; ++s) {
+            if (slot_planes[s].empty()) continue;
+            const SlotSides::Fate fate = sides.classify(&simplified[3 * t], s);
+            fates[t * size_t(n) + size_t(s)] = uint8_t(fate);
+            whole[size_t(s)] += fate == SlotSides::kInside;
+            cut[size_t(s)] += fate == SlotSides::kCut;
+        }
+    // A slot's fragment has about 0.6 vertices per triangle, and a cut triangle leaves about one
+    // piece in each slot it meets (1M scan: 1.43M whole and cut triangles, 1.42M out, 0.84M
+    // vertices).
+    for (size_t s = 0; s < size_t(n); ++s)
+        if (whole[s] + cut[s] > 0) welders[s].reserve((whole[s] + cut[s]) * 5 / 8 + 16, whole[s] + cut[s] * 5 / 4 + 16);
+    for (size_t t = 0; t < triangles; ++t) {
+        const uint32_t* f = &simplified[3 * t];
         std::array<Vec3d, 3> tri = {gathered.positions[f[0]], gathered.positions[f[1]], gathered.positions[f[2]]};
         std::array<Vec3f, 3> normals = {gathered.normals[f[0]], gathered.normals[f[1]], gathered.normals[f[2]]};
         std::array<Rgb8, 3> colors = {gathered.colors[f[0]], gathered.colors[f[1]], gathered.colors[f[2]]};
         for (int s = 0; s < n; ++s) {
             if (slot_planes[s].empty()) continue;
             uint32_t* slot_welded = &welded[size_t(s) * vertex_count];
-            switch (sides.classify(f, s)) {
+            switch (SlotSides::Fate(fates[t * size_t(n) + size_t(s)])) {
                 case SlotSides::kOutside: break;
                 case SlotSides::kInside: welders[s].add_whole(f, slot_welded, tri, normals, colors); break;
                 case SlotSides::kCut:
