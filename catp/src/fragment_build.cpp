@@ -820,6 +820,7 @@ double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<u
 double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& gathered,
                                const std::vector<uint32_t>& simplified, const std::vector<uint32_t>* sources,
                                const Box& box) {
+    assert(!sources || sources->size() * 3 == simplified.size());
     // Bit k of changed(t): the edge from corner k to corner k + 1 of simplified triangle t may
     // not be a gathered edge.
     auto changed = [&](size_t t) -> unsigned {
