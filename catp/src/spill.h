@@ -56,6 +56,7 @@ public:
     void add(uint64_t block, const Record& record);
     size_t block_count() const { return keys_.size(); }
     uint64_t block_key(size_t b) const { return keys_[b]; }
+    uint64_t block_records(size_t b) const { return counts_[b]; }
     // Loads a block's triangles in the order they were added (and frees its buffer).
     void load(size_t b, std::vector<Record>& out);
     uint64_t bytes_spilled() const { return file_end_; }
