@@ -685,9 +685,12 @@ void CatpBuild::coarsen_level() {
     std::vector<double> produced_error(runs.size(), 0.0);
     // Each thread's gathered and child fragments, cleared from diamond to diamond but kept for
     // the level: fresh arrays for every diamond made malloc search its bins of free chunks for
-    // them (3.5% of the 10M scan's build, most of it cache misses on chunk headers).
+    // them (3.5% of the 10M scan's build, most of it cache misses on chunk headers). A thread
+    // waiting inside coarsen_diamond may take up another diamond meanwhile: that one finds the
+    // set in use and works in arrays of its own.
     struct Scratch {
         WorkFragment gathered, child;
+        bool in_use = false;
     };
     tbb::enumerable_thread_specific<Scratch> scratches;
     tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
@@ -700,7 +703,14 @@ void CatpBuild::coarsen_level() {
             auto it = diamond_error_.find(child.bits);
             if (it != diamond_error_.end()) child_error = std::max(child_error, it->second);
         }
-        Scratch& scratch = scratches.local();
+        Scratch& mine = scratches.local();
+        Scratch own;
+        Scratch& scratch = mine.in_use ? own : mine;
+        scratch.in_use = true;
+        struct Release {
+            Scratch& s;
+            ~Release() { s.in_use = false; }
+        } release{scratch};
         WorkFragment &gathered = scratch.gathered, &child = scratch.child;
         clear_keeping_capacity(gathered);
         {
