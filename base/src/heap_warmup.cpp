@@ -29,7 +29,8 @@ HeapWarmup::HeapWarmup(size_t bytes) {
     mallopt(M_ARENA_MAX, 1);
     mallopt(M_TRIM_THRESHOLD, INT32_MAX);
     mallopt(M_MMAP_THRESHOLD, int(kMmapThreshold));
-#if defined(__linux__) && defined(MADV_POPULATE_WRITE)
+#endif
+#if defined(__GLIBC__) && defined(__linux__) && defined(MADV_POPULATE_WRITE)
     // Allocated piece by piece, populated, then freed: the pieces merge into the heap's top,
     // which is no longer trimmed.
     std::vector<void*> pieces;
@@ -43,9 +44,6 @@ HeapWarmup::HeapWarmup(size_t bytes) {
         warmed_ += end - begin;
     }
     for (size_t i = pieces.size(); i-- > 0;) std::free(pieces[i]);
-#else
-    (void)bytes;
-#endif
 #else
     (void)bytes;
 #endif

@@ -110,6 +110,12 @@ struct Quadric {
     }
 };
 
+// condition ? a : b, computed with masks: no branch for the compiler to emit.
+inline uint64_t select(bool condition, uint64_t a, uint64_t b) {
+    const uint64_t mask = uint64_t(0) - uint64_t(condition);
+    return (a & mask) | (b & ~mask);
+}
+
 // Triangle (x, a, b) around vertex x, stored as (a, b).
 struct Pair {
     uint32_t a, b;
@@ -670,14 +676,13 @@ void Simplifier::collect_candidates() {
             const double num = q.eval(t.p) + t.e, den = w + t.w;
             const float c = num > 0 && den > 0 ? float(num / den) : 0.0f;
             const uint64_t key = uint64_t(std::bit_cast<uint32_t>(c)) << 32 | y;
-            // As masks: GCC 12 compiled std::min and std::max here into a branch on key < k1,
-            // which mispredicted (simplify_mesh's share of the 10M-scan build 16.8% -> 14.2%,
-            // coarsen_bench's simplify column x0.85).
-            const uint64_t below = uint64_t(0) - uint64_t(key < k1);  // all ones when key < k1
-            const uint64_t larger = (k1 & below) | (key & ~below);    // max(k1, key)
-            k1 = (key & below) | (k1 & ~below);                       // min(k1, key)
-            const uint64_t below2 = uint64_t(0) - uint64_t(larger < k2);
-            k2 = (larger & below2) | (k2 & ~below2);
+            // By masks (select): GCC 12 compiled std::min and std::max here into a branch on
+            // key < k1, which mispredicted (simplify_mesh's share of the 10M-scan build
+            // 16.8% -> 14.2%, coarsen_bench's simplify column x0.85).
+            const bool below = key < k1;
+            const uint64_t larger = select(below, k1, key);  // max(k1, key)
+            k1 = select(below, key, k1);                     // min(k1, key)
+            k2 = select(larger < k2, larger, k2);
         };
         // Targets: every neighbour (the first elements of the fan's pairs) of an interior vertex,
         // the two border neighbours of a border vertex. One loop, so the evaluation inlines.
@@ -786,17 +791,16 @@ Simplifier::Outcome Simplifier::try_collapse(uint32_t x, uint32_t y, double max_
 }
 
 void Simplifier::compact() {
-    const size_t n = tri_count_ * 3;
-    size_t w = 0;
-    for (size_t t = 0; t < n; t += 3) {
-        const uint32_t a = remap_[tris_[t]], b = remap_[tris_[t + 1]], c = remap_[tris_[t + 2]];
-        tris_[w] = a;
-        tris_[w + 1] = b;
-        tris_[w + 2] = c;
-        source_[w / 3] = source_[t / 3];
-        w += (a != b && b != c && a != c) ? 3 : 0;
+    size_t kept = 0;
+    for (size_t t = 0; t < tri_count_; ++t) {
+        const uint32_t a = remap_[tris_[3 * t]], b = remap_[tris_[3 * t + 1]], c = remap_[tris_[3 * t + 2]];
+        tris_[3 * kept] = a;
+        tris_[3 * kept + 1] = b;
+        tris_[3 * kept + 2] = c;
+        source_[kept] = source_[t];
+        kept += (a != b && b != c && a != c) ? 1 : 0;
     }
-    tri_count_ = w / 3;
+    tri_count_ = kept;
 }
 
 SimplifyResult Simplifier::run() {
