@@ -72,6 +72,51 @@ TEST(RansTables, DataCostMatchesLog2OfTheFrequencies) {
     }
 }
 
+// describe_counts prices each scale over the present symbols only and hands back the chosen
+// scale's table and cost: they must be exactly build_freqs() of the description and
+// data_cost_bits() of the counts with it, and the chosen scale the smallest within a hair of
+// the cheapest, as pricing every scale the straightforward way gives.
+TEST(RansTables, DescribeCountsReturnsTheTableAndCostOfItsDescription) {
+    std::mt19937 rng(13);
+    for (int round = 0; round < 5000; ++round) {
+        uint32_t counts[rans::kMaxAlphabet] = {};
+        const int nsym = 1 + int(rng() % rans::kMaxAlphabet);
+        const uint32_t scale = 1u << (rng() % 18);
+        for (int i = 0; i < nsym; ++i)
+            if (rng() % 3 != 0) counts[i] = uint32_t(rng() % scale);
+        if (rng() % 2) counts[rng() % nsym] += 1;
+        rans::FreqTable returned;
+        double returned_bits = -1;
+        const rans::TableDesc d = rans::describe_counts(counts, nsym, &returned, &returned_bits);
+        rans::FreqTable expected;
+        ASSERT_TRUE(rans::build_freqs(d, expected)) << "round " << round;
+        ASSERT_EQ(returned.scale_bits, expected.scale_bits) << "round " << round;
+        for (int i = 0; i < d.nsym; ++i) {
+            ASSERT_EQ(returned.freq[size_t(i)], expected.freq[size_t(i)]) << "round " << round << " symbol " << i;
+            ASSERT_EQ(returned.start[size_t(i)], expected.start[size_t(i)]) << "round " << round << " symbol " << i;
+        }
+        ASSERT_EQ(returned_bits, rans::data_cost_bits(counts, expected)) << "round " << round;
+        // The same description without the outputs.
+        const rans::TableDesc plain = rans::describe_counts(counts, nsym);
+        ASSERT_EQ(plain.scale_bits, d.scale_bits);
+        for (int i = 0; i < rans::kMaxAlphabet; ++i) ASSERT_EQ(plain.code[size_t(i)], d.code[size_t(i)]);
+        // The scale: the smallest whose cost is within a hair (0.1% + half a bit) of the
+        // cheapest, every scale priced the plain way. (One present symbol or none costs nothing
+        // at the smallest scale.)
+        double cost[rans::kMaxScaleBits + 1], best = 1e30;
+        for (int s = rans::kMinScaleBits; s <= rans::kMaxScaleBits; ++s) {
+            rans::TableDesc at = d;
+            at.scale_bits = s;
+            rans::FreqTable f;
+            cost[s] = rans::build_freqs(at, f) ? rans::data_cost_bits(counts, f) : 1e30;
+            best = std::min(best, cost[s]);
+        }
+        EXPECT_LE(cost[d.scale_bits], best * 1.001 + 0.5) << "round " << round;
+        for (int s = rans::kMinScaleBits; s < d.scale_bits; ++s)
+            EXPECT_GT(cost[s], best * 1.001 + 0.5) << "round " << round << " scale " << s;
+    }
+}
+
 // build_freqs derives every scale's frequencies from one division per symbol (floor(w 2^12 / W)
 // shifted down); this pins it to the direct floor(w 2^s / W) with the same adjustments.
 TEST(RansTables, BuildFreqsMatchesTheDirectDivision) {
