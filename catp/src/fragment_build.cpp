@@ -416,6 +416,21 @@ float root(float x) {
 Float4 min4(Float4 a, Float4 b) { return a < b ? a : b; }
 Float4 max4(Float4 a, Float4 b) { return a > b ? a : b; }
 
+// root() of each lane.
+Float4 root4(Float4 x) {
+#if defined(__SSE__)
+    return Float4(_mm_sqrt_ps(__m128(x)));
+#else
+    return Float4{root(x[0]), root(x[1]), root(x[2]), root(x[3])};
+#endif
+}
+
+// Rows to columns.
+void transpose4(Float4 m[4]) {
+    const Float4 r0 = m[0], r1 = m[1], r2 = m[2], r3 = m[3];
+    for (int i = 0; i < 4; ++i) m[i] = Float4{r0[i], r1[i], r2[i], r3[i]};
+}
+
 bool all_lanes(Int4 v) {
 #if defined(__SSE__)
     return _mm_movemask_ps(reinterpret_cast<__m128>(v)) == 0xf;
@@ -441,6 +456,11 @@ struct Sphere {
     float radius;
 };
 
+// First and last cell per axis of a triangle's box (a grid has at most 256 cells per axis).
+struct CellRange {
+    uint8_t first[3], last[3];
+};
+
 // (cell, triangle): one cell that a triangle's box overlaps.
 struct CellEntry {
     uint32_t cell, triangle;
@@ -454,6 +474,7 @@ struct GridArrays {
     std::vector<TriangleProbe> probes;
     std::vector<Sphere> spheres;
     std::vector<float> settle_margin;
+    std::vector<CellRange> ranges;
     std::vector<uint32_t> start, items;
     std::vector<CellEntry> entries;
     bool in_use = false;
@@ -464,7 +485,7 @@ struct GridArrays {
 
     size_t bytes() const {
         return probes.capacity() * sizeof(TriangleProbe) + spheres.capacity() * sizeof(Sphere) +
-               settle_margin.capacity() * sizeof(float) + (start.capacity() + items.capacity()) * sizeof(uint32_t) +
+               settle_margin.capacity() * sizeof(float) + ranges.capacity() * sizeof(CellRange) + (start.capacity() + items.capacity()) * sizeof(uint32_t) +
                entries.capacity() * sizeof(CellEntry);
     }
     // Grows an array to at least n elements (never shrinks it: elements are overwritten, so
@@ -574,21 +595,29 @@ private:
         std::vector<CellEntry>& entries = arrays_->entries;
         entries.clear();
         entries.reserve(3 * triangles_);
-        // One pass over the triangles: probe, sphere, and an entry per cell that the triangle's
-        // box overlaps, counted per cell (for a counting sort of the entries by cell). The
-        // entries are kept, so that the fill below is one flat loop (nested loops over the
-        // ranges mispredicted their exits).
-        for (size_t t = 0; t < triangles_; ++t) {
+        // Two passes over the triangles. The first, without branches, computes each one's
+        // probe, sphere and range of cells: its divisions and roots overlap from triangle to
+        // triangle, where in one pass with the filing below, whose loop exits mispredict, they
+        // stalled it. The second files an entry per cell that the triangle's box overlaps,
+        // counted per cell (for a counting sort of the entries by cell). The entries are kept,
+        // so that the fill below is one flat loop (nested loops over the ranges mispredicted
+        // their exits).
+        CellRange* ranges = GridArrays::at_least(arrays_->ranges, triangles_);
+        size_t t = 0;
+        for (; t + 4 <= triangles_; t += 4) prepare4(t, float(extent), ranges);
+        for (; t < triangles_; ++t) {
             const Float4 a = relative(corner(t, 0)), b = relative(corner(t, 1)), c = relative(corner(t, 2));
             EdgeProducts e;
             probes_[t] = make_probe(a, b, c, e);
             spheres_[t] = make_sphere(a, b, c);
             settle_margin_[t] = settle_margin(e, float(extent));
-            int r[6];
-            cell_range(a, b, c, r);
-            for (int z = r[2]; z <= r[5]; ++z)
-                for (int y = r[1]; y <= r[4]; ++y)
-                    for (int x = r[0]; x <= r[3]; ++x) {
+            ranges[t] = cell_range(a, b, c);
+        }
+        for (size_t t = 0; t < triangles_; ++t) {
+            const CellRange& r = ranges[t];
+            for (int z = r.first[2]; z <= r.last[2]; ++z)
+                for (int y = r.first[1]; y <= r.last[1]; ++y)
+                    for (int x = r.first[0]; x <= r.last[0]; ++x) {
                         const uint32_t cell = uint32_t(cell_index(x, y, z));
                         start_[cell]++;
                         entries.push_back({cell, uint32_t(t)});
@@ -600,6 +629,71 @@ private:
         items_ = GridArrays::at_least(arrays_->items, entries.size());
         // Fill back to front, decrementing the end of each cell: the ends become the starts.
         for (size_t k = entries.size(); k-- > 0;) items_[--start_[entries[k].cell]] = entries[k].triangle;
+    }
+
+    // What the first pass of build() computes for triangles t to t + 3, one triangle per lane:
+    // each lane performs the very operations, in the same order, of make_probe, make_sphere,
+    // settle_margin and cell_range for its triangle, so the results are the same bits. (One
+    // division and one root for four triangles: in the scalar pass they were a fifth of the
+    // grid's construction.)
+    void prepare4(size_t t, float extent, CellRange* ranges) {
+        Float4 a[3], b[3], c[3];  // by axis; lane k: triangle t + k
+        for (int k = 0; k < 4; ++k) {
+            const Vec3d &pa = corner(t + k, 0), &pb = corner(t + k, 1), &pc = corner(t + k, 2);
+            for (int i = 0; i < 3; ++i) {
+                a[i][k] = float(pa[i] - lo_[i]);
+                b[i][k] = float(pb[i] - lo_[i]);
+                c[i][k] = float(pc[i] - lo_[i]);
+            }
+        }
+        const Float4 zero = {0, 0, 0, 0};
+        auto dot = [](const Float4 x[3], const Float4 y[3]) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; };
+        // make_probe
+        Float4 u[3], v[3];
+        for (int i = 0; i < 3; ++i) {
+            u[i] = b[i] - a[i];
+            v[i] = c[i] - a[i];
+        }
+        const Float4 n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+        const Float4 nn = dot(n, n), uu = dot(u, u), uv = dot(u, v), vv = dot(v, v);
+        const Float4 inv_nn = nn > zero ? 1.0f / nn : zero, inv_len = root4(inv_nn);
+        // The lanes of along_n, along_u and along_v (zero lanes of make_probe's constants too).
+        const Float4 along_u[4] = {zero * inv_nn, vv * inv_nn, -uv * inv_nn, (uv - vv) * inv_nn};
+        const Float4 along_v[4] = {zero * inv_nn, -uv * inv_nn, uu * inv_nn, (uv - uu) * inv_nn};
+        Float4 rows[4][4];  // [x, y, z, constant][h, u, v, w]
+        for (int i = 0; i < 3; ++i)
+            for (int l = 0; l < 4; ++l)
+                rows[i][l] = n[i] * (l == 0 ? inv_len : zero) + u[i] * along_u[l] + v[i] * along_v[l];
+        for (int l = 0; l < 4; ++l)
+            rows[3][l] = rows[0][l] * a[0] + rows[1][l] * a[1] + rows[2][l] * a[2] - (l == 3 ? 1.0f : 0.0f);
+        for (int i = 0; i < 4; ++i) transpose4(rows[i]);
+        for (int k = 0; k < 4; ++k) probes_[t + k] = {rows[0][k], rows[1][k], rows[2][k], rows[3][k]};
+        // make_sphere
+        Float4 centre[3], da[3], db[3], dc[3];
+        for (int i = 0; i < 3; ++i) {
+            centre[i] = (a[i] + b[i] + c[i]) * (1.0f / 3.0f);
+            da[i] = a[i] - centre[i];
+            db[i] = b[i] - centre[i];
+            dc[i] = c[i] - centre[i];
+        }
+        const Float4 radius = root4(max4(max4(dot(da, da), dot(db, db)), dot(dc, dc)));
+        for (int k = 0; k < 4; ++k) spheres_[t + k] = {{centre[0][k], centre[1][k], centre[2][k]}, radius[k]};
+        // settle_margin
+        const Float4 longest2 = max4(max4(uu, vv), uu + vv - 2 * uv);
+        const Float4 floor = max4(Float4{1, 1, 1, 1} * (1e-6f * extent * extent), 1e-2f * longest2);
+        const Float4 margin = nn >= longest2 * floor ? probe_slack_ + 3e-3f * root4(longest2)
+                                                     : Float4{1, 1, 1, 1} * std::numeric_limits<float>::infinity();
+        for (int k = 0; k < 4; ++k) settle_margin_[t + k] = margin[k];
+        // cell_range
+        for (int i = 0; i < 3; ++i) {
+            const Float4 last = Float4{1, 1, 1, 1} * last_cell4_[i];
+            const Int4 first = __builtin_convertvector(min4(max4(min4(min4(a[i], b[i]), c[i]) * inv_cell4_[i], zero), last), Int4);
+            const Int4 end = __builtin_convertvector(min4(max4(max4(max4(a[i], b[i]), c[i]) * inv_cell4_[i], zero), last), Int4);
+            for (int k = 0; k < 4; ++k) {
+                ranges[t + k].first[i] = uint8_t(first[k]);
+                ranges[t + k].last[i] = uint8_t(end[k]);
+            }
+        }
     }
 
     // Whether a triangle of `cell` over which p lies (its projection inside the triangle), near
@@ -759,17 +853,19 @@ private:
             return std::numeric_limits<float>::infinity();
         return probe_slack_ + 3e-3f * root(longest2);
     }
-    // First and last cell per axis (x, y, z, then x, y, z) of the box of a, b, c (relative, in
+    // First and last cell per axis of the box of a, b, c (relative, in
     // floats), clamped to the grid: in floats, not doubles, as that cut the grid's construction
     // by a tenth; their rounding may put a corner up to 3e-5 cells off, which the slack covers.
-    void cell_range(Float4 a, Float4 b, Float4 c, int r[6]) const {
+    CellRange cell_range(Float4 a, Float4 b, Float4 c) const {
         const Float4 zero = {0, 0, 0, 0};
         const Int4 first = __builtin_convertvector(min4(max4(min4(min4(a, b), c) * inv_cell4_, zero), last_cell4_), Int4);
         const Int4 last = __builtin_convertvector(min4(max4(max4(max4(a, b), c) * inv_cell4_, zero), last_cell4_), Int4);
+        CellRange r;
         for (int i = 0; i < 3; ++i) {
-            r[i] = first[i];
-            r[3 + i] = last[i];
+            r.first[i] = uint8_t(first[i]);
+            r.last[i] = uint8_t(last[i]);
         }
+        return r;
     }
     size_t cell_index(int x, int y, int z) const { return (size_t(z) * dims_[1] + y) * dims_[0] + x; }
     // Distance along one axis from v to cell i's slab (0 inside), less the slack.
@@ -903,7 +999,8 @@ double measured_simplification_error(const WorkFragment& gathered, const std::ve
 namespace {
 
 // The side (plane_side times the plane's sign) of every referenced vertex for each clip plane of
-// each slot, and from them the fate of a triangle in a slot, decided exactly as clip_triangle
+// each slot, as bit masks (a branchy per-plane loop over bytes was most of clip_into_slots' own
+// time), and from them the fate of a triangle in a slot, decided exactly as clip_triangle
 // decides it: clip_triangle tests the planes in order, and while the triangle is still whole, a
 // plane with every corner strictly inside leaves it whole, one with no corner inside and some
 // strictly outside drops it. Anything else (a real cut, a corner on a plane) goes to
@@ -914,7 +1011,7 @@ public:
 
     SlotSides(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices,
               const std::vector<std::vector<ClipPlane>>& slot_planes)
-        : slot_planes_(slot_planes), stride_(0) {
+        : stride_(0) {
         // Neighbouring slots share an interior face (with opposite keep sides), so a diamond has
         // only about half as many distinct planes as slot planes: each vertex is tested against
         // the distinct ones (plane_side was most of this constructor's time).
@@ -931,30 +1028,42 @@ public:
                 uses.push_back({u, cp.sign * same_direction(*distinct[u], cp.plane)});
             }
         }
-        sides_.assign(positions.size() * stride_, 0);
+        assert(stride_ <= 16);  // 8 slots with 2 interior faces each
+        for (size_t s = 0; s < slot_planes.size(); ++s) slot_bits_[s] = ((1u << slot_planes[s].size()) - 1) << first_[s];
+        // Per vertex, bit first_[s] + k of `inside` / `outside`: the vertex is strictly inside /
+        // strictly outside slot s's plane k. Vertices of no triangle keep 0, unread.
+        sides_.assign(positions.size(), Sides{0, 0});
         std::vector<uint8_t> seen(positions.size(), 0);
-        int8_t side[16];
-        assert(distinct.size() <= 16);  // 8 slots with 2 interior faces each
+        int side[16];
         for (uint32_t v : indices) {
             if (seen[v]) continue;
             seen[v] = 1;
-            for (size_t u = 0; u < distinct.size(); ++u) side[u] = int8_t(plane_side(*distinct[u], positions[v]));
-            int8_t* out = &sides_[size_t(v) * stride_];
-            for (const Use& use : uses) *out++ = int8_t(side[use.plane] * use.sign);
+            for (size_t u = 0; u < distinct.size(); ++u) side[u] = plane_side(*distinct[u], positions[v]);
+            Sides& out = sides_[v];
+            for (size_t k = 0; k < uses.size(); ++k) {
+                const int value = side[uses[k].plane] * uses[k].sign;
+                out.inside |= uint16_t(unsigned(value > 0) << k);
+                out.outside |= uint16_t(unsigned(value < 0) << k);
+            }
         }
     }
 
-    Fate classify(const uint32_t* corners, int slot) const {
-        const size_t planes = slot_planes_[slot].size();
-        const int8_t* a = &sides_[size_t(corners[0]) * stride_ + first_[slot]];
-        const int8_t* b = &sides_[size_t(corners[1]) * stride_ + first_[slot]];
-        const int8_t* c = &sides_[size_t(corners[2]) * stride_ + first_[slot]];
-        for (size_t k = 0; k < planes; ++k) {
-            if (a[k] > 0 && b[k] > 0 && c[k] > 0) continue;
-            if (a[k] <= 0 && b[k] <= 0 && c[k] <= 0 && (a[k] < 0 || b[k] < 0 || c[k] < 0)) return kOutside;
-            return kCut;
-        }
-        return kInside;
+    // A triangle's corners against every slot's planes, for fate().
+    struct TriangleSides {
+        unsigned inside;   // bit first_[s] + k: every corner strictly inside plane k of slot s
+        unsigned dropped;  // ... no corner inside and some strictly outside
+    };
+    TriangleSides triangle_sides(const uint32_t* corners) const {
+        const Sides &a = sides_[corners[0]], &b = sides_[corners[1]], &c = sides_[corners[2]];
+        return {unsigned(a.inside & b.inside & c.inside),
+                unsigned(~(a.inside | b.inside | c.inside) & (a.outside | b.outside | c.outside))};
+    }
+    // The triangle's fate in `slot`: decided by the first of the slot's planes (in order) that
+    // does not have every corner strictly inside; inside if there is none.
+    Fate fate(const TriangleSides& t, int slot) const {
+        const unsigned undecided = ~t.inside & slot_bits_[slot];
+        if (undecided == 0) return kInside;
+        return t.dropped & undecided & (0u - undecided) ? kOutside : kCut;
     }
 
 private:
@@ -966,10 +1075,13 @@ private:
         return a.n == b.n ? 1 : -1;
     }
 
-    const std::vector<std::vector<ClipPlane>>& slot_planes_;
+    struct Sides {
+        uint16_t inside, outside;
+    };
     size_t stride_;
     std::vector<size_t> first_;
-    std::vector<int8_t> sides_;
+    std::array<unsigned, 8> slot_bits_{};  // the bits of each slot's planes
+    std::vector<Sides> sides_;
 };
 
 }  // namespace
@@ -1004,14 +1116,16 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     const size_t triangles = simplified.size() / 3;
     std::vector<uint8_t> fates(triangles * size_t(n));
     std::array<size_t, 8> whole{}, cut{};
-    for (size_t t = 0; t < triangles; ++t)
+    for (size_t t = 0; t < triangles; ++t) {
+        const SlotSides::TriangleSides corners = sides.triangle_sides(&simplified[3 * t]);
         for (int s = 0; s < n; ++s) {
             if (slot_planes[s].empty()) continue;
-            const SlotSides::Fate fate = sides.classify(&simplified[3 * t], s);
+            const SlotSides::Fate fate = sides.fate(corners, s);
             fates[t * size_t(n) + size_t(s)] = uint8_t(fate);
             whole[size_t(s)] += fate == SlotSides::kInside;
             cut[size_t(s)] += fate == SlotSides::kCut;
         }
+    }
     // A slot's fragment has about 0.6 vertices per triangle, and a cut triangle leaves about one
     // piece in each slot it meets (1M scan: 1.43M whole and cut triangles, 1.42M out, 0.84M
     // vertices).

@@ -175,7 +175,7 @@ static void round_to_grid(const double lambda[], int32_t weight[]) {
 template <int K>
 static BaryWeights quantize_on_support(const double p[3], const std::array<LatticePoint, 4>& c, SupportMask support) {
     double corners[K][3];
-    const double* used[K];
+    const double* used[K] = {};
     int index[K] = {}, k = 0;
     for (int i = 0; i < 4; ++i) {
         if (!(support & (1 << i))) continue;
