@@ -357,11 +357,19 @@ void CatpBuild::compute_normals() {
 
 // Vertex positions from model units to lattice units on the snapping grid, once per vertex
 // (before, every triangle converted its three corners: 30M conversions for 10M triangles).
+// In parallel when every vertex is in memory (the read phase is otherwise serial).
 void CatpBuild::to_lattice() {
-    for (uint64_t v = 0; v < vertices_->size(); ++v) {
-        Vec3d& p = vertices_->at_for_write(v).position;
+    auto convert = [&](Vec3d& p) {
         for (int i = 0; i < 3; ++i) p[i] = snap_to_grid((p[i] - place_.origin[i]) / place_.cell);
+    };
+    PagedArray<VertexRecord>& vertices = *vertices_;
+    if (vertices.resident()) {
+        tbb::parallel_for(tbb::blocked_range<uint64_t>(0, vertices.size(), 1 << 14), [&](const tbb::blocked_range<uint64_t>& r) {
+            for (uint64_t v = r.begin(); v != r.end(); ++v) convert(vertices.resident_at(v).position);
+        });
+        return;
     }
+    for (uint64_t v = 0; v < vertices.size(); ++v) convert(vertices.at_for_write(v).position);
 }
 
 // True to bin triangles as corner indices (TriangleCorners), keeping the vertices in memory until

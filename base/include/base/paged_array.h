@@ -68,6 +68,11 @@ public:
     const T& resident_at(uint64_t i) const {
         return slots_[size_t(slot_of_page_[size_t(i / kPageRecords)])].data[size_t(i % kPageRecords)];
     }
+    // The same, for writing (different records from different threads). No page is marked
+    // dirty: with every page in memory, none is ever evicted, so none is ever written back.
+    T& resident_at(uint64_t i) {
+        return slots_[size_t(slot_of_page_[size_t(i / kPageRecords)])].data[size_t(i % kPageRecords)];
+    }
     // Bytes written to and read from the scratch file so far.
     uint64_t bytes_spilled() const { return spilled_; }
 
