@@ -1,6 +1,7 @@
 // The out-of-core converter: the memory budget changes where data lives, never the dataset;
 // streamed PLY input gives the same dataset as the mesh in memory; bad input leaves nothing.
 #include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
 
 #include <filesystem>
 #include <map>
@@ -73,6 +74,17 @@ TEST(CatpOutOfCore, PagedArrayKeepsEveryRecordThroughEvictions) {
     }
     for (uint64_t at = 0; at < n; ++at) ASSERT_EQ(paged.at(at), reference[at]);
     EXPECT_GT(paged.bytes_spilled(), 0u);
+}
+
+TEST(CatpOutOfCore, PagedArrayResidentWritesFromManyThreadsAreWhatAtReads) {
+    TempDir dir;
+    const uint64_t n = 50000;
+    PagedArray<uint64_t> paged(n, n * sizeof(uint64_t) * 2, dir.file("x"));
+    for (uint64_t i = 0; i < n; ++i) paged.at_for_write(i) = i;
+    ASSERT_TRUE(paged.resident());
+    tbb::parallel_for(uint64_t(0), n, [&](uint64_t i) { paged.resident_at(i) = 3 * i + 1; });
+    for (uint64_t i = 0; i < n; ++i) ASSERT_EQ(paged.at(i), 3 * i + 1) << "record " << i;
+    EXPECT_EQ(paged.bytes_spilled(), 0u);
 }
 
 TEST(CatpOutOfCore, TheDatasetDoesNotDependOnTheMemoryBudget) {
