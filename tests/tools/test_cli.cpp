@@ -6,6 +6,8 @@
 #include <filesystem>
 #include <fstream>
 #include <csignal>
+#include <fcntl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -71,6 +73,41 @@ TEST(Cli, ConvertThenVerifySucceedsOnAGeneratedSphere) {
     ToolRun v = run("verify " + out.string() + " --mesh " + in.string() + " --samples 2000");
     EXPECT_EQ(v.status, 0) << v.output;
     EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
+}
+
+// --memory bounds the whole process, measured from outside: the kernel's high-water mark of the
+// tool's resident memory (wait4), not what the tool reports of itself. A million triangles at
+// 88 MiB: the 1G build of this mesh peaks near 110 MiB, so the budget is what holds it down
+// (triangles binned with their vertices, 156 MiB of scratch data written). Measured: 70.6 to
+// 76.7 MiB over 12 runs. (Closer to the minimum the peak varies more from run to run, and at
+// 72 MiB some runs went past the budget, by up to 2.7 MiB: not yet understood.)
+TEST(Cli, ConvertOfAMillionTrianglesStaysWithinATightMemoryBudget) {
+    fs::path in = scratch() / "scan1m.ply", out = scratch() / "scan1m.cpq", log = scratch() / "scan1m.txt";
+    write_ply(in.string(), make_scan_like(1000000, 7));
+    const uint64_t budget = uint64_t(88) << 20;
+    const std::string tool = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq";
+    const pid_t pid = fork();
+    ASSERT_GE(pid, 0);
+    if (pid == 0) {
+        const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+        if (fd < 0) _exit(127);
+        dup2(fd, 1);
+        dup2(fd, 2);
+        execl(tool.c_str(), tool.c_str(), "convert", in.c_str(), "-o", out.c_str(), "--memory", "88M", (char*)nullptr);
+        _exit(127);
+    }
+    int status = 0;
+    rusage usage{};
+    ASSERT_EQ(wait4(pid, &status, 0, &usage), pid);
+    std::ifstream text(log);
+    const std::string output((std::istreambuf_iterator<char>(text)), std::istreambuf_iterator<char>());
+    ASSERT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << output;
+    EXPECT_LE(uint64_t(usage.ru_maxrss) * 1024, budget) << "peak " << usage.ru_maxrss / 1024 << " MiB\n" << output;
+    // The budget was binding: scratch data went to disk.
+    EXPECT_EQ(output.find(" 0.0 MiB of scratch data"), std::string::npos) << output;
+    EXPECT_NE(output.find("MiB of scratch data written to disk"), std::string::npos) << output;
+    fs::remove(in);
+    fs::remove(out);
 }
 
 TEST(Cli, MissingInputIsAClearError) {
