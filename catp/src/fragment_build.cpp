@@ -403,25 +403,16 @@ Box bounding_box(const std::vector<Vec3d>& points) {
 using Float4 = float __attribute__((vector_size(16)));
 using Int4 = int32_t __attribute__((vector_size(16)));
 
-// Square root of x >= 0 as one instruction: std::sqrt keeps a branch to the library for
-// negative input (errno), and the grid's construction takes three roots per triangle.
-float root(float x) {
-#if defined(__SSE__)
-    return _mm_cvtss_f32(_mm_sqrt_ss(_mm_set_ss(x)));
-#else
-    return std::sqrt(x);
-#endif
-}
-
 Float4 min4(Float4 a, Float4 b) { return a < b ? a : b; }
 Float4 max4(Float4 a, Float4 b) { return a > b ? a : b; }
 
-// root() of each lane.
+// Square roots of four lanes >= 0 as one instruction (std::sqrt keeps a branch to the library
+// for negative input, errno; the grid's construction takes two roots per triangle).
 Float4 root4(Float4 x) {
 #if defined(__SSE__)
     return Float4(_mm_sqrt_ps(__m128(x)));
 #else
-    return Float4{root(x[0]), root(x[1]), root(x[2]), root(x[3])};
+    return Float4{std::sqrt(x[0]), std::sqrt(x[1]), std::sqrt(x[2]), std::sqrt(x[3])};
 #endif
 }
 
@@ -485,8 +476,8 @@ struct GridArrays {
 
     size_t bytes() const {
         return probes.capacity() * sizeof(TriangleProbe) + spheres.capacity() * sizeof(Sphere) +
-               settle_margin.capacity() * sizeof(float) + ranges.capacity() * sizeof(CellRange) + (start.capacity() + items.capacity()) * sizeof(uint32_t) +
-               entries.capacity() * sizeof(CellEntry);
+               settle_margin.capacity() * sizeof(float) + ranges.capacity() * sizeof(CellRange) +
+               (start.capacity() + items.capacity()) * sizeof(uint32_t) + entries.capacity() * sizeof(CellEntry);
     }
     // Grows an array to at least n elements (never shrinks it: elements are overwritten, so
     // what lies beyond n is left alone).
@@ -577,10 +568,10 @@ private:
         for (int i = 0; i < 3; ++i) dims_[i] = std::max(1, int((box.hi[i] - lo_[i]) / cell_) + 1);
         assert(std::max({dims_[0], dims_[1], dims_[2]}) <= 256);
         max_dim_ = std::max({dims_[0], dims_[1], dims_[2]});
-        inv_cell4_ = Float4{1, 1, 1, 0} * float(inv_cell_);
-        last_cell4_ = Float4{float(dims_[0] - 1), float(dims_[1] - 1), float(dims_[2] - 1), 0.0f};
+        inv_cell_f_ = float(inv_cell_);
+        for (int i = 0; i < 3; ++i) last_cell_[i] = float(dims_[i] - 1);
         // Slack for the cell-box bounds: triangles are filed under the cells their box overlaps
-        // as computed in floats (cell_range), which may put a corner up to 3e-5 cells outside
+        // as computed in floats (prepare), which may put a corner up to 3e-5 cells outside
         // them; a query's own cell, in doubles, is off by less than 1e-9.
         slack_ = cell_ * 1e-4 + 1e-6;
         // Float rounding of the probes and spheres is below 1e-6 of the extent.
@@ -603,16 +594,7 @@ private:
         // so that the fill below is one flat loop (nested loops over the ranges mispredicted
         // their exits).
         CellRange* ranges = GridArrays::at_least(arrays_->ranges, triangles_);
-        size_t t = 0;
-        for (; t + 4 <= triangles_; t += 4) prepare4(t, float(extent), ranges);
-        for (; t < triangles_; ++t) {
-            const Float4 a = relative(corner(t, 0)), b = relative(corner(t, 1)), c = relative(corner(t, 2));
-            EdgeProducts e;
-            probes_[t] = make_probe(a, b, c, e);
-            spheres_[t] = make_sphere(a, b, c);
-            settle_margin_[t] = settle_margin(e, float(extent));
-            ranges[t] = cell_range(a, b, c);
-        }
+        for (size_t t = 0; t < triangles_; t += 4) prepare(t, std::min<size_t>(4, triangles_ - t), float(extent), ranges);
         for (size_t t = 0; t < triangles_; ++t) {
             const CellRange& r = ranges[t];
             for (int z = r.first[2]; z <= r.last[2]; ++z)
@@ -631,24 +613,30 @@ private:
         for (size_t k = entries.size(); k-- > 0;) items_[--start_[entries[k].cell]] = entries[k].triangle;
     }
 
-    // What the first pass of build() computes for triangles t to t + 3, one triangle per lane:
-    // each lane performs the very operations, in the same order, of make_probe, make_sphere,
-    // settle_margin and cell_range for its triangle, so the results are the same bits. (One
-    // division and one root for four triangles: in the scalar pass they were a fifth of the
-    // grid's construction.)
-    void prepare4(size_t t, float extent, CellRange* ranges) {
+    // The first pass of build() for triangles t to t + count - 1 (count <= 4), one triangle per
+    // lane (lanes past count repeat the last triangle; only count are stored): each one's probe,
+    // bounding sphere, settle margin and range of cells. (One division and one root for four
+    // triangles: one triangle at a time, they were a fifth of the grid's construction.) The
+    // corners are relative to the grid's corner, in floats.
+    void prepare(size_t t, size_t count, float extent, CellRange* ranges) {
         Float4 a[3], b[3], c[3];  // by axis; lane k: triangle t + k
-        for (int k = 0; k < 4; ++k) {
-            const Vec3d &pa = corner(t + k, 0), &pb = corner(t + k, 1), &pc = corner(t + k, 2);
+        for (size_t k = 0; k < 4; ++k) {
+            const size_t tk = t + std::min(k, count - 1);
+            const Vec3d &pa = corner(tk, 0), &pb = corner(tk, 1), &pc = corner(tk, 2);
             for (int i = 0; i < 3; ++i) {
                 a[i][k] = float(pa[i] - lo_[i]);
                 b[i][k] = float(pb[i] - lo_[i]);
                 c[i][k] = float(pc[i] - lo_[i]);
             }
         }
-        const Float4 zero = {0, 0, 0, 0};
+        const Float4 zero = {0, 0, 0, 0}, ones = {1, 1, 1, 1};
         auto dot = [](const Float4 x[3], const Float4 y[3]) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; };
-        // make_probe
+
+        // The probe. With u, v the edges from a and n = u x v, its rows are the unit normal
+        // n / |n|, the dual basis g0 = (|v|^2 u - (u.v) v) / |n|^2 (g0 . u = 1, g0 . v = 0) and
+        // g1 = (|u|^2 v - (u.v) u) / |n|^2, and g2 = -g0 - g1: each column is a combination of
+        // n, u and v. The constants make a's coordinates (h, u, v, w) = (0, 0, 0, 1).
+        // Degenerate triangles get zero rows: every point lies on their plane and over them.
         Float4 u[3], v[3];
         for (int i = 0; i < 3; ++i) {
             u[i] = b[i] - a[i];
@@ -657,7 +645,7 @@ private:
         const Float4 n[3] = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
         const Float4 nn = dot(n, n), uu = dot(u, u), uv = dot(u, v), vv = dot(v, v);
         const Float4 inv_nn = nn > zero ? 1.0f / nn : zero, inv_len = root4(inv_nn);
-        // The lanes of along_n, along_u and along_v (zero lanes of make_probe's constants too).
+        // The weights of n, u and v in the probe's four columns (h, u, v, w).
         const Float4 along_u[4] = {zero * inv_nn, vv * inv_nn, -uv * inv_nn, (uv - vv) * inv_nn};
         const Float4 along_v[4] = {zero * inv_nn, -uv * inv_nn, uu * inv_nn, (uv - uu) * inv_nn};
         Float4 rows[4][4];  // [x, y, z, constant][h, u, v, w]
@@ -667,8 +655,9 @@ private:
         for (int l = 0; l < 4; ++l)
             rows[3][l] = rows[0][l] * a[0] + rows[1][l] * a[1] + rows[2][l] * a[2] - (l == 3 ? 1.0f : 0.0f);
         for (int i = 0; i < 4; ++i) transpose4(rows[i]);
-        for (int k = 0; k < 4; ++k) probes_[t + k] = {rows[0][k], rows[1][k], rows[2][k], rows[3][k]};
-        // make_sphere
+        for (size_t k = 0; k < count; ++k) probes_[t + k] = {rows[0][k], rows[1][k], rows[2][k], rows[3][k]};
+
+        // The bounding sphere: about the centroid, its radius measured from the centre as rounded.
         Float4 centre[3], da[3], db[3], dc[3];
         for (int i = 0; i < 3; ++i) {
             centre[i] = (a[i] + b[i] + c[i]) * (1.0f / 3.0f);
@@ -677,19 +666,30 @@ private:
             dc[i] = c[i] - centre[i];
         }
         const Float4 radius = root4(max4(max4(dot(da, da), dot(db, db)), dot(dc, dc)));
-        for (int k = 0; k < 4; ++k) spheres_[t + k] = {{centre[0][k], centre[1][k], centre[2][k]}, radius[k]};
-        // settle_margin
-        const Float4 longest2 = max4(max4(uu, vv), uu + vv - 2 * uv);
-        const Float4 floor = max4(Float4{1, 1, 1, 1} * (1e-6f * extent * extent), 1e-2f * longest2);
+        for (size_t k = 0; k < count; ++k) spheres_[t + k] = {{centre[0][k], centre[1][k], centre[2][k]}, radius[k]};
+
+        // The settle margin: how far below `enough` a candidate's height must be for its probe
+        // to settle it (over_in_cell). Infinite unless the triangle is well shaped (no side more
+        // than 10 times its smallest height, that height at least 1e-3 of the grid's extent).
+        // Float rounding of the corners and of a query (6e-8 of the extent each) then tilts and
+        // shifts the probe's plane by less than 1e-6 of the extent within the grid (probe_slack_
+        // is ten times that) and moves its barycentric coordinates by less than 1e-3: a
+        // candidate (coordinates at least -1e-4) projects at most 2.2e-3 of the longest side
+        // outside the triangle. nn = (2 area)^2 = smallest height^2 longest side^2.
+        const Float4 longest2 = max4(max4(uu, vv), uu + vv - 2 * uv);  // |c - b|^2 = |v - u|^2
+        const Float4 floor = max4(ones * (1e-6f * extent * extent), 1e-2f * longest2);
         const Float4 margin = nn >= longest2 * floor ? probe_slack_ + 3e-3f * root4(longest2)
-                                                     : Float4{1, 1, 1, 1} * std::numeric_limits<float>::infinity();
-        for (int k = 0; k < 4; ++k) settle_margin_[t + k] = margin[k];
-        // cell_range
+                                                     : ones * std::numeric_limits<float>::infinity();
+        for (size_t k = 0; k < count; ++k) settle_margin_[t + k] = margin[k];
+
+        // The first and last cell per axis of the triangle's box, clamped to the grid: in
+        // floats, not doubles, as that cut the grid's construction by a tenth; their rounding
+        // may put a corner up to 3e-5 cells off, which the slack covers.
         for (int i = 0; i < 3; ++i) {
-            const Float4 last = Float4{1, 1, 1, 1} * last_cell4_[i];
-            const Int4 first = __builtin_convertvector(min4(max4(min4(min4(a[i], b[i]), c[i]) * inv_cell4_[i], zero), last), Int4);
-            const Int4 end = __builtin_convertvector(min4(max4(max4(max4(a[i], b[i]), c[i]) * inv_cell4_[i], zero), last), Int4);
-            for (int k = 0; k < 4; ++k) {
+            const Float4 last = ones * last_cell_[i];
+            const Int4 first = __builtin_convertvector(min4(max4(min4(min4(a[i], b[i]), c[i]) * inv_cell_f_, zero), last), Int4);
+            const Int4 end = __builtin_convertvector(min4(max4(max4(max4(a[i], b[i]), c[i]) * inv_cell_f_, zero), last), Int4);
+            for (size_t k = 0; k < count; ++k) {
                 ranges[t + k].first[i] = uint8_t(first[k]);
                 ranges[t + k].last[i] = uint8_t(end[k]);
             }
@@ -802,71 +802,6 @@ private:
     Float4 relative(const Vec3d& v) const {
         return Float4{float(v[0] - lo_[0]), float(v[1] - lo_[1]), float(v[2] - lo_[2]), 0.0f};
     }
-    static float dot3(Float4 a, Float4 b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
-    // Bounding sphere about the centroid, its radius measured from the centre as rounded.
-    static Sphere make_sphere(Float4 a, Float4 b, Float4 c) {
-        const Float4 centre = (a + b + c) * (1.0f / 3.0f);
-        const Float4 da = a - centre, db = b - centre, dc = c - centre;
-        Sphere s;
-        for (int i = 0; i < 3; ++i) s.centre[i] = centre[i];
-        s.radius = root(std::max({dot3(da, da), dot3(db, db), dot3(dc, dc)}));
-        return s;
-    }
-    // Products of a triangle's edges u = b - a, v = c - a (n = u x v), as make_probe computes
-    // them, for settle_margin.
-    struct EdgeProducts {
-        float nn, uu, uv, vv;
-    };
-    // With u, v the edges from a and n = u x v, the probe's rows are the unit normal n / |n|,
-    // the dual basis g0 = (|v|^2 u - (u.v) v) / |n|^2 (g0 . u = 1, g0 . v = 0) and
-    // g1 = (|u|^2 v - (u.v) u) / |n|^2, and g2 = -g0 - g1: each column is a combination of n, u
-    // and v. The constants make a's coordinates (h, u, v, w) = (0, 0, 0, 1). Degenerate
-    // triangles get zero rows: every point lies on their plane and over them.
-    static TriangleProbe make_probe(Float4 a, Float4 b, Float4 c, EdgeProducts& e) {
-        const Float4 u = b - a, v = c - a;
-        const Float4 n = {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0], 0.0f};
-        const float nn = dot3(n, n), uu = dot3(u, u), uv = dot3(u, v), vv = dot3(v, v);
-        e = {nn, uu, uv, vv};
-        const float inv_nn = nn > 0 ? 1.0f / nn : 0.0f, inv_len = root(inv_nn);
-        const Float4 along_n = {inv_len, 0.0f, 0.0f, 0.0f};
-        const Float4 along_u = Float4{0.0f, vv, -uv, uv - vv} * inv_nn;
-        const Float4 along_v = Float4{0.0f, -uv, uu, uv - uu} * inv_nn;
-        TriangleProbe probe;
-        probe.x = n[0] * along_n + u[0] * along_u + v[0] * along_v;
-        probe.y = n[1] * along_n + u[1] * along_u + v[1] * along_v;
-        probe.z = n[2] * along_n + u[2] * along_u + v[2] * along_v;
-        probe.constant = probe.x * a[0] + probe.y * a[1] + probe.z * a[2] - Float4{0.0f, 0.0f, 0.0f, 1.0f};
-        return probe;
-    }
-    // How far below `enough` a candidate's height must be for its probe to settle it
-    // (over_in_cell), for a triangle with edge products e: infinite unless the triangle
-    // is well shaped (no side more than 10 times its smallest height, that height at least 1e-3
-    // of the grid's extent). Float rounding of the corners and of a query (6e-8 of the extent
-    // each) then tilts and shifts the probe's plane by less than 1e-6 of the extent within the
-    // grid (probe_slack_ is ten times that) and moves its barycentric coordinates by less than
-    // 1e-3: a candidate (coordinates at least -1e-4) projects at most 2.2e-3 of the longest side
-    // outside the triangle.
-    float settle_margin(const EdgeProducts& e, float extent) const {
-        const float longest2 = std::max({e.uu, e.vv, e.uu + e.vv - 2 * e.uv});  // |c - b|^2 = |v - u|^2
-        const float height2_times_longest2 = e.nn;  // (2 area)^2 = smallest height^2 longest^2
-        if (!(height2_times_longest2 >= longest2 * std::max(1e-6f * extent * extent, 1e-2f * longest2)))
-            return std::numeric_limits<float>::infinity();
-        return probe_slack_ + 3e-3f * root(longest2);
-    }
-    // First and last cell per axis of the box of a, b, c (relative, in
-    // floats), clamped to the grid: in floats, not doubles, as that cut the grid's construction
-    // by a tenth; their rounding may put a corner up to 3e-5 cells off, which the slack covers.
-    CellRange cell_range(Float4 a, Float4 b, Float4 c) const {
-        const Float4 zero = {0, 0, 0, 0};
-        const Int4 first = __builtin_convertvector(min4(max4(min4(min4(a, b), c) * inv_cell4_, zero), last_cell4_), Int4);
-        const Int4 last = __builtin_convertvector(min4(max4(max4(max4(a, b), c) * inv_cell4_, zero), last_cell4_), Int4);
-        CellRange r;
-        for (int i = 0; i < 3; ++i) {
-            r.first[i] = uint8_t(first[i]);
-            r.last[i] = uint8_t(last[i]);
-        }
-        return r;
-    }
     size_t cell_index(int x, int y, int z) const { return (size_t(z) * dims_[1] + y) * dims_[0] + x; }
     // Distance along one axis from v to cell i's slab (0 inside), less the slack.
     double axis_gap(int axis, int i, double v) const {
@@ -879,14 +814,14 @@ private:
     const size_t triangles_;
     double lo_[3] = {0, 0, 0}, cell_ = 1, inv_cell_ = 1, slack_ = 0;
     float probe_slack_ = 0;           // widens the float bounds, ten times their rounding
-    Float4 inv_cell4_, last_cell4_;   // 1 / cell and the last cell per axis, for cell_range
+    float inv_cell_f_ = 1, last_cell_[3] = {0, 0, 0};  // 1 / cell and the last cell per axis, for prepare
     int dims_[3] = {1, 1, 1};
     int max_dim_ = 1;
     GridArrays::Lease arrays_;
     // Views into arrays_, set by build().
     TriangleProbe* probes_ = nullptr;
     Sphere* spheres_ = nullptr;
-    float* settle_margin_ = nullptr;  // per triangle, see settle_margin()
+    float* settle_margin_ = nullptr;  // per triangle, see prepare()
     // Cell c lists items_[start_[c] .. start_[c + 1]).
     uint32_t* start_ = nullptr;
     uint32_t* items_ = nullptr;
