@@ -945,17 +945,16 @@ public:
     enum Fate { kOutside, kInside, kCut };
 
     SlotSides(const std::vector<Vec3d>& positions, const std::vector<uint32_t>& indices,
-              const std::vector<std::vector<ClipPlane>>& slot_planes)
-        : stride_(0) {
+              const std::vector<std::vector<ClipPlane>>& slot_planes) {
         // Neighbouring slots share an interior face (with opposite keep sides), so a diamond has
         // only about half as many distinct planes as slot planes: each vertex is tested against
         // the distinct ones (plane_side was most of this constructor's time).
         std::vector<const LatticePlane*> distinct;
         struct Use { size_t plane; int sign; };  // slot plane side = distinct side * sign
         std::vector<Use> uses;
+        // Slot planes are numbered in slot order, then plane order: bit k of a mask is plane k.
         for (size_t s = 0; s < slot_planes.size(); ++s) {
-            first_.push_back(stride_);
-            stride_ += slot_planes[s].size();
+            slot_bits_[s] = ((1u << slot_planes[s].size()) - 1) << uses.size();
             for (const ClipPlane& cp : slot_planes[s]) {
                 size_t u = 0;
                 while (u < distinct.size() && !(*distinct[u] == cp.plane)) ++u;
@@ -963,10 +962,9 @@ public:
                 uses.push_back({u, cp.sign * same_direction(*distinct[u], cp.plane)});
             }
         }
-        assert(stride_ <= 16);  // 8 slots with 2 interior faces each
-        for (size_t s = 0; s < slot_planes.size(); ++s) slot_bits_[s] = ((1u << slot_planes[s].size()) - 1) << first_[s];
-        // Per vertex, bit first_[s] + k of `inside` / `outside`: the vertex is strictly inside /
-        // strictly outside slot s's plane k. Vertices of no triangle keep 0, unread.
+        assert(uses.size() <= 16);  // 8 slots with 2 interior faces each
+        // Per vertex, bit k of `inside` / `outside`: the vertex is strictly inside / strictly
+        // outside slot plane k. Vertices of no triangle keep 0, unread.
         sides_.assign(positions.size(), Sides{0, 0});
         std::vector<uint8_t> seen(positions.size(), 0);
         int side[16];
@@ -985,7 +983,7 @@ public:
 
     // A triangle's corners against every slot's planes, for fate().
     struct TriangleSides {
-        unsigned inside;   // bit first_[s] + k: every corner strictly inside plane k of slot s
+        unsigned inside;   // bit k: every corner strictly inside slot plane k
         unsigned dropped;  // ... no corner inside and some strictly outside
     };
     TriangleSides triangle_sides(const uint32_t* corners) const {
@@ -1013,8 +1011,6 @@ private:
     struct Sides {
         uint16_t inside, outside;
     };
-    size_t stride_;
-    std::vector<size_t> first_;
     std::array<unsigned, 8> slot_bits_{};  // the bits of each slot's planes
     std::vector<Sides> sides_;
 };
