@@ -66,10 +66,10 @@ void expect_failure(const std::string& args, const std::string& message_part) {
 TEST(Cli, ConvertThenVerifySucceedsOnAGeneratedSphere) {
     fs::path in = scratch() / "sphere.ply", out = scratch() / "sphere.cpq";
     write_ply(in.string(), make_sphere(5000, 2));
-    ToolRun c = run("convert " + in.string() + " -o " + out.string() + " --leaf-triangles 300 --memory 80M");
+    ToolRun c = run("convert " + in.string() + " -o " + out.string() + " --leaf-triangles 300 --memory 128M");
     ASSERT_EQ(c.status, 0) << c.output;
     EXPECT_NE(c.output.find("input triangles/s"), std::string::npos);
-    EXPECT_NE(c.output.find("of a 80 MiB budget"), std::string::npos) << c.output;
+    EXPECT_NE(c.output.find("of a 128 MiB budget"), std::string::npos) << c.output;
     ToolRun v = run("verify " + out.string() + " --mesh " + in.string() + " --samples 2000");
     EXPECT_EQ(v.status, 0) << v.output;
     EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
@@ -77,16 +77,14 @@ TEST(Cli, ConvertThenVerifySucceedsOnAGeneratedSphere) {
 
 // --memory bounds the whole process, measured from outside: the kernel's high-water mark of the
 // tool's resident memory (wait4), not what the tool reports of itself. A million triangles at
-// 88 MiB: the 1G build of this mesh peaks near 110 MiB, so the budget is what holds it down
-// (triangles binned with their vertices, 156 MiB of scratch data written). Measured: 70.6 to
-// 76.7 MiB over 12 runs. (Closer to the minimum the peak varies more from run to run, and at
-// 72 MiB some runs went past the budget, by up to 2.7 MiB: glibc raises its mmap and trim
-// thresholds as mapped blocks are freed, and freed heap stays resident. Fixed thresholds of
-// 256 KiB kept that run at 59-62 MiB but made it 1.47x slower, in page faults: not done yet.)
+// 112 MiB, 10 MiB above the smallest budget the tool accepts with two threads. The budget binds:
+// what is left for data after the per-thread reserve is a fraction of this mesh's bins and
+// fragments, and the rest goes to scratch files (checked below).
+// bench/catp/memory_budget_bench sweeps more budgets, thread counts and runs.
 TEST(Cli, ConvertOfAMillionTrianglesStaysWithinATightMemoryBudget) {
     fs::path in = scratch() / "scan1m.ply", out = scratch() / "scan1m.cpq", log = scratch() / "scan1m.txt";
     write_ply(in.string(), make_scan_like(1000000, 7));
-    const uint64_t budget = uint64_t(88) << 20;
+    const uint64_t budget = uint64_t(112) << 20;
     const std::string tool = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq";
     const pid_t pid = fork();
     ASSERT_GE(pid, 0);
@@ -95,7 +93,7 @@ TEST(Cli, ConvertOfAMillionTrianglesStaysWithinATightMemoryBudget) {
         if (fd < 0) _exit(127);
         dup2(fd, 1);
         dup2(fd, 2);
-        execl(tool.c_str(), tool.c_str(), "convert", in.c_str(), "-o", out.c_str(), "--memory", "88M", (char*)nullptr);
+        execl(tool.c_str(), tool.c_str(), "convert", in.c_str(), "-o", out.c_str(), "--memory", "112M", (char*)nullptr);
         _exit(127);
     }
     int status = 0;

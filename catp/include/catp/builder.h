@@ -35,11 +35,17 @@ struct CatpBuildSettings {
     uint64_t memory_budget = 0;
 };
 
-// Working memory the converter reserves per worker thread (what the simplifier and the error
-// measurement keep from diamond to diamond, up to 12 and 8 MiB, plus slack) and needs at least
-// beyond that.
-constexpr uint64_t kMemoryPerThread = uint64_t(24) << 20;
-constexpr uint64_t kMinimumDataMemory = uint64_t(4) << 20;
+// Working memory the converter reserves per worker thread, and needs at least beyond that.
+// Measured, not derived: a thread keeps the simplifier's and the error grid's arrays from
+// diamond to diamond (up to 12 and 8 MiB), but the largest diamond of a level sets its working
+// set (65k gathered triangles on the 10M scan: the simplifier's block alone is 16 MiB), a thread
+// waiting inside one diamond's parallel steps may take up parts of another (TBB work stealing)
+// with arrays of their own, and glibc keeps each thread arena's freed blocks resident. The
+// per-thread part of the peak reached about 34 MiB on the 10M scan. The fixed part holds the
+// input reader's 4 MiB window and the levels' indexes. (bench/catp/memory_budget_bench sweeps
+// budgets and thread counts and checks the peak the kernel measured.)
+constexpr uint64_t kMemoryPerThread = uint64_t(40) << 20;
+constexpr uint64_t kMinimumDataMemory = uint64_t(8) << 20;
 // The smallest budget for `threads` workers (0: as many as cores).
 uint64_t minimum_memory_budget(unsigned threads = 0);
 // Half the machine's physical memory.
