@@ -1,7 +1,7 @@
 // gen_mesh: writes a generated mesh (mesh/generators.h) as binary PLY, for the report's larger
 // datasets: the same arguments give the same bytes on every machine.
 //
-// usage: gen_mesh scan|sphere|torus TRIANGLES OUT.ply [--seed S]
+// usage: gen_mesh scan|uneven|sphere|torus TRIANGLES OUT.ply [--seed S]
 #include <cstdio>
 #include <cstdlib>
 #include <string>
@@ -14,10 +14,10 @@ using namespace catpaq;
 
 int main(int argc, char** argv) try {
     if (argc == 2 && (std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help")) {
-        std::printf("usage: gen_mesh scan|sphere|torus TRIANGLES OUT.ply [--seed S]\n");
+        std::printf("usage: gen_mesh scan|uneven|sphere|torus TRIANGLES OUT.ply [--seed S]\n");
         return 0;
     }
-    if (argc != 4 && !(argc == 6 && std::string(argv[4]) == "--seed")) fail("usage: gen_mesh scan|sphere|torus TRIANGLES OUT.ply [--seed S]");
+    if (argc != 4 && !(argc == 6 && std::string(argv[4]) == "--seed")) fail("usage: gen_mesh scan|uneven|sphere|torus TRIANGLES OUT.ply [--seed S]");
     std::string kind = argv[1];
     char* end = nullptr;
     unsigned long long triangles = std::strtoull(argv[2], &end, 10);
@@ -26,12 +26,14 @@ int main(int argc, char** argv) try {
     Mesh mesh;
     if (kind == "scan")
         mesh = make_scan_like(triangles, seed);
+    else if (kind == "uneven")
+        mesh = make_uneven_density(triangles, seed);
     else if (kind == "sphere")
         mesh = make_sphere(triangles, seed);
     else if (kind == "torus")
         mesh = make_torus(triangles, seed);
     else
-        fail("unknown mesh kind '%s' (scan, sphere or torus)", kind.c_str());
+        fail("unknown mesh kind '%s' (scan, uneven, sphere or torus)", kind.c_str());
     write_ply(argv[3], mesh, true);
     std::printf("%s: %zu vertices, %zu triangles\n", argv[3], mesh.vertex_count(), mesh.triangle_count());
     return 0;

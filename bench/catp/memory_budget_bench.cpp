@@ -6,8 +6,8 @@
 // the high-water mark, not sampled), not from what the tool reports of itself. The baseline is
 // the same input at an ample budget (1 GiB) in the same run: times are ratios to it.
 //
-// usage: memory_budget_bench [--input MESH | --triangles N] [--threads 1,2] [--steps 0,8,16,32]
-//                            [--runs 6] [--catpaq PATH]
+// usage: memory_budget_bench [--input MESH | --triangles N [--uneven]] [--threads 1,2]
+//                            [--steps 0,8,16,32] [--runs 6] [--catpaq PATH]
 //   --steps: MiB above the smallest budget the tool accepts for that thread count.
 // Prints one line per budget; exits 1 when any run peaked past its budget.
 #include <sys/resource.h>
@@ -35,12 +35,13 @@ namespace fs = std::filesystem;
 namespace {
 
 const char* kUsage =
-    "usage: memory_budget_bench [--input MESH | --triangles N] [--threads 1,2] [--steps 0,8,16,32]\n"
-    "                           [--runs 6] [--catpaq PATH]\n"
+    "usage: memory_budget_bench [--input MESH | --triangles N [--uneven]] [--threads 1,2]\n"
+    "                           [--steps 0,8,16,32] [--runs 6] [--catpaq PATH]\n"
     "  Converts one mesh at budgets from the smallest `catpaq convert --memory` accepts upwards and\n"
     "  checks each run's peak resident memory (wait4) against its budget.\n"
     "  --input MESH    mesh to convert (default: a generated scan-like mesh of --triangles)\n"
     "  --triangles N   size of the generated mesh (default 1000000)\n"
+    "  --uneven        generate make_uneven_density (a dense sphere in a sparse blob) instead\n"
     "  --threads LIST  thread counts (default 1,2)\n"
     "  --steps LIST    MiB above the smallest accepted budget (default 0,8,16,32)\n"
     "  --runs N        runs per budget (default 6)\n"
@@ -112,7 +113,7 @@ uint64_t smallest_budget_mib(const std::string& tool, const std::string& input, 
 }  // namespace
 
 int main(int argc, char** argv) try {
-    Options options(argc, argv, kUsage);
+    Options options(argc, argv, kUsage, {"uneven"});
     if (options.help()) {
         std::printf("%s", kUsage);
         return 0;
@@ -121,6 +122,7 @@ int main(int argc, char** argv) try {
     const std::string tool = options.get("catpaq", default_tool);
     std::string input = options.get("input", "");
     const int64_t triangles = options.integer("triangles", 1000000, 1000, 100000000);
+    const bool uneven = options.flag("uneven");
     const std::vector<long> thread_counts = parse_list(options.get("threads", "1,2"), "threads");
     const std::vector<long> steps = parse_list(options.get("steps", "0,8,16,32"), "steps");
     const int runs = int(options.integer("runs", 6, 1, 1000));
@@ -135,8 +137,9 @@ int main(int argc, char** argv) try {
     } cleanup{dir};
     if (input.empty()) {
         input = (dir / "scan.ply").string();
-        write_ply(input, make_scan_like(size_t(triangles), 7), true);
-        std::printf("input: generated scan-like mesh of %lld triangles\n", (long long)triangles);
+        write_ply(input, uneven ? make_uneven_density(size_t(triangles), 7) : make_scan_like(size_t(triangles), 7), true);
+        std::printf("input: generated %s mesh of %lld triangles\n", uneven ? "uneven-density" : "scan-like",
+                    (long long)triangles);
     } else {
         std::printf("input: %s\n", input.c_str());
     }

@@ -86,9 +86,22 @@ struct LevelChoice {
 
 // The leaf level: sample vertices are tracked down the hierarchy one bisection at a time (a point
 // in a tetrahedron is in the child on its side of the splitting plane), counting the tetrahedra
-// hit; the leaf level is the first with about `leaf_target` triangles per occupied tetrahedron.
-// Vertices sample the surface as well as triangle centroids do (a mesh has about two triangles
-// per vertex), and they are known before the triangles are read.
+// hit; the leaf level is the first with about `leaf_target` triangles per occupied tetrahedron
+// on average, and with no tetrahedron estimated to hold more than kLargestLeafRatio times the
+// target. Vertices sample the surface as well as triangle centroids do (a mesh has about two
+// triangles per vertex), and they are known before the triangles are read.
+//
+// The second condition matters where density varies: the coarsening's working memory grows
+// with the largest diamond (its gathered fragments), not with the mean one, and the budget
+// reserves a fixed amount per thread for it (kMemoryPerThread). A 300k-triangle scan with a
+// 2M-triangle sphere inside chose its leaves by the mean alone: the sphere's leaf tetrahedra
+// held 46k triangles each, and at a 102 MiB budget the build peaked at 235 MiB. Scan-like
+// meshes of uniform density have a largest tetrahedron of 4.4-6.3 times the target at the level
+// the mean chooses, so their leaves are unchanged. Deeper levels stop once the mean tetrahedron
+// holds under a sixteenth of the target: extreme density contrasts would otherwise make
+// millions of tiny fragments elsewhere.
+constexpr double kLargestLeafRatio = 8.0;
+
 int choose_leaf_level(const std::vector<Vec3d>& sample, uint64_t triangles, size_t leaf_target) {
     struct Tracked { Vec3d p; Tetrahedron t; };
     std::vector<Tracked> points;
@@ -119,8 +132,15 @@ int choose_leaf_level(const std::vector<Vec3d>& sample, uint64_t triangles, size
             keys[i] = h;
         });
         tbb::parallel_sort(keys.begin(), keys.end());
+        size_t largest = 0;
+        for (size_t i = 0, run = 0; i < keys.size(); ++i) {
+            run = (i > 0 && keys[i] == keys[i - 1]) ? run + 1 : 1;
+            largest = std::max(largest, run);
+        }
         size_t distinct = size_t(std::unique(keys.begin(), keys.end()) - keys.begin());
-        if (per_point * double(points.size()) / double(std::max<size_t>(1, distinct)) <= double(leaf_target) * 1.4142)
+        const double mean = per_point * double(points.size()) / double(std::max<size_t>(1, distinct));
+        const double target = double(leaf_target);
+        if (mean <= target * 1.4142 && (per_point * double(largest) <= target * kLargestLeafRatio || mean < target / 16))
             return level;
         over_points([&](size_t i) {
             Tetrahedron a, b;
@@ -226,6 +246,11 @@ struct BudgetShares {
           // instead of being faulted in afresh (1M scan: 3.9 s with one block, 3.2 s with 16).
           block_triangles(std::clamp<uint64_t>(budget * 2 / 5 / 320, 1, kMaxBlockTriangles)) {}
 };
+
+// Working memory of coarsening one diamond per gathered triangle: the simplifier's block, the
+// two error grids, the welded arrays and the clipped slots (measured with heaptrack on the 1M
+// scan, one thread: 21 MiB for its largest diamond, 46k gathered triangles).
+constexpr uint64_t kCoarsenBytesPerTriangle = 480;
 
 constexpr size_t kChunk = 1 << 16;  // vertices or triangles per read
 constexpr size_t kSampleTarget = 50000;
@@ -701,7 +726,7 @@ void CatpBuild::coarsen_level() {
         bool in_use = false;
     };
     tbb::enumerable_thread_specific<Scratch> scratches;
-    tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
+    auto coarsen_run = [&](size_t i) {
         DiamondId id{parent_of[runs[i].first]};
         DiamondInfo info = diamond_info(id);
         // Every child with geometry counts, also those whose gathered slots came from other
@@ -746,7 +771,25 @@ void CatpBuild::coarsen_level() {
             if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, std::move(produced[s]));
         // Gathered triangles sum to about twice the input over all levels.
         progress_->add(gathered_triangles * kCoarsenShare / 200);
-    });
+    };
+    // Diamonds too large for one thread's allowance (kMemoryPerThread) go one at a time, after
+    // the others, each still using every thread inside (coarsen_diamond's parallel steps), and
+    // each after handing the heap's free memory back: where density varies, a level's largest
+    // diamonds gather far more than its mean one, and on top of what glibc kept of the smaller
+    // diamonds' memory they went past the budget (a 300k scan with a 2M-triangle sphere inside,
+    // at 102 MiB: 106-110 MiB; trimmed first, 94-95 MiB). Scan-like meshes of even density
+    // have none (the 10M scan's largest diamond gathers 65k triangles).
+    std::vector<size_t> small, large;
+    for (size_t i = 0; i < runs.size(); ++i) {
+        uint64_t triangles = 0;
+        for (size_t k = runs[i].first; k < runs[i].second; ++k) triangles += refs[k].triangles;
+        (triangles * kCoarsenBytesPerTriangle > kMemoryPerThread ? large : small).push_back(i);
+    }
+    tbb::parallel_for(size_t(0), small.size(), [&](size_t k) { coarsen_run(small[k]); });
+    for (size_t i : large) {
+        return_free_memory(warm_heap_.get());
+        coarsen_run(i);
+    }
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_ = std::move(next);
     // No return_free_memory() here: the next level reuses what this one freed, and trimming
@@ -875,7 +918,11 @@ CatpBuildReport CatpBuild::run() {
 }  // namespace
 
 uint64_t minimum_memory_budget(unsigned threads) {
-    return kMinimumDataMemory + kMemoryPerThread * worker_threads(threads);
+    // At least two threads' allowance, also for one thread: a level's largest diamond, coarsened
+    // alone (coarsen_level), may need up to twice one (its leaves are capped at kLargestLeafRatio
+    // times the target, and it gathers several of them). A 300k scan with a 2M-triangle sphere
+    // inside, one thread at 62 MiB: 65-66 MiB.
+    return kMinimumDataMemory + kMemoryPerThread * std::max(2u, worker_threads(threads));
 }
 
 uint64_t default_memory_budget() {

@@ -408,6 +408,23 @@ Mesh make_scan_like(size_t target_triangles, uint64_t seed) {
     return mesh;
 }
 
+Mesh make_uneven_density(size_t target_triangles, uint64_t seed) {
+    const size_t total = std::max<size_t>(target_triangles, 96);
+    Mesh mesh = make_scan_like(total / 8, seed);
+    const Mesh sphere = make_sphere(total - mesh.triangle_count(), seed + 1);
+    // The blob's surface stays beyond radius 0.5 of the origin: the sphere lies inside it, apart.
+    constexpr double kRadius = 0.15;
+    const uint32_t first = uint32_t(mesh.positions.size());
+    for (size_t v = 0; v < sphere.positions.size(); ++v) {
+        const Vec3d& p = sphere.positions[v];
+        mesh.positions.push_back({p[0] * kRadius, p[1] * kRadius, p[2] * kRadius});
+        mesh.normals.push_back(sphere.normals[v]);
+        mesh.colors.push_back(sphere.colors[v]);
+    }
+    for (uint32_t i : sphere.indices) mesh.indices.push_back(first + i);
+    return mesh;
+}
+
 }  // namespace catpaq
 
 // ---------------------------------------------------------------------------------------------

@@ -78,6 +78,15 @@ TEST(CatpCracks, EveryCutOfAClosedTorusIsClosed) {
     EXPECT_GT(mixed, 10);
 }
 
+// Leaves deep enough for the dense sphere (the largest leaf is bounded, not only the mean) leave
+// the sparse blob in small fragments far below its own density: cuts still close both surfaces.
+TEST(CatpCracks, EveryCutOfAnUnevenDensityMeshIsClosed) {
+    Mesh mesh = make_uneven_density(40000, 2);
+    Built b = build(mesh, "uneven", 200);
+    int mixed = expect_every_cut_closed(b.path, 30);
+    EXPECT_GT(mixed, 10);
+}
+
 TEST(CatpCracks, EveryCutOfTheBunnyIsClosed) {
     Mesh bunny = read_mesh(std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply");
     Built b = build(bunny, "bunny", 1000);

@@ -133,6 +133,32 @@ TEST(Generators, ScanLikeIsAClosedBlobAtTheTargetResolution) {
     }
 }
 
+TEST(Generators, UnevenDensityIsADenseSphereApartInsideASparseBlob) {
+    for (size_t target : {96, 20000, 400000}) {
+        SCOPED_TRACE(target);
+        Mesh mesh = make_uneven_density(target, 5);
+        EXPECT_LE(mesh.triangle_count(), target + 2);
+        EXPECT_GE(mesh.triangle_count() + 2, target);
+        expect_well_formed(mesh);
+        expect_closed_manifold(mesh, 4);  // two spheres
+        // Blob vertices (listed first) keep clear of the sphere's radius 0.15; the rest lie on it.
+        const Mesh blob = make_scan_like(std::max<size_t>(target, 96) / 8, 5);
+        double blob_nearest = 1e9;
+        for (size_t v = 0; v < mesh.vertex_count(); ++v) {
+            const Vec3d& p = mesh.positions[v];
+            const double r = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+            if (v < blob.vertex_count())
+                blob_nearest = std::min(blob_nearest, r);
+            else
+                EXPECT_NEAR(r, 0.15, 1e-6);
+        }
+        EXPECT_GT(blob_nearest, 0.3);
+        // Most triangles on the small sphere (its area is about a hundredth of the blob's).
+        const size_t sphere_triangles = mesh.triangle_count() - blob.triangle_count();
+        EXPECT_GE(sphere_triangles, 6 * blob.triangle_count());
+    }
+}
+
 TEST(Generators, ScanLikeHasDetailAtTheTriangleScale) {
     // The finest noise octave is a few triangles wide: neighbouring normals differ noticeably.
     Mesh scan = make_scan_like(500000, 1);

@@ -46,7 +46,8 @@ struct CatpBuildSettings {
 // budgets and thread counts and checks the peak the kernel measured.)
 constexpr uint64_t kMemoryPerThread = uint64_t(40) << 20;
 constexpr uint64_t kMinimumDataMemory = uint64_t(8) << 20;
-// The smallest budget for `threads` workers (0: as many as cores).
+// The smallest budget for `threads` workers (0: as many as cores): kMinimumDataMemory plus
+// kMemoryPerThread per thread, for at least two threads.
 uint64_t minimum_memory_budget(unsigned threads = 0);
 // Half the machine's physical memory.
 uint64_t default_memory_budget();

@@ -29,6 +29,12 @@ Mesh make_torus(size_t target_triangles, uint64_t seed = 1);
 // 6 s of CPU, spread over the available cores).
 Mesh make_scan_like(size_t target_triangles, uint64_t seed = 1);
 
+// Density that varies about a hundredfold, as in a scan with one finely detailed region: a
+// scan-like blob (make_scan_like) with an eighth of the triangles, and inside it, apart from
+// it, a sphere of radius 0.15 about the origin with the rest. Two closed surfaces. Triangle
+// count within 2 of max(target_triangles, 96).
+Mesh make_uneven_density(size_t target_triangles, uint64_t seed = 1);
+
 // Small meshes that stress numerical robustness. Unless stated otherwise a case's bounding box
 // is exactly [0,1]^3: the converter then uses the root cube [-0.5,1.5]^3, whose bisection planes
 // are x, y, z in {0.5, 0, 1, 0.25, 0.75, ...} and whose diagonal planes (x=y, x+y=1, ...) pass
