@@ -71,6 +71,7 @@ need render_bench bench/client/render_bench
 need hard_cases bench/catp/hard_cases
 need rd_bench bench/catp/rd_bench
 need gen_mesh bench/catp/gen_mesh
+need memory_budget_bench bench/catp/memory_budget_bench
 
 # required NAME OUTFILE CMD...: runs a step the report needs, output to OUTFILE; on failure names
 # the step, shows the end of its output and stops the run (exit 1), so nothing half-measured is
@@ -147,6 +148,17 @@ fi
 if [[ $MODE == short ]]; then SIZES=100000; else SIZES=100000,1000000,10000000; fi
 log "catp_build_bench --sizes $SIZES"
 required "catp_build_bench" "$RAW/build_bench.txt" "$BUILD/bench/catp/catp_build_bench" --sizes "$SIZES"
+
+# ---- memory budget -------------------------------------------------------------------------
+# Peaks measured from outside (wait4) from the smallest accepted budget upwards; a run past its
+# budget fails the report.
+if [[ $MODE == short ]]; then MB_TRIS=200000; MB_RUNS=2; MB_STEPS=0,32; else MB_TRIS=1000000; MB_RUNS=4; MB_STEPS=0,16,48; fi
+log "memory_budget_bench scan $MB_TRIS"
+required "memory_budget_bench scan" "$RAW/memory_scan.txt" "$BUILD/bench/catp/memory_budget_bench" \
+    --triangles "$MB_TRIS" --threads 1,2 --steps "$MB_STEPS" --runs "$MB_RUNS"
+log "memory_budget_bench uneven $MB_TRIS"
+required "memory_budget_bench uneven" "$RAW/memory_uneven.txt" "$BUILD/bench/catp/memory_budget_bench" \
+    --triangles "$MB_TRIS" --uneven --threads 1,2 --steps "$MB_STEPS" --runs "$MB_RUNS"
 
 # ---- hard cases ----------------------------------------------------------------------------
 # A case that neither passes nor is refused with a message fails the run.
