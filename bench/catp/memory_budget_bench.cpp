@@ -10,20 +10,15 @@
 //                            [--steps 0,8,16,32] [--runs 6] [--catpaq PATH]
 //   --steps: MiB above the smallest budget the tool accepts for that thread count.
 // Prints one line per budget; exits 1 when any run peaked past its budget.
-#include <sys/resource.h>
-#include <sys/wait.h>
-#include <fcntl.h>
 #include <unistd.h>
 
 #include <algorithm>
-#include <chrono>
 #include <cstdio>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 #include <string>
 #include <vector>
 
+#include "base/child_process.h"
 #include "base/error.h"
 #include "base/options.h"
 #include "mesh/generators.h"
@@ -63,47 +58,11 @@ std::vector<long> parse_list(const std::string& text, const char* name) {
     return out;
 }
 
-struct ConvertRun {
-    int status = -1;
-    uint64_t peak_bytes = 0;
-    double seconds = 0;
-    std::string output;
-};
-
-// One `catpaq convert` in a child process; its peak resident memory from the kernel.
-ConvertRun run_convert(const std::string& tool, const std::vector<std::string>& args, const fs::path& log) {
-    std::vector<char*> argv;
-    argv.push_back(const_cast<char*>(tool.c_str()));
-    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    const auto start = std::chrono::steady_clock::now();
-    const pid_t pid = fork();
-    if (pid < 0) fail("fork failed");
-    if (pid == 0) {
-        const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        if (fd < 0) _exit(127);
-        dup2(fd, 1);
-        dup2(fd, 2);
-        execv(tool.c_str(), argv.data());
-        _exit(127);
-    }
-    ConvertRun r;
-    int status = 0;
-    rusage usage{};
-    if (wait4(pid, &status, 0, &usage) != pid) fail("wait4 failed");
-    r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : 128;
-    r.peak_bytes = uint64_t(usage.ru_maxrss) * 1024;
-    std::ifstream text(log);
-    r.output.assign(std::istreambuf_iterator<char>(text), std::istreambuf_iterator<char>());
-    return r;
-}
-
 // The smallest budget the tool accepts with `threads` workers, from its own refusal message.
 uint64_t smallest_budget_mib(const std::string& tool, const std::string& input, const fs::path& dir, long threads) {
-    ConvertRun r = run_convert(tool, {"convert", input, "-o", (dir / "refused.cpq").string(), "--memory", "1M",
-                                      "--threads", std::to_string(threads), "--quiet"},
-                               dir / "refused.txt");
+    ChildRun r = run_measured({tool, "convert", input, "-o", (dir / "refused.cpq").string(), "--memory", "1M",
+                               "--threads", std::to_string(threads), "--quiet"},
+                              (dir / "refused.txt").string());
     const size_t at = r.output.find("at least ");
     if (r.status == 0 || at == std::string::npos)
         fail("%s did not refuse a 1 MiB budget as expected:\n%s", tool.c_str(), r.output.c_str());
@@ -141,23 +100,24 @@ int main(int argc, char** argv) try {
         std::printf("input: generated %s mesh of %lld triangles\n", uneven ? "uneven-density" : "scan-like",
                     (long long)triangles);
     } else {
+        if (!fs::is_regular_file(input)) fail("--input %s: no such file", input.c_str());
         std::printf("input: %s\n", input.c_str());
     }
     const std::string out = (dir / "out.cpq").string();
-    const fs::path log = dir / "log.txt";
+    const std::string log = (dir / "log.txt").string();
 
     bool over = false;
     std::printf("%7s %11s %4s %12s %12s %12s %10s\n", "threads", "budget MiB", "runs", "peak min", "peak max",
                 "max/budget", "time x1G");
     for (long threads : thread_counts) {
-        const std::vector<std::string> common = {"convert", input, "-o", out, "--quiet", "--threads", std::to_string(threads)};
+        const std::vector<std::string> common = {tool, "convert", input, "-o", out, "--quiet", "--threads", std::to_string(threads)};
         auto with_memory = [&](const std::string& memory) {
             std::vector<std::string> a = common;
             a.push_back("--memory");
             a.push_back(memory);
             return a;
         };
-        ConvertRun base = run_convert(tool, with_memory("1G"), log);
+        ChildRun base = run_measured(with_memory("1G"), log);
         if (base.status != 0) fail("convert at 1G failed:\n%s", base.output.c_str());
         const uint64_t smallest = smallest_budget_mib(tool, input, dir, threads);
         for (long step : steps) {
@@ -166,7 +126,7 @@ int main(int argc, char** argv) try {
             uint64_t lo = UINT64_MAX, hi = 0;
             double seconds = 0;
             for (int r = 0; r < runs; ++r) {
-                ConvertRun run = run_convert(tool, with_memory(std::to_string(budget_mib) + "M"), log);
+                ChildRun run = run_measured(with_memory(std::to_string(budget_mib) + "M"), log);
                 if (run.status != 0) fail("convert at %llu MiB failed:\n%s", (unsigned long long)budget_mib, run.output.c_str());
                 lo = std::min(lo, run.peak_bytes);
                 hi = std::max(hi, run.peak_bytes);

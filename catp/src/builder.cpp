@@ -84,6 +84,17 @@ struct LevelChoice {
     int block_octave = 0;                 // blocks are the cubes of this octave (level 3 x octave)
 };
 
+// The length of the longest run of equal keys in sorted `keys` (the sample points of the
+// fullest tetrahedron or cube).
+size_t longest_run(const std::vector<uint64_t>& keys) {
+    size_t longest = 0;
+    for (size_t i = 0, run = 0; i < keys.size(); ++i) {
+        run = (i > 0 && keys[i] == keys[i - 1]) ? run + 1 : 1;
+        longest = std::max(longest, run);
+    }
+    return longest;
+}
+
 // The leaf level: sample vertices are tracked down the hierarchy one bisection at a time (a point
 // in a tetrahedron is in the child on its side of the splitting plane), counting the tetrahedra
 // hit; the leaf level is the first with about `leaf_target` triangles per occupied tetrahedron
@@ -132,11 +143,7 @@ int choose_leaf_level(const std::vector<Vec3d>& sample, uint64_t triangles, size
             keys[i] = h;
         });
         tbb::parallel_sort(keys.begin(), keys.end());
-        size_t largest = 0;
-        for (size_t i = 0, run = 0; i < keys.size(); ++i) {
-            run = (i > 0 && keys[i] == keys[i - 1]) ? run + 1 : 1;
-            largest = std::max(largest, run);
-        }
+        const size_t largest = longest_run(keys);
         size_t distinct = size_t(std::unique(keys.begin(), keys.end()) - keys.begin());
         const double mean = per_point * double(points.size()) / double(std::max<size_t>(1, distinct));
         const double target = double(leaf_target);
@@ -167,11 +174,7 @@ LevelChoice choose_block_octave(const std::vector<Vec3d>& sample, uint64_t trian
             keys[i] = c.key();
         }
         std::sort(keys.begin(), keys.end());
-        size_t largest = 0;
-        for (size_t i = 0, run = 0; i < keys.size(); ++i) {
-            run = (i > 0 && keys[i] == keys[i - 1]) ? run + 1 : 1;
-            largest = std::max(largest, run);
-        }
+        const size_t largest = longest_run(keys);
         // Triangles crossing block borders are counted in every block they touch: 25% margin.
         choice.block_octave = octave;
         if (uint64_t(1.25 * per_point * double(largest)) + 1 <= block_target) break;

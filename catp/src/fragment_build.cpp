@@ -564,16 +564,16 @@ private:
         // Cells of about two mean edge lengths (a surface fills few of them, each holding a few
         // triangles), at most 128 per axis. (1.5 and 3 edges measured the same.)
         cell_ = std::max(extent / 128.0, 2.0 * edges / double(3 * measured)) * 1.0000001;
-        for (int i = 0; i < 3; ++i) dims_[i] = std::max(1, int((box.hi[i] - lo_[i]) / cell_) + 1);
         // At most kCellsPerTriangle cells per triangle: a surface fills few cells of its box, and
         // the coarse diamonds of a large model (a box over 200 mean edges wide) reached 128^3
         // cells, 8 MiB of cell starts per grid, two grids per diamond, mostly empty. (Queries
         // are unaffected beyond speed: the grid only orders the search, the result is exact.)
         const double limit = std::max(4096.0, kCellsPerTriangle * double(triangles_));
-        for (double cells = double(dims_[0]) * dims_[1] * dims_[2]; cells > limit;
-             cells = double(dims_[0]) * dims_[1] * dims_[2]) {
-            cell_ *= std::max(1.01, std::cbrt(cells / limit));
+        for (;;) {
             for (int i = 0; i < 3; ++i) dims_[i] = std::max(1, int((box.hi[i] - lo_[i]) / cell_) + 1);
+            const double cells = double(dims_[0]) * dims_[1] * dims_[2];
+            if (cells <= limit) break;
+            cell_ *= std::max(1.01, std::cbrt(cells / limit));
         }
         inv_cell_ = 1.0 / cell_;
         assert(std::max({dims_[0], dims_[1], dims_[2]}) <= 256);

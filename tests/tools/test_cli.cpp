@@ -6,12 +6,11 @@
 #include <filesystem>
 #include <fstream>
 #include <csignal>
-#include <fcntl.h>
-#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
 #include "base/atomic_file.h"
+#include "base/child_process.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
 
@@ -75,37 +74,20 @@ TEST(Cli, ConvertThenVerifySucceedsOnAGeneratedSphere) {
     EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
 }
 
-// `catpaq convert IN -o OUT --memory BUDGET` in a child process, with the kernel's high-water
-// mark of its resident memory (wait4), not what the tool reports of itself.
-struct MeasuredConvert {
-    int status = -1;
-    uint64_t peak_bytes = 0;
-    std::string output;
-};
-
-MeasuredConvert convert_measured(const fs::path& in, const fs::path& out, const std::string& budget) {
-    const fs::path log = out.string() + ".txt";
-    const std::string tool = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq";
-    MeasuredConvert r;
-    const pid_t pid = fork();
-    if (pid < 0) return r;
-    if (pid == 0) {
-        const int fd = open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-        if (fd < 0) _exit(127);
-        dup2(fd, 1);
-        dup2(fd, 2);
-        execl(tool.c_str(), tool.c_str(), "convert", in.c_str(), "-o", out.c_str(), "--memory", budget.c_str(), (char*)nullptr);
-        _exit(127);
-    }
-    int status = 0;
-    rusage usage{};
-    if (wait4(pid, &status, 0, &usage) != pid) return r;
-    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : 128;
-    r.peak_bytes = uint64_t(usage.ru_maxrss) * 1024;
-    std::ifstream text(log);
-    r.output.assign(std::istreambuf_iterator<char>(text), std::istreambuf_iterator<char>());
-    fs::remove(log);
-    return r;
+// Converts `mesh` with `catpaq convert --memory BUDGET_MIB` in a child process and expects its
+// peak resident memory, as the kernel measured it (wait4), within the budget; not what the tool
+// reports of itself. Returns the tool's output.
+std::string expect_convert_within_budget(const Mesh& mesh, const std::string& name, uint64_t budget_mib) {
+    fs::path in = scratch() / (name + ".ply"), out = scratch() / (name + ".cpq");
+    write_ply(in.string(), mesh);
+    ChildRun r = run_measured({std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq", "convert", in.string(), "-o", out.string(),
+                               "--memory", std::to_string(budget_mib) + "M"},
+                              (scratch() / (name + ".txt")).string());
+    EXPECT_EQ(r.status, 0) << r.output;
+    EXPECT_LE(r.peak_bytes, budget_mib << 20) << "peak " << (r.peak_bytes >> 20) << " MiB\n" << r.output;
+    fs::remove(in);
+    fs::remove(out);
+    return r.output;
 }
 
 // --memory bounds the whole process. A million triangles at 112 MiB, 10 MiB above the smallest
@@ -114,28 +96,16 @@ MeasuredConvert convert_measured(const fs::path& in, const fs::path& out, const 
 // scratch files (checked below). bench/catp/memory_budget_bench sweeps more budgets, thread
 // counts and runs.
 TEST(Cli, ConvertOfAMillionTrianglesStaysWithinATightMemoryBudget) {
-    fs::path in = scratch() / "scan1m.ply", out = scratch() / "scan1m.cpq";
-    write_ply(in.string(), make_scan_like(1000000, 7));
-    MeasuredConvert r = convert_measured(in, out, "112M");
-    ASSERT_EQ(r.status, 0) << r.output;
-    EXPECT_LE(r.peak_bytes, uint64_t(112) << 20) << "peak " << (r.peak_bytes >> 20) << " MiB\n" << r.output;
-    EXPECT_EQ(r.output.find(" 0.0 MiB of scratch data"), std::string::npos) << r.output;
-    EXPECT_NE(r.output.find("MiB of scratch data written to disk"), std::string::npos) << r.output;
-    fs::remove(in);
-    fs::remove(out);
+    const std::string output = expect_convert_within_budget(make_scan_like(1000000, 7), "scan1m", 112);
+    EXPECT_EQ(output.find(" 0.0 MiB of scratch data"), std::string::npos) << output;
+    EXPECT_NE(output.find("MiB of scratch data written to disk"), std::string::npos) << output;
 }
 
 // Where density varies a hundredfold (a dense sphere inside a sparse blob), the largest leaves
 // and diamonds, not the mean ones, set the coarsening's memory. Before the leaf level took the
 // largest leaf into account, this run peaked at 158-163 MiB of its 112 MiB budget; now 92-101.
 TEST(Cli, ConvertOfUnevenDensityStaysWithinItsMemoryBudget) {
-    fs::path in = scratch() / "uneven1m.ply", out = scratch() / "uneven1m.cpq";
-    write_ply(in.string(), make_uneven_density(1000000, 7));
-    MeasuredConvert r = convert_measured(in, out, "112M");
-    ASSERT_EQ(r.status, 0) << r.output;
-    EXPECT_LE(r.peak_bytes, uint64_t(112) << 20) << "peak " << (r.peak_bytes >> 20) << " MiB\n" << r.output;
-    fs::remove(in);
-    fs::remove(out);
+    expect_convert_within_budget(make_uneven_density(1000000, 7), "uneven1m", 112);
 }
 
 TEST(Cli, MissingInputIsAClearError) {
