@@ -17,6 +17,14 @@ static const char* kConvertUsage =
     "options:\n"
     "  -o, --output FILE        output dataset (.cpq), written atomically\n"
     "  --format catp            output format (catp: Compact Adaptive TetraPuzzles)\n"
+    "  --precision P            the finest level's largest distance from the input: P in model\n"
+    "                           units, or Pe in mean input edges (default 0.1e); the vertex layout's\n"
+    "                           grid and the leaf level are chosen so that quantization stays within it\n"
+    "  --vertex-layout L        auto (default: position48 without colours; with colours rgb24 when\n"
+    "                           its grid reaches the precision, else rgb18), rgb24 (8-bit colour,\n"
+    "                           deeper leaves if needed), rgb18 (6-bit colour, 4x finer positions),\n"
+    "                           position48 (no colour, 35x finer positions)\n"
+    "  --up AXIS                the model's up axis, stored for viewers: x, y, z, -x, -y, -z (default y)\n"
     "  --leaf-triangles N       target triangles per leaf fragment (default 2000)\n"
     "  --leaf-level L           force the leaf level of the diamond hierarchy\n"
     "  --threads N              worker threads (default: all cores)\n"
@@ -45,6 +53,15 @@ int cmd_convert(int argc, char** argv) {
     settings.leaf_triangles = size_t(options.integer("leaf-triangles", 2000, 50, 1000000));
     settings.leaf_level = int(options.integer("leaf-level", -1, -1, kMaxLevel - 3));
     settings.threads = unsigned(options.integer("threads", 0, 0, 1024));
+    const std::string precision = options.get("precision", "0.1e");
+    if (!parse_precision(precision, settings.precision))
+        fail("--precision: '%s' is not a positive distance in model units (0.001) or in mean edges (0.1e)",
+             precision.c_str());
+    const std::string layout = options.get("vertex-layout", "auto");
+    if (!parse_layout_choice(layout, settings.layout))
+        fail("--vertex-layout: '%s' is not one of auto, rgb24, rgb18, position48", layout.c_str());
+    const std::string up = options.get("up", "y");
+    if (!parse_up_axis(up, settings.up)) fail("--up: '%s' is not one of x, y, z, -x, -y, -z", up.c_str());
     // --memory bounds the whole process: the program's own code and libraries come first, as
     // resident now plus the pages of code the build has still to load (measured: the file-backed
     // part of the resident memory grows by 1-2 MiB after this point).
@@ -66,6 +83,7 @@ int cmd_convert(int argc, char** argv) {
     options.finish();
 
     CatpBuildReport r = build_catp_file(input, output, settings);
+    for (const std::string& w : r.warnings) std::fprintf(stderr, "catpaq convert: warning: %s\n", w.c_str());
     if (quiet) return 0;
     size_t vertices = 0, triangles = 0;
     for (const CatpLevelStats& l : r.levels) {
@@ -75,6 +93,10 @@ int cmd_convert(int argc, char** argv) {
     std::printf("input:      %s: %zu vertices, %zu triangles\n", input.c_str(), r.input_vertices, r.input_triangles);
     std::printf("output:     %s: %llu bytes, %zu diamonds, leaf level %d\n", output.c_str(),
                 (unsigned long long)r.file_bytes, r.nodes, r.leaf_level);
+    std::printf("precision:  %.4g model units (%.3g mean edges of %.4g): vertex layout %s, grid %d, leaf step %.4g, "
+                "leaf level %d (%d from the density alone)\n",
+                r.precision, r.precision / r.mean_edge, r.mean_edge, r.layout.name(), r.layout.grid, r.leaf_step,
+                r.leaf_level, r.density_leaf_level);
     uint64_t process_budget = r.memory_budget + own;
     std::printf("build:      %.2f s (reading included), %.0f input triangles/s, peak memory %.1f MiB of a %.0f MiB budget\n",
                 r.seconds, double(r.input_triangles) / r.seconds, double(r.peak_rss) / (1 << 20),

@@ -71,13 +71,15 @@ static void export_cut(const StreamingSession& session, const Camera& camera, co
         Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(diamond_info(DiamondId{item.diamond_key}), item.slot));
         std::array<LatticePoint, 4> corners = {t[0], t[1], t[2], t[3]};
         uint32_t base = uint32_t(mesh.positions.size());
+        const VertexDecodeParams params = transform.params(corners);
         for (const PackedVertex& v : frag.vertices) {
             DecodedVertex d;
-            if (!decode_packed_vertex(v, corners, transform.anchor_times_grid, transform.scale, d)) continue;
+            if (!decode_packed_vertex(v, params, d)) continue;
             mesh.positions.push_back({transform.anchor_world.x + d.position[0], transform.anchor_world.y + d.position[1],
                                       transform.anchor_world.z + d.position[2]});
             mesh.normals.push_back({d.normal[0], d.normal[1], d.normal[2]});
-            mesh.colors.push_back({v.r(), v.g(), v.b()});
+            mesh.colors.push_back({uint8_t(std::lround(d.color[0] * 255.0f)), uint8_t(std::lround(d.color[1] * 255.0f)),
+                                   uint8_t(std::lround(d.color[2] * 255.0f))});
         }
         for (uint32_t i : frag.indices) mesh.indices.push_back(base + i);
     }

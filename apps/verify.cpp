@@ -1,4 +1,5 @@
 // catpaq verify DATASET [--mesh ORIGINAL]: checks a dataset's invariants and measures its error.
+#include <algorithm>
 #include <cstdio>
 
 #include "apps/commands.h"
@@ -60,6 +61,18 @@ int cmd_verify(int argc, char** argv) {
         std::printf("%5d %8zu %9zu %9zu %12llu %11.3g %11.3g %21s %21s %21s %21s\n", l.level, l.diamonds, l.triangles,
                     l.cut_vertices, (unsigned long long)l.bytes, l.stored_error, l.quantization_step, to, from, to_rms,
                     from_rms);
+    }
+    std::printf("vertices: %s layout, grid %d\n", r.layout.name(), r.layout.grid);
+    if (r.precision > 0) {
+        std::printf("precision: %.4g", r.precision);
+        if (r.mean_edge > 0) std::printf(" (%.3g mean input edges of %.4g)", r.precision / r.mean_edge, r.mean_edge);
+        const VerifyLevel& finest = r.levels.back();
+        if (finest.distance_to_original_max >= 0) {
+            const double measured = std::max(finest.distance_to_original_max, finest.distance_from_original_max);
+            std::printf("; finest level measured %.4g (%.2f of it): %s", measured, measured / r.precision,
+                        r.precision_exceeded ? "EXCEEDED" : "ok");
+        }
+        std::printf("\n");
     }
     for (const std::string& p : r.problems) std::printf("problem: %s\n", p.c_str());
     std::printf("%s\n", r.ok() ? "verify: OK" : "verify: FAILED");

@@ -90,7 +90,7 @@ int main(int argc, char** argv) {
         std::vector<uint8_t> bytes;
         const double t_encode = best_of(kRuns, [&] {
             FragmentMesh mesh;
-            quantize_fragment(out, tet, mesh);
+            quantize_fragment(out, tet, VertexLayout{}, mesh);
             bytes.clear();
             fragment_encode(mesh, bytes);
         }, thread_cpu_seconds);

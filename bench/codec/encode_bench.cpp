@@ -161,7 +161,7 @@ int main(int argc, char** argv) try {
             unpacked = 0;
             for (size_t i = 0; i < points.size(); ++i) {
                 BaryWeights w;
-                bary_unpack(index[i], w);
+                bary_unpack(index[i], kBaryGrid, w);
                 unpacked += uint64_t(w[1]) + uint64_t(w[2]) + uint64_t(w[3]);
             }
         }, thread_cpu_seconds);

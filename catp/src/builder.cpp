@@ -54,7 +54,13 @@ Placement place_model(const Bounds& b) {
     if (!(extent > 0) || !std::isfinite(extent))
         fail("the model has zero extent (all vertices coincide): nothing to build a hierarchy over");
     // A power-of-two cube with at least 3% margin on every side, so no geometry touches the root
-    // cube's boundary and the lattice mapping is an exact power-of-two scaling.
+    // cube's boundary and the lattice mapping is an exact power-of-two scaling. (A cube fitted
+    // to the model would make the leaves' steps up to twice finer for the same triangles per
+    // leaf, but it was measured to break the hard case FlatTilted: the inexact scaling moves a
+    // plane that contained lattice lines exactly to one that nearly contains them, and the
+    // clipper's triangle x line constructions then disagree between neighbouring cells (cracks,
+    // and the finest level 30 times its bound). The precision is reached by the vertex layout's
+    // grid and the leaf level instead.)
     double side = std::exp2(std::ceil(std::log2(extent * 1.0625)));
     Placement p;
     p.cell = side / double(kLatticeSize);
@@ -182,6 +188,46 @@ LevelChoice choose_block_octave(const std::vector<Vec3d>& sample, uint64_t trian
     return choice;
 }
 
+// The longest edge of the tetrahedra of `level` (their diamonds' spines), in lattice units: the
+// side of the level's cubes times sqrt 3 (cube diamonds), sqrt 2 (face) or 1 (edge).
+double level_longest_edge(int level) {
+    static constexpr double kSpine[3] = {1.7320508075688772, 1.4142135623730951, 1.0};
+    return std::ldexp(kSpine[level % 3], kLatticeBits - level / 3);
+}
+
+// The vertex layout, its grid and the leaf level for a precision (lattice units): the leaves'
+// quantization step (longest edge / grid) must be at most the precision. Tried from the density's
+// leaf level down, each level with the layouts `kinds` in order; the smallest grid that reaches
+// it is taken (a finer grid only costs bits), but at least kMinGrid steps: the grid is the same
+// at every level, and the coarser levels' own simplification error needs the 24-bit layout's
+// 463 steps (with 100, on the hard cases, level 0 was four times as far from the input).
+struct PrecisionChoice {
+    VertexLayout layout;
+    int leaf_level = 0;
+    bool reached = true;  // false: a forced leaf level the layouts cannot reach the precision at
+};
+constexpr int32_t kMinGrid = kBaryGrid;
+
+PrecisionChoice choose_precision(double precision, int density_level, bool level_forced,
+                                 const std::vector<VertexLayoutKind>& kinds) {
+    PrecisionChoice choice;
+    const int last = level_forced ? density_level : kMaxLevel - 3;
+    for (int level = density_level; level <= last; ++level)
+        for (VertexLayoutKind kind : kinds) {
+            const double steps = std::ceil(level_longest_edge(level) / precision);
+            if (steps > double(VertexLayout::max_grid(kind))) continue;
+            choice.layout = VertexLayout{kind, std::max(kMinGrid, int32_t(steps))};
+            choice.leaf_level = level;
+            return choice;
+        }
+    if (!level_forced)
+        fail("a precision of %g lattice cells is finer than the deepest leaves can hold", precision);
+    choice.layout = VertexLayout{kinds.back(), VertexLayout::max_grid(kinds.back())};
+    choice.leaf_level = density_level;
+    choice.reached = false;
+    return choice;
+}
+
 // ----------------------------------------------------------------------------------------------
 
 Tetrahedron slot_tetrahedron(const SlotKey& key) { return diamond_tetrahedron(diamond_info(DiamondId{key.diamond}), key.slot); }
@@ -192,6 +238,24 @@ double tetrahedron_longest_edge(const Tetrahedron& t) {
         for (int j = i + 1; j < 4; ++j) best = std::max(best, len2(t[i], t[j]));
     return std::sqrt(double(best));
 }
+
+// The sum of edge lengths (lattice units) in fixed point with 2^-24 resolution, so that it does
+// not depend on the order of the additions: inputs read in other chunks, or by other threads,
+// give the same mean edge, hence the same grid and the same dataset.
+struct EdgeLengthSum {
+    unsigned __int128 sum = 0;  // lengths below 2^22, times 2^24, over fewer than 2^64 edges
+    uint64_t count = 0;
+    void add(const Vec3d& a, const Vec3d& b) {
+        const double d2 = (a[0] - b[0]) * (a[0] - b[0]) + (a[1] - b[1]) * (a[1] - b[1]) + (a[2] - b[2]) * (a[2] - b[2]);
+        sum += uint64_t(std::ldexp(std::sqrt(d2), 24));
+        ++count;
+    }
+    void add(const EdgeLengthSum& o) {
+        sum += o.sum;
+        count += o.count;
+    }
+    double mean() const { return count ? std::ldexp(double(sum / count), -24) : 0.0; }
+};
 
 // Per-vertex data as the converter keeps it (40 bytes).
 struct VertexRecord {
@@ -280,6 +344,7 @@ private:
     void build_leaves(TriangleBins<Record>& bins);
     void write_leaf_nodes();
     void coarsen_level();
+    void choose_layout_and_leaves();
     void finish_archive();
 
     void write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
@@ -304,7 +369,11 @@ private:
     std::unique_ptr<PagedArray<VertexRecord>> vertices_;
     std::vector<Vec3d> sample_;  // model units
     LevelChoice levels_;
+    VertexLayout layout_;
+    double mean_edge_ = 0;   // lattice units
+    double precision_ = 0;   // lattice units, as asked for
     uint64_t triangles_ = 0;
+    EdgeLengthSum edge_lengths_;  // of the binned triangles
     std::vector<TriangleCorners> block_corners_;  // the block being loaded, by corner indices
     std::unique_ptr<ArchiveWriter> archive_;
     std::vector<CatpLevelStats> stats_;
@@ -456,6 +525,7 @@ void CatpBuild::bin_triangles(TriangleBins<Record>& bins) {
         std::vector<Record> records;
         std::vector<std::pair<uint32_t, uint64_t>> hits;  // record, block cube
         size_t triangles = 0;
+        EdgeLengthSum edge_lengths;
     };
     // Three stages overlap on the cores: reading (serial: the input and the paged vertices are
     // sequential), finding each triangle's block cubes (any order), and appending to the bins
@@ -488,10 +558,12 @@ void CatpBuild::bin_triangles(TriangleBins<Record>& bins) {
     };
     auto find_blocks = [&](Batch* batch) -> Batch* {
         batch->hits.clear();
+        batch->edge_lengths = EdgeLengthSum{};
         BlockCube cube;
         for (size_t i = 0; i < batch->records.size(); ++i) {
             Vec3d corners[3];
             corner_positions(batch->records[i], *vertices_, corners);
+            for (int k = 0; k < 3; ++k) batch->edge_lengths.add(corners[k], corners[(k + 1) % 3]);
             int32_t lo[3], hi[3];
             cube_range(corners, 3, side, lo, hi);
             for (cube.index[2] = lo[2]; cube.index[2] <= hi[2]; ++cube.index[2])
@@ -502,6 +574,7 @@ void CatpBuild::bin_triangles(TriangleBins<Record>& bins) {
         return batch;
     };
     auto append = [&](Batch* batch) {
+        edge_lengths_.add(batch->edge_lengths);
         for (auto [record, block] : batch->hits) bins.add(block, batch->records[record]);
         progress_->add(batch->triangles * bin_share_ / 100);
         free_batches.push(batch);
@@ -629,7 +702,7 @@ double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<co
     for (int s = 0; s < 8; ++s)
         if (slots[s] && !slots[s]->indices.empty())
             longest = std::max(longest, tetrahedron_longest_edge(diamond_tetrahedron(info, s)));
-    return longest / kBaryGrid;
+    return longest / layout_.grid;
 }
 
 // Writes the node of a diamond whose fragments are final.
@@ -640,7 +713,7 @@ void CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::arr
     for (int s = 0; s < 8; ++s) {
         if (!slots[s] || slots[s]->indices.empty()) continue;
         Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, s));
-        quantize_fragment(*slots[s], t, node.slots[s]);
+        quantize_fragment(*slots[s], t, layout_, node.slots[s]);
         if (node.slots[s].indices.empty()) continue;
         node.slot_mask |= uint8_t(1 << s);
         triangles += node.slots[s].triangle_count();
@@ -802,6 +875,46 @@ void CatpBuild::coarsen_level() {
     for (size_t i = 0; i < runs.size(); ++i) diamond_error_[parent_of[runs[i].first]] = produced_error[i];
 }
 
+// The vertex layout, its grid and the final leaf level, from the precision asked for (after the
+// binning pass measured the mean edge). Going deeper than the density's level keeps the blocks
+// valid: they only need to be coarser than the leaves.
+void CatpBuild::choose_layout_and_leaves() {
+    if (edge_lengths_.count == 0) fail("the mesh has no triangles");
+    mean_edge_ = edge_lengths_.mean();
+    const Precision& asked = settings_.precision;
+    precision_ = asked.model_units > 0 ? asked.model_units / place_.cell : asked.mean_edges * mean_edge_;
+    if (!(precision_ > 0) || !std::isfinite(precision_))
+        fail("the precision must be positive (asked: %g model units, or %g mean edges of %g)", asked.model_units,
+             asked.mean_edges, mean_edge_ * place_.cell);
+    std::vector<VertexLayoutKind> kinds;
+    switch (settings_.layout) {
+        case LayoutChoice::Rgb24: kinds = {VertexLayoutKind::Rgb24}; break;
+        case LayoutChoice::Rgb18: kinds = {VertexLayoutKind::Rgb18}; break;
+        case LayoutChoice::Position48: kinds = {VertexLayoutKind::Position48}; break;
+        case LayoutChoice::Auto:
+            kinds = in_.has_colors() ? std::vector{VertexLayoutKind::Rgb24, VertexLayoutKind::Rgb18}
+                                     : std::vector{VertexLayoutKind::Position48};
+            break;
+    }
+    PrecisionChoice choice = choose_precision(precision_, levels_.leaf_level, settings_.leaf_level >= 0, kinds);
+    layout_ = choice.layout;
+    report_.density_leaf_level = levels_.leaf_level;
+    levels_.leaf_level = choice.leaf_level;
+    report_.leaf_level = choice.leaf_level;
+    report_.layout = layout_;
+    report_.mean_edge = mean_edge_ * place_.cell;
+    report_.leaf_step = level_longest_edge(choice.leaf_level) / layout_.grid * place_.cell;
+    // What is guaranteed: the precision asked for, or (a forced leaf level that cannot reach
+    // it) the leaves' step.
+    report_.precision = std::max(precision_ * place_.cell, choice.reached ? 0.0 : report_.leaf_step);
+    if (!choice.reached)
+        report_.warnings.push_back(strprintf(
+            "the precision asked for (%g) cannot be reached at the forced leaf level %d: the finest level is within %g",
+            precision_ * place_.cell, choice.leaf_level, report_.leaf_step));
+    stats_.resize(size_t(levels_.leaf_level) + 1);
+    for (int l = 0; l <= levels_.leaf_level; ++l) stats_[size_t(l)].level = l;
+}
+
 void CatpBuild::finish_archive() {
     CatpMeta meta;
     for (int i = 0; i < 3; ++i) {
@@ -815,6 +928,10 @@ void CatpBuild::finish_archive() {
     meta.input_vertices = in_.vertex_count();
     meta.input_triangles = triangles_;
     meta.default_rgb = uint32_t(default_color_[0]) | (uint32_t(default_color_[1]) << 8) | (uint32_t(default_color_[2]) << 16);
+    meta.layout = layout_;
+    meta.up = settings_.up;
+    meta.precision = report_.precision;
+    meta.mean_edge = report_.mean_edge;
     report_.file_bytes = archive_->finish(encode_catp_meta(meta));
 }
 
@@ -861,10 +978,7 @@ CatpBuildReport CatpBuild::run() {
                                                : choose_leaf_level(sample_, estimate, settings_.leaf_triangles);
     if (leaf_level > kMaxLevel - 3) fail("leaf level %d is deeper than the lattice allows (%d)", leaf_level, kMaxLevel - 3);
     levels_ = choose_block_octave(sample_, estimate, leaf_level, shares_->block_triangles);
-    report_.leaf_level = levels_.leaf_level;
     report_.block_level = 3 * levels_.block_octave;
-    stats_.resize(size_t(levels_.leaf_level) + 1);
-    for (int l = 0; l <= levels_.leaf_level; ++l) stats_[size_t(l)].level = l;
     archive_ = std::make_unique<ArchiveWriter>(output_, ArchiveKind::Catp);
 
     to_lattice();
@@ -875,6 +989,7 @@ CatpBuildReport CatpBuild::run() {
         bin_triangles(bins);
         lap(report_.seconds_bin);
         if (triangles_ == 0) fail("the mesh has no triangles");
+        choose_layout_and_leaves();
         if (records_carry_vertices) {
             vertices_.reset();  // free the cache before the blocks are loaded
             return_free_memory(warm_heap_.get());
@@ -919,6 +1034,30 @@ CatpBuildReport CatpBuild::run() {
 }
 
 }  // namespace
+
+bool parse_precision(const std::string& text, Precision& out) {
+    if (text.empty()) return false;
+    const bool edges = text.back() == 'e' || text.back() == 'E';
+    const std::string number = edges ? text.substr(0, text.size() - 1) : text;
+    char* end = nullptr;
+    const double v = std::strtod(number.c_str(), &end);
+    if (number.empty() || end != number.c_str() + number.size() || !(v > 0) || !std::isfinite(v)) return false;
+    out = edges ? Precision{0, v} : Precision{v, 0};
+    return true;
+}
+
+bool parse_layout_choice(const std::string& text, LayoutChoice& out) {
+    static const std::pair<const char*, LayoutChoice> kNames[] = {{"auto", LayoutChoice::Auto},
+                                                                   {"rgb24", LayoutChoice::Rgb24},
+                                                                   {"rgb18", LayoutChoice::Rgb18},
+                                                                   {"position48", LayoutChoice::Position48}};
+    for (auto& [name, choice] : kNames)
+        if (text == name) {
+            out = choice;
+            return true;
+        }
+    return false;
+}
 
 uint64_t minimum_memory_budget(unsigned threads) {
     // At least two threads' allowance, also for one thread: a level's largest diamond, coarsened

@@ -116,7 +116,7 @@ size_t border_edges_off_original_border(const CatpFile& file, const RefinedSet& 
         if (n != 1) continue;
         Vec3d mid;
         for (int i = 0; i < 3; ++i)
-            mid[i] = meta.origin[i] + 0.5 * double(cut.positions[e.first][i] + cut.positions[e.second][i]) / kBaryGrid * meta.cell;
+            mid[i] = meta.origin[i] + 0.5 * double(cut.positions[e.first][i] + cut.positions[e.second][i]) / meta.layout.grid * meta.cell;
         off += distance_to_border(mid) > tolerance;
     }
     return off;

@@ -50,7 +50,7 @@ DiamondFragments CatpFile::decode(const ArchiveEntry& entry) const {
     const uint8_t* bytes = archive_->node(index_->entry_index(&entry), &error);
     if (!bytes) fail("%s", error.c_str());
     DiamondFragments out;
-    std::string problem = decode_diamond_node(bytes, entry.size, out);
+    std::string problem = decode_diamond_node(bytes, entry.size, index_->meta().layout, out);
     if (!problem.empty()) fail("diamond %llu: %s", (unsigned long long)entry.key, problem.c_str());
     return out;
 }
@@ -63,23 +63,29 @@ bool decode_fragment_integer_positions(const FragmentMesh& fragment, const Diamo
     out.reserve(fragment.vertices.size());
     for (const PackedVertex& v : fragment.vertices) {
         BaryWeights w;
-        if (!bary_unpack(v.position_index(), w)) return false;
-        std::array<int64_t, 3> s;
-        for (int k = 0; k < 3; ++k)
-            s[k] = int64_t(w[0]) * c[0][k] + int64_t(w[1]) * c[1][k] + int64_t(w[2]) * c[2][k] + int64_t(w[3]) * c[3][k];
-        out.push_back(s);
+        if (!vertex_weights(v, fragment.layout, w)) return false;
+        out.push_back(bary_integer_sum(w, c));
     }
     return true;
 }
 
-bool decode_fragment_positions(const FragmentMesh& fragment, const DiamondInfo& diamond, int slot,
-                               const std::array<int32_t, 3>& anchor_times_grid, float scale,
-                               std::vector<float>& positions_out) {
+VertexDecodeParams slot_decode_params(const CatpMeta& meta, const DiamondInfo& diamond, int slot,
+                                      const LatticePoint& anchor, double cell_in_frame) {
     Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(diamond, slot));
-    std::array<LatticePoint, 4> c = {t[0], t[1], t[2], t[3]};
+    VertexDecodeParams p;
+    for (int i = 0; i < 4; ++i)
+        for (int k = 0; k < 3; ++k) p.offsets[size_t(i)][size_t(k)] = t[size_t(i)][size_t(k)] - anchor[size_t(k)];
+    p.layout = meta.layout;
+    p.scale = float(cell_in_frame / meta.layout.grid);
+    for (int k = 0; k < 3; ++k) p.default_color[size_t(k)] = float((meta.default_rgb >> (8 * k)) & 0xff) / 255.0f;
+    return p;
+}
+
+bool decode_fragment_positions(const FragmentMesh& fragment, const VertexDecodeParams& params,
+                               std::vector<float>& positions_out) {
     for (const PackedVertex& v : fragment.vertices) {
         DecodedVertex d;
-        if (!decode_packed_vertex(v, c, anchor_times_grid, scale, d)) return false;
+        if (!decode_packed_vertex(v, params, d)) return false;
         positions_out.insert(positions_out.end(), d.position, d.position + 3);
     }
     return true;

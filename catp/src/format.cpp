@@ -22,6 +22,11 @@ std::vector<uint8_t> encode_catp_meta(const CatpMeta& m) {
     for (double v : m.bounds_min) w.f64(v);
     for (double v : m.bounds_max) w.f64(v);
     w.u32(m.default_rgb);
+    w.u8(uint8_t(m.layout.kind));
+    w.u8(uint8_t(m.up));
+    w.u16(uint16_t(m.layout.grid));
+    w.f64(m.precision);
+    w.f64(m.mean_edge);
     return std::move(w.bytes());
 }
 
@@ -30,8 +35,8 @@ std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m) {
     ByteReader r(data + 8, size - 8);
     uint32_t version = r.u32();
     if (!r.ok()) return "CATP metadata truncated";
-    if (version != kCatpMetaVersion)
-        return strprintf("unsupported CATP metadata version %u (this build reads %u)", version, kCatpMetaVersion);
+    if (version != 1 && version != kCatpMetaVersion)
+        return strprintf("unsupported CATP metadata version %u (this build reads 1 to %u)", version, kCatpMetaVersion);
     m.lattice_bits = r.u32();
     for (double& v : m.origin) v = r.f64();
     m.cell = r.f64();
@@ -42,7 +47,22 @@ std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m) {
     for (double& v : m.bounds_min) v = r.f64();
     for (double& v : m.bounds_max) v = r.f64();
     m.default_rgb = r.u32();
+    m.layout = VertexLayout{};
+    m.up = UpAxis::Unknown;
+    m.precision = m.mean_edge = 0;
+    if (version >= 2) {
+        m.layout.kind = VertexLayoutKind(r.u8());
+        m.up = UpAxis(r.u8());
+        m.layout.grid = r.u16();
+        m.precision = r.f64();
+        m.mean_edge = r.f64();
+    }
     if (!r.ok()) return "CATP metadata truncated";
+    if (!m.layout.valid())
+        return strprintf("CATP metadata names an invalid vertex layout (%u, grid %d)", unsigned(m.layout.kind), m.layout.grid);
+    if (uint8_t(m.up) > uint8_t(UpAxis::NegZ)) return "CATP metadata has an invalid up axis";
+    if (!(m.precision >= 0) || !std::isfinite(m.precision) || !(m.mean_edge >= 0) || !std::isfinite(m.mean_edge))
+        return "CATP metadata has an invalid precision or mean edge";
     if (m.lattice_bits != uint32_t(kLatticeBits))
         return strprintf("CATP lattice of %u bits is not supported (this build uses %d)", m.lattice_bits, kLatticeBits);
     if (!(m.cell > 0) || !std::isfinite(m.cell)) return "CATP metadata has an invalid cell size";
@@ -65,7 +85,8 @@ std::vector<uint8_t> encode_diamond_node(const DiamondFragments& f) {
     return out;
 }
 
-std::string decode_diamond_node(const uint8_t* data, size_t size, DiamondFragments& out) {
+std::string decode_diamond_node(const uint8_t* data, size_t size, const std::optional<VertexLayout>& layout,
+                                DiamondFragments& out) {
     ByteReader r(data, size);
     out.slot_mask = r.u8();
     if (!r.ok()) return "empty diamond node";
@@ -79,9 +100,37 @@ std::string decode_diamond_node(const uint8_t* data, size_t size, DiamondFragmen
         FragmentStatus status = fragment_decode(p, n, out.slots[s]);
         if (status != FragmentStatus::Ok)
             return strprintf("slot %d: fragment %s", s, fragment_status_name(status));
+        if (layout && out.slots[s].layout != *layout)
+            return strprintf("slot %d: fragment in the %s layout with grid %d, the dataset's is %s with grid %d", s,
+                             out.slots[s].layout.name(), out.slots[s].layout.grid, layout->name(), layout->grid);
     }
     if (r.remaining() != 0) return "trailing bytes after the diamond's fragments";
     return "";
+}
+
+const char* up_axis_name(UpAxis axis) {
+    static const char* const kNames[] = {"", "x", "y", "z", "-x", "-y", "-z"};
+    return uint8_t(axis) <= uint8_t(UpAxis::NegZ) ? kNames[uint8_t(axis)] : "";
+}
+
+bool parse_up_axis(const std::string& text, UpAxis& out) {
+    for (uint8_t a = uint8_t(UpAxis::PosX); a <= uint8_t(UpAxis::NegZ); ++a)
+        if (text == up_axis_name(UpAxis(a)) || (text.size() == 2 && text[0] == '+' && text.substr(1) == up_axis_name(UpAxis(a)))) {
+            out = UpAxis(a);
+            return true;
+        }
+    return false;
+}
+
+std::array<double, 3> up_axis_vector(UpAxis axis) {
+    switch (axis) {
+        case UpAxis::PosX: return {1, 0, 0};
+        case UpAxis::PosY: return {0, 1, 0};
+        case UpAxis::NegX: return {-1, 0, 0};
+        case UpAxis::NegY: return {0, -1, 0};
+        case UpAxis::NegZ: return {0, 0, -1};
+        default: return {0, 0, 1};
+    }
 }
 
 }  // namespace catpaq

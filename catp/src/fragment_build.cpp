@@ -276,71 +276,75 @@ std::vector<ClipPlane> tetrahedron_clip_planes(const Tetrahedron& t, unsigned fa
     return planes;
 }
 
-// The 24-bit barycentric position index of every vertex of `in` (quantize_fragment's first pass).
-static void quantize_positions(const WorkFragment& in, const Tetrahedron& corners, uint32_t* index) {
+// The position bits of every vertex of `in` in the layout (quantize_fragment's first pass): the
+// 24-bit barycentric index (Rgb24) or the three 16-bit weights (Position48).
+static void quantize_positions(const WorkFragment& in, const Tetrahedron& corners, const VertexLayout& layout,
+                               uint64_t* key) {
     LatticePlane faces[4];
     for (int f = 0; f < 4; ++f) faces[f] = make_plane(corners[(f + 1) % 4], corners[(f + 2) % 4], corners[(f + 3) % 4]);
     std::array<LatticePoint, 4> c = {corners[0], corners[1], corners[2], corners[3]};
+    const uint8_t no_color[3] = {0, 0, 0};
     for (size_t v = 0; v < in.positions.size(); ++v) {
         const Vec3d& p = in.positions[v];
         SupportMask support = 0;
         for (int f = 0; f < 4; ++f)
             if (plane_side(faces[f], p) != 0) support |= SupportMask(1 << f);
         if (support == 0) support = 0xf;  // cannot happen for a point in the tetrahedron
-        index[v] = bary_pack(bary_quantize(p.data(), c, support));
+        key[v] = pack_vertex(layout, bary_quantize(p.data(), c, support, layout.grid), 0, no_color).payload();
     }
 }
 
-void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, FragmentMesh& out) {
+void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, const VertexLayout& layout, FragmentMesh& out) {
+    out.layout = layout;
     out.vertices.clear();
     out.indices.clear();
-    // Three passes: position indices; merging by index; the new vertices' normals. The merge
-    // probes a hash table at random, and interleaved with the quantization (which fills the
+    // Three passes: position keys; merging by key; the new vertices' normals. The merge probes a
+    // hash table at random, and interleaved with the quantization (which fills the
     // out-of-order window) every probe's cache miss stalled the loop: that load was 65% of
     // quantize_fragment's own time in perf. Alone in a short loop, with prefetching, the
     // misses overlap.
     const size_t n = in.positions.size();
-    // remap first holds each vertex's position index, then its vertex in `out`.
+    std::vector<uint64_t> key(n);
+    quantize_positions(in, corners, layout, key.data());
+    // Each input vertex's vertex in `out`.
     std::vector<uint32_t> remap(n);
-    quantize_positions(in, corners, remap.data());
 
     // Vertices closer than a grid step quantize to the same position: merge them (keeping the
     // first one's normal and colour) and drop the triangles that collapse.
-    // Open addressing on the 24-bit position index (std::unordered_map allocates a node per
-    // vertex; quantize_fragment was 6% of the converter's CPU time with it, in perf).
+    // Open addressing on the position key (std::unordered_map allocates a node per vertex;
+    // quantize_fragment was 6% of the converter's CPU time with it, in perf).
     size_t capacity = 16;
     while (capacity < n * 2) capacity *= 2;
     const size_t mask = capacity - 1;
-    constexpr uint32_t kEmpty = UINT32_MAX;  // no 24-bit index
-    std::vector<std::pair<uint32_t, uint32_t>> by_position(capacity, {kEmpty, 0});  // index, vertex
-    auto slot_of = [mask](uint32_t index) {
-        const uint64_t k = uint64_t(index) * 0x9E3779B97F4A7C15ull;
+    constexpr uint64_t kEmpty = UINT64_MAX;  // no position key (they have at most 48 bits)
+    std::vector<std::pair<uint64_t, uint32_t>> by_position(capacity, {kEmpty, 0});  // key, vertex
+    auto slot_of = [mask](uint64_t k) {
+        k *= 0x9E3779B97F4A7C15ull;
         return size_t(k ^ (k >> 32)) & mask;
     };
     constexpr size_t kPrefetchAhead = 8;
     std::vector<uint32_t> first_of;  // the input vertex of each output vertex
     first_of.reserve(n);
-    out.vertices.reserve(n);
     for (size_t v = 0; v < n; ++v) {
-        if (v + kPrefetchAhead < n) __builtin_prefetch(&by_position[slot_of(remap[v + kPrefetchAhead])]);
-        const uint32_t index = remap[v];
-        size_t h = slot_of(index);
-        while (by_position[h].first != kEmpty && by_position[h].first != index) h = (h + 1) & mask;
-        if (by_position[h].first == index) {
+        if (v + kPrefetchAhead < n) __builtin_prefetch(&by_position[slot_of(key[v + kPrefetchAhead])]);
+        const uint64_t k = key[v];
+        size_t h = slot_of(k);
+        while (by_position[h].first != kEmpty && by_position[h].first != k) h = (h + 1) & mask;
+        if (by_position[h].first == k) {
             remap[v] = by_position[h].second;
             continue;
         }
-        by_position[h] = {index, uint32_t(first_of.size())};
+        by_position[h] = {k, uint32_t(first_of.size())};
         remap[v] = uint32_t(first_of.size());
         first_of.push_back(uint32_t(v));
-        out.vertices.push_back(PackedVertex::make(index, 0, 0, 0, 0));
     }
 
+    out.vertices.resize(first_of.size());
     for (size_t i = 0; i < first_of.size(); ++i) {
         const uint32_t v = first_of[i];
         const Vec3f& nv = in.normals[v];
-        out.vertices[i] = PackedVertex::make(out.vertices[i].position_index(), oct_encode_precise(nv[0], nv[1], nv[2]),
-                                             in.colors[v][0], in.colors[v][1], in.colors[v][2]);
+        const uint64_t payload = key[v] | color_payload(layout, in.colors[v].data());
+        out.vertices[i] = PackedVertex::from_payload(payload, oct_encode_precise(nv[0], nv[1], nv[2]));
     }
     for (size_t i = 0; i + 2 < in.indices.size(); i += 3) {
         uint32_t a = remap[in.indices[i]], b = remap[in.indices[i + 1]], d = remap[in.indices[i + 2]];

@@ -121,7 +121,7 @@ std::vector<ClipPlane> tetrahedron_clip_planes(const Tetrahedron& t, unsigned fa
 // Quantizes a fragment in the tetrahedron with canonical corners `corners` (face rule by exact
 // predicates) into 64-bit vertices. Triangles that collapse (two corners with the same position)
 // are dropped.
-void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, FragmentMesh& out);
+void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, const VertexLayout& layout, FragmentMesh& out);
 
 // Squared distance from p to triangle (a, b, c), as the simplification error measures it.
 double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c);

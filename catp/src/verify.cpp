@@ -68,7 +68,7 @@ public:
             problem(error);
         } else {
             out.reset(new DiamondFragments);
-            std::string bad = decode_diamond_node(bytes, e.size, *out);
+            std::string bad = decode_diamond_node(bytes, e.size, file_.index().meta().layout, *out);
             if (!bad.empty()) {
                 report_.corrupt_nodes++;
                 problem(strprintf("diamond %llu: %s", (unsigned long long)e.key, bad.c_str()));
@@ -101,13 +101,13 @@ public:
             }
             Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, d.slot));
             std::vector<BaryWeights> w(frag.vertices.size());
-            for (size_t v = 0; v < w.size(); ++v) bary_unpack(frag.vertices[v].position_index(), w[v]);
+            for (size_t v = 0; v < w.size(); ++v) vertex_weights(frag.vertices[v], frag.layout, w[v]);
             std::vector<uint32_t> ids(ints.size());
             for (size_t v = 0; v < ints.size(); ++v) {
                 auto [it, inserted] = weld.emplace(ints[v], uint32_t(out.positions.size()));
                 if (inserted) {
                     double lattice[3], world[3];
-                    for (int k = 0; k < 3; ++k) lattice[k] = double(ints[v][k]) / kBaryGrid;
+                    for (int k = 0; k < 3; ++k) lattice[k] = double(ints[v][k]) / meta.layout.grid;
                     for (int k = 0; k < 3; ++k) world[k] = meta.origin[k] + lattice[k] * meta.cell;
                     out.positions.push_back({world[0], world[1], world[2]});
                 }
@@ -201,6 +201,9 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
     const CatpMeta& meta = index.meta();
     VerifyReport report;
     report.file_bytes = file.archive().size();
+    report.layout = meta.layout;
+    report.precision = meta.precision;
+    report.mean_edge = meta.mean_edge;
     double d2 = 0;
     for (int i = 0; i < 3; ++i) d2 += (meta.bounds_max[i] - meta.bounds_min[i]) * (meta.bounds_max[i] - meta.bounds_min[i]);
     report.diagonal = std::sqrt(d2);
@@ -252,7 +255,7 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
             lv.fragments++;
             report.fragments++;
             lv.quantization_step = std::max(lv.quantization_step,
-                                            longest_edge(diamond_tetrahedron(info, s)) * meta.cell / kBaryGrid);
+                                            longest_edge(diamond_tetrahedron(info, s)) * meta.cell / meta.layout.grid);
         }
         if (triangles != e.count) {
             report.bad_flags++;
@@ -286,6 +289,17 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
         DistanceStats from = measure_distances(to_level, original_samples);
         lv.distance_from_original_max = from.max;
         lv.distance_from_original_rms = from.rms;
+    }
+    // The finest level against the precision the converter guaranteed (version-1 datasets
+    // recorded none).
+    const VerifyLevel& finest = report.levels.back();
+    if (original && meta.precision > 0 && finest.distance_to_original_max >= 0) {
+        const double measured = std::max(finest.distance_to_original_max, finest.distance_from_original_max);
+        if (measured > meta.precision) {
+            report.precision_exceeded = true;
+            checker.problem(strprintf("the finest level is %g from the original, more than the precision %g (by %.3gx)",
+                                      measured, meta.precision, measured / meta.precision));
+        }
     }
     // A random mixed cut too.
     {

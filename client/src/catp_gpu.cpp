@@ -42,9 +42,12 @@ void validate_fragment(uint64_t diamond_key, int slot, const FragmentMesh& f) {
     const uint32_t n = uint32_t(f.vertices.size());
     for (uint32_t i : f.indices)
         if (i >= n) fail("fragment %llu/%d has index %u >= %u vertices", (unsigned long long)diamond_key, slot, i, n);
-    for (const PackedVertex& v : f.vertices)
-        if (v.position_index() >= kBaryIndexCount)
-            fail("fragment %llu/%d has a corrupt position index %u", (unsigned long long)diamond_key, slot, v.position_index());
+    if (!f.layout.valid()) fail("fragment %llu/%d has an invalid vertex layout", (unsigned long long)diamond_key, slot);
+    for (size_t i = 0; i < f.vertices.size(); ++i) {
+        BaryWeights w;
+        if (!vertex_weights(f.vertices[i], f.layout, w))
+            fail("fragment %llu/%d has a corrupt position in vertex %zu", (unsigned long long)diamond_key, slot, i);
+    }
 }
 
 // Creates the VAO with an index buffer; the caller then describes the vertex attributes.
@@ -122,9 +125,11 @@ void FragmentStore::upload(uint64_t diamond_key, int slot, const FragmentMesh& f
 void FragmentStore::upload_float(uint64_t diamond_key, int slot, const FragmentMesh& fragment, const CatpMeta& meta) {
     std::array<LatticePoint, 4> corners = slot_corners(diamond_key, slot);
     validate_fragment(diamond_key, slot, fragment);
-    // Positions relative to the dataset origin in world units: anchor 0, scale cell / kBaryGrid.
-    const std::array<int32_t, 3> no_anchor{0, 0, 0};
-    const float scale = float(meta.cell / kBaryGrid);
+    // Positions relative to the dataset origin in world units: anchor 0, scale cell / grid.
+    VertexDecodeParams params;
+    params.offsets = corners;
+    params.layout = meta.layout;
+    params.scale = float(meta.cell / meta.layout.grid);
     struct FloatVertex {
         float position[3];
         float normal[3];
@@ -135,14 +140,12 @@ void FragmentStore::upload_float(uint64_t diamond_key, int slot, const FragmentM
     for (size_t i = 0; i < vertices.size(); ++i) {
         DecodedVertex d;
         const PackedVertex& p = fragment.vertices[i];
-        if (!decode_packed_vertex(p, corners, no_anchor, scale, d))
+        if (!decode_packed_vertex(p, params, d))
             fail("fragment %llu/%d has a corrupt vertex", (unsigned long long)diamond_key, slot);
         FloatVertex& v = vertices[i];
         std::memcpy(v.position, d.position, sizeof v.position);
         std::memcpy(v.normal, d.normal, sizeof v.normal);
-        v.color[0] = p.r();
-        v.color[1] = p.g();
-        v.color[2] = p.b();
+        for (int k = 0; k < 3; ++k) v.color[k] = uint8_t(std::lround(d.color[k] * 255.0f));
         v.color[3] = 255;
     }
     clear_gl_errors();
@@ -265,21 +268,32 @@ FrameTransform frame_transform(const Camera& camera, const CatpMeta& meta) {
         if (!(l >= 0)) l = 0;  // also NaN
         if (l > kLatticeSize) l = kLatticeSize;
         t.anchor[i] = int32_t(l);
-        t.anchor_times_grid[i] = t.anchor[i] * kBaryGrid;
         t.anchor_world[i] = origin[i] + double(t.anchor[i]) * meta.cell;
     }
-    t.scale = float(meta.cell / kBaryGrid);
+    t.scale = float(meta.cell / meta.layout.grid);
+    t.decode.layout = meta.layout;
+    t.decode.scale = t.scale;
+    for (int k = 0; k < 3; ++k) t.decode.default_color[size_t(k)] = float((meta.default_rgb >> (8 * k)) & 0xff) / 255.0f;
     glm::dmat4 projection = camera.projection();
     t.mvp_packed = glm::mat4(projection * camera.view_relative(t.anchor_world));
     t.mvp_float = glm::mat4(projection * camera.view_relative(origin));
     return t;
 }
 
-static void find_uniforms(const GlProgram& p, int& corners, int& anchor, int& scale, int& mvp, int& flat_mode,
-                          int& flat_color, int& light, int& ambient) {
+VertexDecodeParams FrameTransform::params(const std::array<LatticePoint, 4>& corners) const {
+    VertexDecodeParams p = decode;
+    for (size_t i = 0; i < 4; ++i)
+        for (size_t k = 0; k < 3; ++k) p.offsets[i][k] = corners[i][k] - anchor[k];
+    return p;
+}
+
+static void find_uniforms(const GlProgram& p, int& corners, int& layout, int& grid, int& scale, int& default_color,
+                          int& mvp, int& flat_mode, int& flat_color, int& light, int& ambient) {
     corners = p.uniform("corners");
-    anchor = p.uniform("anchor_times_grid");
+    layout = p.uniform("vertex_layout");
+    grid = p.uniform("grid");
     scale = p.uniform("scale");
+    default_color = p.uniform("default_color");
     mvp = p.uniform("mvp");
     flat_mode = p.uniform("flat_mode");
     flat_color = p.uniform("flat_color");
@@ -291,11 +305,11 @@ CatpRenderer::CatpRenderer(FragmentStore& store) : store_(store) {
     bool gles = current_context_is_gles();
     packed_ = GlProgram(shader_source(ShaderKind::CatpVertex, gles), shader_source(ShaderKind::Fragment, gles));
     float_ = GlProgram(shader_source(ShaderKind::FloatVertex, gles), shader_source(ShaderKind::Fragment, gles));
-    find_uniforms(packed_, packed_u_.corners, packed_u_.anchor, packed_u_.scale, packed_u_.mvp, packed_u_.flat_mode,
-                  packed_u_.flat_color, packed_u_.light, packed_u_.ambient);
-    find_uniforms(float_, float_u_.corners, float_u_.anchor, float_u_.scale, float_u_.mvp, float_u_.flat_mode,
-                  float_u_.flat_color, float_u_.light, float_u_.ambient);
-    if (packed_u_.corners < 0 || packed_u_.anchor < 0 || packed_u_.scale < 0 || packed_u_.mvp < 0)
+    for (auto [program, u] : {std::pair{&packed_, &packed_u_}, std::pair{&float_, &float_u_}})
+        find_uniforms(*program, u->corners, u->layout, u->grid, u->scale, u->default_color, u->mvp, u->flat_mode,
+                      u->flat_color, u->light, u->ambient);
+    if (packed_u_.corners < 0 || packed_u_.layout < 0 || packed_u_.grid < 0 || packed_u_.scale < 0 ||
+        packed_u_.default_color < 0 || packed_u_.mvp < 0)
         fail("the CATP vertex shader lacks its decode uniforms");
 }
 
@@ -349,8 +363,10 @@ RenderStats CatpRenderer::render(const Camera& camera_in, const CatpMeta& meta, 
     RenderStats stats;
     std::vector<const GpuFragment*> float_items;
     glUseProgram(packed_.id());
-    glUniform3iv(packed_u_.anchor, 1, t.anchor_times_grid.data());
+    glUniform1i(packed_u_.layout, int(meta.layout.kind));
+    glUniform1i(packed_u_.grid, meta.layout.grid);
     glUniform1f(packed_u_.scale, t.scale);
+    glUniform3fv(packed_u_.default_color, 1, t.decode.default_color.data());
     glUniformMatrix4fv(packed_u_.mvp, 1, GL_FALSE, glm::value_ptr(t.mvp_packed));
     set_shading(packed_, packed_u_, settings, light_f);
     for (const DrawItem& item : items) {
@@ -365,7 +381,8 @@ RenderStats CatpRenderer::render(const Camera& camera_in, const CatpMeta& meta, 
             continue;
         }
         if (g->index_count == 0) continue;
-        glUniform3iv(packed_u_.corners, 4, g->corners[0].data());
+        const VertexDecodeParams params = t.params(g->corners);
+        glUniform3iv(packed_u_.corners, 4, params.offsets[0].data());
         glBindVertexArray(g->vao);
         glDrawElements(GL_TRIANGLES, GLsizei(g->index_count), g->index32 ? GL_UNSIGNED_INT : GL_UNSIGNED_SHORT, nullptr);
         ++stats.draws;

@@ -189,8 +189,9 @@ FetchRequest FetchRequest::of(const HierarchyNode& node) {
 Fetcher::Fetcher(std::unique_ptr<NodeSource> source, FetcherSettings settings)
     : source_(std::move(source)), settings_(std::move(settings)) {
     if (!settings_.decode) {
-        settings_.decode = [](const FetchRequest&, const uint8_t* data, size_t size, DiamondFragments& out) {
-            return decode_diamond_node(data, size, out);
+        settings_.decode = [layout = settings_.layout](const FetchRequest&, const uint8_t* data, size_t size,
+                                                       DiamondFragments& out) {
+            return decode_diamond_node(data, size, layout, out);
         };
     }
     if (settings_.max_attempts == 0) settings_.max_attempts = 1;

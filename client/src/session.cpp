@@ -17,7 +17,9 @@ StreamingSession::StreamingSession(const std::string& location, const SessionSet
     counter_ = std::make_unique<PartDrawCounter>(hierarchy_);
     residency_ = std::make_unique<ResidencyTable>(hierarchy_);
     engine_ = std::make_unique<CutEngine>(hierarchy_, *counter_, settings.budgets);
-    fetcher_ = std::make_unique<Fetcher>(std::move(source), settings.fetcher);
+    FetcherSettings fetcher_settings = settings.fetcher;
+    fetcher_settings.layout = index_->meta().layout;
+    fetcher_ = std::make_unique<Fetcher>(std::move(source), fetcher_settings);
     store_.set_budget(settings.gpu_cache_bytes);
     store_.set_eviction_callback([this](uint64_t key, int) {
         uint32_t node = hierarchy_.find(key);

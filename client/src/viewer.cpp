@@ -164,12 +164,12 @@ std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera
         Tetrahedron tet =
             canonical_tetrahedron(diamond_tetrahedron(diamond_info(DiamondId{item.diamond_key}), item.slot));
         std::array<LatticePoint, 4> corners = {tet[0], tet[1], tet[2], tet[3]};
+        const VertexDecodeParams params = transform.params(corners);
         positions.resize(frag.vertices.size());
         valid.assign(frag.vertices.size(), 0);
         for (size_t i = 0; i < frag.vertices.size(); ++i) {
             DecodedVertex d;
-            if (!decode_packed_vertex(frag.vertices[i], corners, transform.anchor_times_grid, transform.scale, d))
-                continue;
+            if (!decode_packed_vertex(frag.vertices[i], params, d)) continue;
             positions[i] = glm::dvec3(d.position[0], d.position[1], d.position[2]);
             valid[i] = 1;
         }

@@ -8,20 +8,21 @@ namespace catpaq {
 
 // Enumeration: a = w1+w2+w3, b = w2+w3, c = w3, index = Tet(a) + Tri(b) + c.
 static constexpr uint32_t tri(uint32_t b) { return b * (b + 1) / 2; }
-static constexpr uint32_t tet(uint32_t a) { return a * (a + 1) * (a + 2) / 6; }
+static constexpr uint32_t tet(uint32_t a) { return uint32_t(uint64_t(a) * (a + 1) * (a + 2) / 6); }
 
-// Inverting index = tet(a) + tri(b) + c by table. tet and tri run to kBaryGrid + 1, sentinels
-// above every valid index (tet(kBaryGrid + 1) = kBaryIndexCount) and every valid rest
-// (index - tet(a) < tri(a + 1)). Per block of 2^kBlockBits indices (2^kRestBlockBits rests),
-// a_of_block (b_of_block) is the largest a with tet(a) (b with tri(b)) at or below the block's
-// first value. A block is narrower than the gap to the next number once a >= 90 (b >= 64), so
-// one step from the block's value is then exact. This replaced std::cbrt and std::sqrt
-// estimates, 8x slower in encode_bench (the encoder unpacks every vertex of every fragment).
+// Inverting index = tet(a) + tri(b) + c by table, for every grid of the enumeration (up to
+// kMaxIndexGrid). tet and tri run to kMaxIndexGrid + 1, sentinels above every valid index and
+// every valid rest (index - tet(a) < tri(a + 1)). Per block of 2^kBlockBits indices
+// (2^kRestBlockBits rests), a_of_block (b_of_block) is the largest a with tet(a) (b with tri(b))
+// at or below the block's first value. A block is narrower than the gap to the next number once
+// a >= 127 (b >= 64), so one step from the block's value is then exact. This replaced std::cbrt
+// and std::sqrt estimates, 8x slower in encode_bench (the encoder unpacks every vertex of every
+// fragment).
 struct UnpackTables {
-    static constexpr int kBlockBits = 12, kRestBlockBits = 6;
-    std::array<uint32_t, kBaryGrid + 2> tet{}, tri{};
-    std::array<uint16_t, (kBaryIndexCount >> kBlockBits) + 1> a_of_block{};
-    std::array<uint16_t, (catpaq::tri(kBaryGrid + 1) >> kRestBlockBits) + 1> b_of_block{};
+    static constexpr int kBlockBits = 13, kRestBlockBits = 6;
+    std::array<uint32_t, kMaxIndexGrid + 2> tet{}, tri{};
+    std::array<uint16_t, (catpaq::tet(kMaxIndexGrid + 1) >> kBlockBits) + 1> a_of_block{};
+    std::array<uint16_t, (catpaq::tri(kMaxIndexGrid + 1) >> kRestBlockBits) + 1> b_of_block{};
     constexpr UnpackTables() {
         for (uint32_t a = 0; a < tet.size(); ++a) {
             tet[a] = catpaq::tet(a);
@@ -40,18 +41,20 @@ struct UnpackTables {
 };
 static constexpr UnpackTables kUnpack{};
 static_assert(kUnpack.tet[kBaryGrid + 1] == kBaryIndexCount);
+static_assert(kUnpack.tet[kMaxIndexGrid + 1] <= (1u << 30), "the Rgb18 layout's index must fit 30 bits");
 
 uint32_t bary_pack(const BaryWeights& w) {
     assert(w[0] >= 0 && w[1] >= 0 && w[2] >= 0 && w[3] >= 0);
-    assert(w[0] + w[1] + w[2] + w[3] == kBaryGrid);
+    assert(w[1] + w[2] + w[3] <= kMaxIndexGrid);
     uint32_t a = uint32_t(w[1] + w[2] + w[3]), b = uint32_t(w[2] + w[3]), c = uint32_t(w[3]);
     return tet(a) + tri(b) + c;
 }
 
-bool bary_unpack(uint32_t index, BaryWeights& w) {
-    if (index >= kBaryIndexCount) return false;
+bool bary_unpack(uint32_t index, int32_t grid, BaryWeights& w) {
+    assert(grid >= 1 && grid <= kMaxIndexGrid);
+    if (index >= bary_index_count(grid)) return false;
     // Largest a with tet(a) <= index: the block's a, then one step without a branch and more
-    // only near the first corner (the sentinel stops the loop at kBaryGrid). Gives the same
+    // only near the first corner (the sentinel stops the loop). Gives the same
     // weights as bary_unpack() in shaders/catp_decode.glsl, which starts from a cube root.
     uint32_t a = kUnpack.a_of_block[index >> UnpackTables::kBlockBits];
     a += uint32_t(kUnpack.tet[a + 1] <= index);
@@ -64,7 +67,7 @@ bool bary_unpack(uint32_t index, BaryWeights& w) {
     while (kUnpack.tri[b + 1] <= rest) [[unlikely]]
         ++b;
     uint32_t c = rest - kUnpack.tri[b];
-    w = {int32_t(kBaryGrid - a), int32_t(a - b), int32_t(b - c), int32_t(c)};
+    w = {grid - int32_t(a), int32_t(a - b), int32_t(b - c), int32_t(c)};
     return true;
 }
 
@@ -136,18 +139,18 @@ static void simplex_coordinates(const double p[3], const double* const corners[]
 }
 
 // Largest-remainder rounding of K coordinates (>= 0, summing to about 1) to integer weights
-// summing to kBaryGrid; ties go to the lower index.
+// summing to `grid`; ties go to the lower index.
 template <int K>
-static void round_to_grid(const double lambda[], int32_t weight[]) {
+static void round_to_grid(const double lambda[], int32_t grid, int32_t weight[]) {
     double fraction[K];
     int32_t total = 0;
     for (int i = 0; i < K; ++i) {
-        const double scaled = lambda[i] * kBaryGrid;
+        const double scaled = lambda[i] * grid;
         weight[i] = int32_t(scaled);  // scaled >= 0: truncation is floor
         fraction[i] = scaled - weight[i];
         total += weight[i];
     }
-    const int remaining = kBaryGrid - total;
+    const int remaining = grid - total;
     if (remaining <= K) [[likely]] {
         // The `remaining` first coordinates in the order (fraction descending, index ascending)
         // get one more each: the result of handing them out one at a time to the first largest
@@ -173,7 +176,8 @@ static void round_to_grid(const double lambda[], int32_t weight[]) {
 
 // bary_quantize for a support of K corners.
 template <int K>
-static BaryWeights quantize_on_support(const double p[3], const std::array<LatticePoint, 4>& c, SupportMask support) {
+static BaryWeights quantize_on_support(const double p[3], const std::array<LatticePoint, 4>& c, SupportMask support,
+                                       int32_t grid) {
     double corners[K][3];
     const double* used[K] = {};
     int index[K] = {}, k = 0;
@@ -186,7 +190,7 @@ static BaryWeights quantize_on_support(const double p[3], const std::array<Latti
     double lambda[K];
     simplex_coordinates<K>(p, used, lambda);
     int32_t weight[K];
-    round_to_grid<K>(lambda, weight);
+    round_to_grid<K>(lambda, grid, weight);
     if constexpr (K == 4) {
         // Built whole: scattering into w then returning it stalls on store forwarding.
         return {weight[0], weight[1], weight[2], weight[3]};
@@ -197,35 +201,38 @@ static BaryWeights quantize_on_support(const double p[3], const std::array<Latti
     }
 }
 
-BaryWeights bary_quantize(const double p[3], const std::array<LatticePoint, 4>& c, SupportMask support) {
+BaryWeights bary_quantize(const double p[3], const std::array<LatticePoint, 4>& c, SupportMask support, int32_t grid) {
     assert(support != 0 && support < 16);
+    assert(grid >= 1 && grid <= kMaxWideGrid);
     // Corners per support mask (std::popcount is a library call without a popcnt instruction).
     static constexpr uint8_t kCorners[16] = {0, 1, 1, 2, 1, 2, 2, 3, 1, 2, 2, 3, 2, 3, 3, 4};
     switch (kCorners[support & 15]) {
-        case 4: return quantize_on_support<4>(p, c, support);
-        case 3: return quantize_on_support<3>(p, c, support);
-        case 2: return quantize_on_support<2>(p, c, support);
-        default: return quantize_on_support<1>(p, c, support);
+        case 4: return quantize_on_support<4>(p, c, support, grid);
+        case 3: return quantize_on_support<3>(p, c, support, grid);
+        case 2: return quantize_on_support<2>(p, c, support, grid);
+        default: return quantize_on_support<1>(p, c, support, grid);
     }
 }
 
-std::array<int32_t, 3> bary_weighted_sum(const BaryWeights& w, const std::array<LatticePoint, 4>& c,
-                                         const std::array<int32_t, 3>& anchor_times_grid) {
-    std::array<int32_t, 3> s;
-    for (int k = 0; k < 3; ++k) {
-        // Exact in 32 bits for lattice coordinates below 2^22 (asserted by the lattice module);
-        // computed in 64 bits here so a violated precondition cannot be undefined behaviour.
-        int64_t sum = int64_t(w[0]) * c[0][k] + int64_t(w[1]) * c[1][k] + int64_t(w[2]) * c[2][k] +
-                      int64_t(w[3]) * c[3][k] - anchor_times_grid[k];
-        s[k] = int32_t(sum);
-    }
+std::array<int64_t, 3> bary_integer_sum(const BaryWeights& w, const std::array<LatticePoint, 4>& c) {
+    std::array<int64_t, 3> s;
+    for (int k = 0; k < 3; ++k)
+        s[k] = int64_t(w[0]) * c[0][k] + int64_t(w[1]) * c[1][k] + int64_t(w[2]) * c[2][k] + int64_t(w[3]) * c[3][k];
     return s;
 }
 
-void bary_decode(const BaryWeights& w, const std::array<LatticePoint, 4>& c,
-                 const std::array<int32_t, 3>& anchor_times_grid, float scale, float out[3]) {
-    std::array<int32_t, 3> s = bary_weighted_sum(w, c, anchor_times_grid);
-    for (int k = 0; k < 3; ++k) out[k] = float(s[k]) * scale;
+void bary_decode(const BaryWeights& w, const std::array<LatticePoint, 4>& offsets, float scale, float out[3]) {
+    for (int k = 0; k < 3; ++k) {
+        // The shader's two 32-bit sums (exact there for |offsets| <= 2^20 and weights summing
+        // below 2^14), computed in 64 bits so that a violated precondition is not undefined
+        // behaviour here.
+        int64_t high = 0, low = 0;
+        for (int i = 0; i < 4; ++i) {
+            high += int64_t(w[i] >> 7) * offsets[i][k];
+            low += int64_t(w[i] & 127) * offsets[i][k];
+        }
+        out[k] = (float(int32_t(high)) * 128.0f + float(int32_t(low))) * scale;
+    }
 }
 
 std::array<int, 4> canonical_order(std::array<LatticePoint, 4>& corners) {

@@ -2,7 +2,9 @@
 //
 // Bitstream, version 1 (all little-endian)
 // ----------------------------------------
-//   header (24 bytes): u32 magic "CFRG" | u8 version = 1 | u8 flags = 0 | u16 reserved = 0 |
+//   header (24 bytes): u32 magic "CFRG" | u8 version = 1 | u8 vertex layout (0 = Rgb24,
+//                      1 = Position48, 2 = Rgb18, packed_vertex.h) | u16 grid G (0 stands for 463, and is
+//                      what Rgb24 with G = 463 writes: the bytes of the first datasets) |
 //                      u32 vertex_count V | u32 triangle_count T | u64 checksum = XXH3-64 of the
 //                      payload (every byte after this field)
 //   payload:
@@ -13,7 +15,9 @@
 //   compressed:
 //     u8  modes         bits 0-1 position coding: 0 = cumulative weights (a, b, c) =
 //                       (w1+w2+w3, w2+w3, w3) (the index enumeration of barycentric.h), 1 =
-//                       weights (w1, w2, w3), 2 = raw 24-bit index (any index >= the grid size);
+//                       weights (w1, w2, w3), 2 = raw payload position bits (24 for Rgb24, 30
+//                       for Rgb18, 48 for Position48: any vertex whose position is not valid
+//                       for the grid);
 //                       bits 2-3 normal predictor: 0 = gate average, 1 = parallelogram,
 //                       2 = geometric; bit 4 colour predictor: 0 = gate average,
 //                       1 = parallelogram; bit 5: R and B residuals are coded relative to the
@@ -28,12 +32,15 @@
 //                       order:
 //       tables          connectivity (6 symbols), 3 position tables (absent for raw positions),
 //                       normal u, v, colour R, G, B: alphabet size, scale and log-domain weights
-//                       (rans.h), symbols on lane 0
+//                       (rans.h), symbols on lane 0; layouts without colour have no colour
+//                       tables and no colour values
 //       connectivity    N traversal symbols (symbol k on lane k & 3) and, in the bit stream,
 //                       SPLIT indices; then E x 3 indices of bit_width(V - 1) bits each
-//       positions       per vertex in decoded order: 3 residual values (lanes 0, 1, 2), or 24 bits
+//       positions       per vertex in decoded order: 3 residual values (lanes 0, 1, 2), or 24
+//                       (48) raw bits
 //       normals         per vertex: u, v residual values (lanes 0, 1), modulo 256
-//       colours         per vertex: G, R, B residual values (lanes 0, 1, 2), modulo 256
+//       colours         per vertex: G, R, B residual values (lanes 0, 1, 2), modulo 2^bits
+//                       (8 bits per channel for Rgb24, 6 for Rgb18)
 //     Every byte must be consumed and all rANS states must end at their initial value.
 //
 // Connectivity: a deterministic front traversal in the spirit of the cut-border machine (and of
@@ -60,14 +67,14 @@
 // v0 + v1 - opp (parallelogram) or (v0 + v1) / 2 (gate average); other vertices from the
 // previous vertex in decoded order (the first one from zero). Positions are predicted coordinate
 // by coordinate, each prediction clamped to the range the already decoded coordinates allow
-// (a in [0, 463], b in [0, a], c in [0, b]; in weight space w1 in [0, 463], w2 in [0, 463 - w1],
-// w3 in [0, 463 - w1 - w2]). The geometric normal predictor sums, per vertex, the (integer)
+// (a in [0, G], b in [0, a], c in [0, b]; in weight space w1 in [0, G], w2 in [0, G - w1],
+// w3 in [0, G - w1 - w2]). The geometric normal predictor sums, per vertex, the (integer)
 // cross products of its triangles in (a, b, c) space, maps the sum by M and projects it to the
 // octahedral code in double arithmetic, rounding half up (vertices with a zero sum take the
 // previous vertex's normal). (Averaging it with the neighbours' parallelogram where both agree
 // saves about 0.5 bit per vertex on the bunny but chains every vertex to its predecessors and
-// costs about 7% of the decoding speed, so it is not done.) Normal and colour residuals wrap
-// modulo 256.
+// costs about 7% of the decoding speed, so it is not done.) Normal residuals wrap modulo 256,
+// colour residuals modulo the channel's range.
 //
 // Residual values: zig-zag mapped z; symbol z for z < 8, otherwise, with k = floor(log2 z),
 // symbol 8 + 2 (k - 3) + (bit k-1 of z) followed by the k - 1 low bits of z in the bit stream.
@@ -121,7 +128,6 @@ constexpr int kStreamLane[kStreamCount] = {0, 0, 1, 2, 0, 1, 1, 0, 2};
 enum PositionMode { kPosCumulative = 0, kPosWeights = 1, kPosRaw = 2 };
 enum NormalMode { kNormalAverage = 0, kNormalParallelogram = 1, kNormalGeometric = 2 };
 
-constexpr int32_t kGrid = kBaryGrid;
 constexpr uint32_t kNone = 0xffffffffu;
 constexpr uint32_t kDead = 0xffffffffu;
 
@@ -139,8 +145,8 @@ constexpr Bucket bucket_by_bits(uint32_t z) {
     int k = int(std::bit_width(z)) - 1;
     return {uint32_t(8 + 2 * (k - 3)) + ((z >> (k - 1)) & 1u), uint32_t(k - 1), z & ((1u << (k - 1)) - 1)};
 }
-// Symbol and extra-bit count of every value below 1024 (all residuals but raw escapes: positions
-// are below 2 * 463, normals and colours below 256). A lookup instead of the branch on z < 8,
+// Symbol and extra-bit count of every value below 1024 (positions on the 24-bit layout's grid
+// are below 2 * 463, normals and colours below 256; larger grids' residuals go the long way). A lookup instead of the branch on z < 8,
 // which the encoder mispredicted often (it buckets every residual of every trial mode).
 struct BucketTable {
     std::array<uint8_t, 1024> sym{}, nbits{};
@@ -177,10 +183,10 @@ static_assert((kBucketDecode.packed[rans::kMaxAlphabet - 1] & 0xff) <= 13);
 
 // Tetrahedral-number enumeration of barycentric.h: index = tet(a) + tri(b) + c.
 struct BaryTables {
-    std::array<uint32_t, kBaryGrid + 1> tet{}, tri{};
+    std::array<uint32_t, kMaxIndexGrid + 1> tet{}, tri{};
     constexpr BaryTables() {
-        for (uint32_t a = 0; a <= uint32_t(kBaryGrid); ++a) {
-            tet[a] = a * (a + 1) * (a + 2) / 6;
+        for (uint32_t a = 0; a <= uint32_t(kMaxIndexGrid); ++a) {
+            tet[a] = uint32_t(uint64_t(a) * (a + 1) * (a + 2) / 6);
             tri[a] = a * (a + 1) / 2;
         }
     }
@@ -311,8 +317,10 @@ CATPAQ_RANS_INLINE bool project_oct(double x, double y, double z, int& cu, int& 
 
 // Cumulative barycentric coordinates (a, b, c) of a vertex (fourth entry unused, for alignment).
 using Coord = std::array<int32_t, 4>;
-// Sums of integer cross products: each product component is below 2^19 in magnitude
-// (coordinates are <= 463), so |sum| < 2^42 for any fragment (exact in doubles too).
+// Sums of integer cross products: each product component is below 2^29 in magnitude
+// (coordinates are <= 16383, so each product fits 32 bits). The encoder and the decoder evaluate
+// the prediction with the same operations in the same order, so it agrees on both sides whether
+// or not the doubles below are exact (they are for the 24-bit layout's grid).
 using NormalSum = std::array<int64_t, 4>;
 
 // Area-weighted normals in (a, b, c) space: sum of the cross products of each vertex's triangles.
@@ -331,8 +339,7 @@ void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* 
     }
 }
 
-// Predicted normal of a vertex under the geometric predictor; `prev_u/v` is the fallback. M n is
-// exact in doubles (|m| <= 128 and |n| < 2^42, so |M n| < 2^51).
+// Predicted normal of a vertex under the geometric predictor; `prev_u/v` is the fallback.
 CATPAQ_RANS_INLINE void geometric_prediction(const NormalSum& n, const std::array<int8_t, 9>& m, int prev_u,
                                              int prev_v, int& pu, int& pv) {
     const double n0 = double(n[0]), n1 = double(n[1]), n2 = double(n[2]);
@@ -370,8 +377,20 @@ uint16_t header_fold(const uint8_t* header) {
     return f;
 }
 
-// Colour channel helpers (r = 0, g = 1, b = 2) of word1.
-inline int channel(uint32_t word1, int c) { return int((word1 >> (8 + 8 * c)) & 0xffu); }
+// The colour channels of a layout in word1 (r = 0, g = 1, b = 2): `bits` each from bit `shift`;
+// residuals wrap modulo 2^bits.
+struct ColorField {
+    int shift = 8, bits = 8;
+    int top = 255;  // largest channel value
+    explicit ColorField(const VertexLayout& layout)
+        : shift(layout.color_shift() - 16), bits(layout.color_bits()), top((1 << layout.color_bits()) - 1) {}
+    CATPAQ_RANS_INLINE int get(uint32_t word1, int c) const { return int((word1 >> (shift + bits * c)) & uint32_t(top)); }
+    // A residual as the signed value in [-2^(bits-1), 2^(bits-1)) it is congruent to.
+    CATPAQ_RANS_INLINE int32_t wrap(int32_t r) const {
+        const int32_t half = (top + 1) >> 1;
+        return ((r & top) ^ half) - half;
+    }
+};
 
 // ---------------------------------------------------------------------------------------------
 // Encoder
@@ -412,7 +431,7 @@ struct Candidate {
     int first = 0;  // counts[k] belongs to stream first + k
     std::array<std::array<uint32_t, rans::kMaxAlphabet>, kMaxStreams> counts{};
     size_t raw_bits = 0;
-    std::vector<uint16_t> values;  // residuals are below 2 * kGrid
+    std::vector<uint16_t> values;  // residuals are below 2 * grid <= 2 * kMaxWideGrid
     size_t size = 0;
     std::array<rans::TableDesc, kMaxStreams> desc{};
     std::array<rans::FreqTable, kMaxStreams> freqs{};
@@ -465,7 +484,8 @@ struct Candidate {
         return bits_total;
     }
 };
-static_assert(2 * kBaryGrid < 65536, "position residuals must fit the 16-bit values");
+static_assert(2 * kMaxWideGrid < 65536, "position residuals must fit the 16-bit values");
+static_assert(2 * kMaxWideGrid < (1 << 15), "residual symbols must fit the alphabet (kMaxExtraBits)");
 
 // Puts a candidate's values into the encoder: per vertex one value of each of the N streams in
 // `order` (the decode order), each a symbol on its stream's lane plus its extra bits.
@@ -501,6 +521,7 @@ struct Emitter {
 
 // The mesh in coding order.
 struct EncoderState {
+    VertexLayout layout;
     uint32_t V = 0;
     const PackedVertex* verts = nullptr;  // new order, plus the virtual zero vertex at V
     const Pred* pred = nullptr;           // per new vertex
@@ -510,6 +531,7 @@ struct EncoderState {
 // (w1, w2, w3)), index V the virtual zero vertex.
 template <bool kCumulative, class Out>
 void emit_positions(const EncoderState& st, const Coord* q, Out& out) {
+    const int32_t kGrid = st.layout.grid;
     for (uint32_t v = 0; v < st.V; ++v) {
         const Pred p = st.pred[v];
         const Coord x = q[v], A = q[p.a], B = q[p.b], C = q[p.c];
@@ -554,22 +576,23 @@ void emit_normals(const EncoderState& st, const NormalSum* acc, const std::array
 template <bool kParallelogram, bool kDecorrelate, class Out>
 void emit_colors(const EncoderState& st, Out& out) {
     const PackedVertex* verts = st.verts;
+    const ColorField f(st.layout);
     for (uint32_t v = 0; v < st.V; ++v) {
         const Pred p = st.pred[v];
         const uint32_t wa = verts[p.a].word1, wb = verts[p.b].word1, wc = verts[p.c].word1, wv = verts[v].word1;
         int r[3];
         for (int c = 0; c < 3; ++c) {
-            const int a = channel(wa, c), b = channel(wb, c);
-            const int pc = kParallelogram ? std::clamp(a + b - channel(wc, c), 0, 255) : (a + b + 1) >> 1;
-            r[c] = channel(wv, c) - pc;
+            const int a = f.get(wa, c), b = f.get(wb, c);
+            const int pc = kParallelogram ? std::clamp(a + b - f.get(wc, c), 0, f.top) : (a + b + 1) >> 1;
+            r[c] = f.get(wv, c) - pc;
         }
         if constexpr (kDecorrelate) {
             r[0] -= r[1];
             r[2] -= r[1];
         }
-        out.value(kStreamColG, zigzag(int8_t(uint8_t(r[1]))));
-        out.value(kStreamColR, zigzag(int8_t(uint8_t(r[0]))));
-        out.value(kStreamColB, zigzag(int8_t(uint8_t(r[2]))));
+        out.value(kStreamColG, zigzag(f.wrap(r[1])));
+        out.value(kStreamColR, zigzag(f.wrap(r[0])));
+        out.value(kStreamColB, zigzag(f.wrap(r[2])));
     }
 }
 
@@ -925,7 +948,7 @@ void choose_positions(const EncoderState& st, EncoderWorkspace& ws, AttributeCho
     coords[V] = Coord{0, 0, 0, 0};
     for (uint32_t v = 0; v < V; ++v) {
         BaryWeights w;
-        if (!bary_unpack(st.verts[v].position_index(), w)) {
+        if (!vertex_weights(st.verts[v], st.layout, w)) {
             choice.pos_mode = kPosRaw;
             return;
         }
@@ -980,16 +1003,17 @@ void choose_colors(const EncoderState& st, EncoderWorkspace& ws, AttributeChoice
     uint32_t *g_par = counts(1, 1), *r_par = counts(1, 0), *b_par = counts(1, 2);
     uint32_t *g_avg_rel = counts(2, 1), *r_avg_rel = counts(2, 0), *b_avg_rel = counts(2, 2);
     uint32_t *g_par_rel = counts(3, 1), *r_par_rel = counts(3, 0), *b_par_rel = counts(3, 2);
-    auto sym = [](int residual) { return bucket_of(zigzag(int8_t(uint8_t(residual)))).sym; };
+    const ColorField f(st.layout);
+    auto sym = [&f](int residual) { return bucket_of(zigzag(f.wrap(residual))).sym; };
     const PackedVertex* verts = st.verts;
     for (uint32_t v = 0; v < st.V; ++v) {
         const Pred p = st.pred[v];
         const uint32_t wa = verts[p.a].word1, wb = verts[p.b].word1, wc = verts[p.c].word1, wv = verts[v].word1;
         int avg[3], par[3];  // residuals against the gate average and the parallelogram
         for (int c = 0; c < 3; ++c) {
-            const int a = channel(wa, c), b = channel(wb, c), x = channel(wv, c);
+            const int a = f.get(wa, c), b = f.get(wb, c), x = f.get(wv, c);
             avg[c] = x - ((a + b + 1) >> 1);
-            par[c] = x - std::clamp(a + b - channel(wc, c), 0, 255);
+            par[c] = x - std::clamp(a + b - f.get(wc, c), 0, f.top);
         }
         const uint32_t ga = sym(avg[1]), gp = sym(par[1]);
         ++g_avg[ga], ++g_avg_rel[ga], ++g_par[gp], ++g_par_rel[gp];
@@ -1019,18 +1043,20 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     assert(mesh.indices.size() % 3 == 0);
     assert(V_size <= kFragmentMaxVertices && T_size <= kFragmentMaxTriangles);
     const uint32_t V = uint32_t(V_size), T = uint32_t(T_size);
+    assert(mesh.layout.valid());
+    const bool colors = mesh.layout.has_color();
     // Indices are checked (asserted) by encode_connectivity, which reads them all anyway.
 
     encode_connectivity(mesh, ws);
     ws.verts.resize(size_t(V) + 1);
     for (uint32_t v = 0; v < V; ++v) ws.verts[v] = mesh.vertices[ws.old_of_new[v]];
     ws.verts[V] = PackedVertex{};
-    const EncoderState st{V, ws.verts.data(), ws.pred.data()};
+    const EncoderState st{mesh.layout, V, ws.verts.data(), ws.pred.data()};
 
     AttributeChoice choice;
     choose_positions(st, ws, choice);
     choose_normals(st, ws, choice);
-    choose_colors(st, ws, choice);
+    if (colors) choose_colors(st, ws, choice);
 
     // Tables, then everything in decode order. Sections (for the size report): tables of each
     // part, then the symbols of each part.
@@ -1043,6 +1069,7 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     int sections = 0;
     for (int s = 0; s < kStreamCount; ++s) {
         if (stream_part[s] == 1 && choice.pos_mode == kPosRaw) continue;
+        if (stream_part[s] == 3 && !colors) continue;
         if (sections == 0 || section_part[sections - 1] != stream_part[s]) {
             enc.begin_section();
             section_part[sections++] = stream_part[s];
@@ -1073,7 +1100,12 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     enc.begin_section();
     section_part[sections++] = 1;
     if (choice.pos_mode == kPosRaw) {
-        for (uint32_t v = 0; v < V; ++v) enc.put_bits(st.verts[v].position_index(), 24);
+        const int high_bits = mesh.layout.color_shift() - 24;  // position bits above the first 24
+        for (uint32_t v = 0; v < V; ++v) {
+            const uint64_t payload = st.verts[v].payload();
+            enc.put_bits(uint32_t(payload & 0xffffff), 24);
+            enc.put_bits(uint32_t(payload >> 24) & ((1u << high_bits) - 1), high_bits);
+        }
     } else {
         put_values<3>(enc, *choice.pos, tables, {kStreamPos0, kStreamPos1, kStreamPos2});
     }
@@ -1082,10 +1114,12 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     section_part[sections++] = 2;
     put_values<2>(enc, *choice.nor, tables, {kStreamNormU, kStreamNormV});
     // Colours.
-    enc.begin_section();
-    section_part[sections++] = 3;
-    Emitter emitter{enc, tables};
-    emit_colors(st, choice.color_parallelogram, choice.color_decorrelate, emitter);
+    if (colors) {
+        enc.begin_section();
+        section_part[sections++] = 3;
+        Emitter emitter{enc, tables};
+        emit_colors(st, choice.color_parallelogram, choice.color_decorrelate, emitter);
+    }
 
     // Assemble: header, then the payload straight after it in `out`.
     const size_t base = out.size();
@@ -1093,6 +1127,11 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     uint8_t* header = out.data() + base;
     std::memcpy(header, kMagicBytes, 4);
     header[4] = kVersion;
+    header[5] = uint8_t(mesh.layout.kind);
+    const bool legacy_grid = mesh.layout.kind == VertexLayoutKind::Rgb24 && mesh.layout.grid == kBaryGrid;
+    const uint16_t grid_field = legacy_grid ? 0 : uint16_t(mesh.layout.grid);
+    header[6] = uint8_t(grid_field);
+    header[7] = uint8_t(grid_field >> 8);
     for (int i = 0; i < 4; ++i) {
         header[8 + i] = uint8_t(V >> (8 * i));
         header[12 + i] = uint8_t(T >> (8 * i));
@@ -1122,9 +1161,9 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
         for (uint32_t i : mesh.indices) put_u32(out, i);
         s.header_bytes = kHeaderBytes + 3;
         s.connectivity_bytes = 12 * size_t(T);
-        s.position_bytes = 3 * size_t(V);
+        s.position_bytes = size_t(mesh.layout.color_shift()) * V / 8;
         s.normal_bytes = 2 * size_t(V);
-        s.color_bytes = 3 * size_t(V);
+        s.color_bytes = size_t(3 * mesh.layout.color_bits()) * V / 8;
     } else {
         s.header_bytes = kHeaderBytes + prefix_bytes - (choice.normal_mode == kNormalGeometric ? 9 : 0);
         s.normal_bytes = choice.normal_mode == kNormalGeometric ? 9 : 0;
@@ -1169,12 +1208,21 @@ size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
 FragmentStatus fragment_peek(const uint8_t* data, size_t size, uint32_t& vertex_count, uint32_t& triangle_count) {
     if (size < kHeaderBytes) return FragmentStatus::Truncated;
     if (std::memcmp(data, kMagicBytes, 4) != 0) return FragmentStatus::BadMagic;
-    if (data[4] != kVersion || data[5] != 0) return FragmentStatus::UnsupportedVersion;
-    if (read_u16(data + 6) != 0) return FragmentStatus::Corrupt;
+    if (data[4] != kVersion || data[5] > uint8_t(VertexLayoutKind::Rgb18)) return FragmentStatus::UnsupportedVersion;
+    if (!fragment_layout(data).valid()) return FragmentStatus::Corrupt;
     vertex_count = read_u32(data + 8);
     triangle_count = read_u32(data + 12);
     if (vertex_count > kFragmentMaxVertices || triangle_count > kFragmentMaxTriangles) return FragmentStatus::TooLarge;
     return FragmentStatus::Ok;
+}
+
+VertexLayout fragment_layout(const uint8_t* data) {
+    VertexLayout layout;
+    layout.kind = VertexLayoutKind(data[5]);
+    const uint16_t grid = read_u16(data + 6);
+    // 0 is the first datasets' Rgb24 grid of 463; for Position48 it is invalid.
+    layout.grid = grid != 0 ? int32_t(grid) : layout.kind == VertexLayoutKind::Rgb24 ? kBaryGrid : 0;
+    return layout;
 }
 
 namespace {
@@ -1383,17 +1431,32 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
     return FragmentStatus::Ok;
 }
 
-// Positions: fills word0's position bits and ws.sa/sb/sc (cumulative coordinates, index V = 0).
-// False on a coordinate out of range.
-bool decode_positions(rans::Decoder& io, Workspace& ws, int pos_mode, uint32_t V, const Pred* pred,
-                      PackedVertex* vert) {
+// Positions: sets each vertex's position bits (word1 = 0 for Rgb24, which holds no position
+// there) and ws.coords (cumulative coordinates, index V = 0). False on a coordinate out of range.
+bool decode_positions(rans::Decoder& io, Workspace& ws, const VertexLayout& layout, int pos_mode, uint32_t V,
+                      const Pred* pred, PackedVertex* vert) {
     rans::Decoder dec = io;
+    const int32_t kGrid = layout.grid;
+    const bool wide = layout.kind == VertexLayoutKind::Position48;
+    // The position bits of weights (w1, w2, w3), w1 + w2 + w3 <= grid: three 16-bit weights, or
+    // the index (below 2^30, so the colour bits of word1 stay zero).
+    auto set_position = [&](PackedVertex& out, int32_t w1, int32_t w2, int32_t w3) __attribute__((always_inline)) {
+        const uint64_t p = wide ? uint64_t(w1) | (uint64_t(w2) << 16) | (uint64_t(w3) << 32)
+                                : uint64_t(kBaryTables.tet[size_t(w1 + w2 + w3)] + kBaryTables.tri[size_t(w2 + w3)] +
+                                           uint32_t(w3));
+        out.word0 = uint32_t(p & 0xffffff);
+        out.word1 = uint32_t(p >> 24) << 8;
+    };
     Coord* s = ws.coords.data();
     s[V] = {0, 0, 0, 0};
     uint32_t bad = 0;  // accumulated range violations, checked once
     const rans::TableView t0(ws.tables[kStreamPos0]), t1(ws.tables[kStreamPos1]), t2(ws.tables[kStreamPos2]);
     if (pos_mode == kPosRaw) {
-        for (uint32_t v = 0; v < V; ++v) vert[v].word0 = dec.get_bits(24);
+        const uint32_t high_bits = uint32_t(layout.color_shift() - 24);
+        for (uint32_t v = 0; v < V; ++v) {
+            vert[v].word0 = dec.get_bits(24);
+            vert[v].word1 = dec.get_bits(high_bits) << 8;
+        }
     } else if (pos_mode == kPosCumulative) {
         for_each_item(dec, V, 3, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
             const Pred q = pred[v];
@@ -1409,7 +1472,7 @@ bool decode_positions(rans::Decoder& io, Workspace& ws, int pos_mode, uint32_t V
             bad |= uint32_t(c) > uint32_t(b);
             c = std::clamp(c, 0, b);
             s[v] = {a, b, c, 0};
-            vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(c);
+            set_position(vert[v], a - b, b - c, c);
         });
     } else {
         // Weight space: (w1, w2, w3) kept in s during the pass, converted after.
@@ -1427,8 +1490,7 @@ bool decode_positions(rans::Decoder& io, Workspace& ws, int pos_mode, uint32_t V
             bad |= uint32_t(w3) > uint32_t(kGrid - w1 - w2);
             w3 = std::clamp(w3, 0, kGrid - w1 - w2);
             s[v] = {w1, w2, w3, 0};
-            int32_t a = w1 + w2 + w3, b = w2 + w3;
-            vert[v].word0 = kBaryTables.tet[size_t(a)] + kBaryTables.tri[size_t(b)] + uint32_t(w3);
+            set_position(vert[v], w1, w2, w3);
         });
         for (uint32_t v = 0; v < V; ++v) s[v] = {s[v][0] + s[v][1] + s[v][2], s[v][1] + s[v][2], s[v][2], 0};
     }
@@ -1436,7 +1498,7 @@ bool decode_positions(rans::Decoder& io, Workspace& ws, int pos_mode, uint32_t V
     return bad == 0;
 }
 
-// Normals: ORs u into word0 and sets word1 to v (signed bytes; index V is the virtual zero vertex).
+// Normals: ORs u into word0 and v into word1 (signed bytes; index V is the virtual zero vertex).
 void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std::array<int8_t, 9>& matrix, uint32_t V,
                     uint32_t T, const Pred* pred, const uint32_t* indices, PackedVertex* vert) {
     grow(ws.nu, size_t(V) + 1);
@@ -1476,23 +1538,24 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
     io = dec;
     for (uint32_t v = 0; v < V; ++v) {
         vert[v].word0 |= uint32_t(uint8_t(nu[v])) << 24;
-        vert[v].word1 = uint8_t(nv[v]);
+        vert[v].word1 |= uint8_t(nv[v]);
     }
 }
 
 // Colours: ORs R, G, B into word1.
 template <bool kParallelogram>
-void decode_colors_with(rans::Decoder& io, Workspace& ws, bool decorrelate, uint32_t V, const Pred* pred,
-                        PackedVertex* vert) {
+void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, bool decorrelate, uint32_t V,
+                        const Pred* pred, PackedVertex* vert) {
     grow(ws.rgb, size_t(V) + 1);
     std::array<uint8_t, 4>* rgb = ws.rgb.data();
     rgb[V] = {0, 0, 0, 0};
     rans::Decoder dec = io;
     const rans::TableView tr(ws.tables[kStreamColR]), tg(ws.tables[kStreamColG]), tb(ws.tables[kStreamColB]);
     const int32_t dmask = decorrelate ? -1 : 0;
-    auto predict = [](int a, int b, int c) {
+    const int top = f.top, shift = f.shift, bits = f.bits;
+    auto predict = [top](int a, int b, int c) {
         if constexpr (kParallelogram)
-            return std::clamp(a + b - c, 0, 255);
+            return std::clamp(a + b - c, 0, top);
         else
             return (a + b + 1) >> 1;
     };
@@ -1502,25 +1565,27 @@ void decode_colors_with(rans::Decoder& io, Workspace& ws, bool decorrelate, uint
         int32_t rr = dresidual<kFast, 1>(dec, tr) + (rg & dmask);
         int32_t rb = dresidual<kFast, 2>(dec, tb) + (rg & dmask);
         const std::array<uint8_t, 4> A = rgb[q.a], B = rgb[q.b], C = rgb[q.c];
-        const uint32_t r = uint8_t(predict(A[0], B[0], C[0]) + rr);
-        const uint32_t g = uint8_t(predict(A[1], B[1], C[1]) + rg);
-        const uint32_t bl = uint8_t(predict(A[2], B[2], C[2]) + rb);
+        const uint32_t r = uint32_t(predict(A[0], B[0], C[0]) + rr) & uint32_t(top);
+        const uint32_t g = uint32_t(predict(A[1], B[1], C[1]) + rg) & uint32_t(top);
+        const uint32_t bl = uint32_t(predict(A[2], B[2], C[2]) + rb) & uint32_t(top);
         rgb[v] = {uint8_t(r), uint8_t(g), uint8_t(bl), 0};
-        vert[v].word1 |= r << 8 | g << 16 | bl << 24;
+        vert[v].word1 |= r << shift | g << (shift + bits) | bl << (shift + 2 * bits);
     });
     io = dec;
 }
 
-void decode_colors(rans::Decoder& io, Workspace& ws, bool parallelogram, bool decorrelate, uint32_t V,
-                   const Pred* pred, PackedVertex* vert) {
+void decode_colors(rans::Decoder& io, Workspace& ws, const VertexLayout& layout, bool parallelogram, bool decorrelate,
+                   uint32_t V, const Pred* pred, PackedVertex* vert) {
+    const ColorField f(layout);
     if (parallelogram)
-        decode_colors_with<true>(io, ws, decorrelate, V, pred, vert);
+        decode_colors_with<true>(io, ws, f, decorrelate, V, pred, vert);
     else
-        decode_colors_with<false>(io, ws, decorrelate, V, pred, vert);
+        decode_colors_with<false>(io, ws, f, decorrelate, V, pred, vert);
 }
 
 FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint32_t T, FragmentMesh& out,
                                  Workspace& ws) {
+    const bool colors = out.layout.has_color();
     if (size < 1) return FragmentStatus::Corrupt;
     const uint8_t modes = *p++;
     --size;
@@ -1562,6 +1627,7 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
     if (!dec.init(p, size)) return FragmentStatus::Corrupt;
     for (int s = 0; s < kStreamCount; ++s) {
         if (pos_mode == kPosRaw && s >= kStreamPos0 && s <= kStreamPos2) continue;
+        if (!colors && s >= kStreamColR) continue;
         rans::FreqTable f;
         if (!dec.get_table(f, ws.tables[size_t(s)])) return FragmentStatus::Corrupt;
         if (s == kStreamConn && f.nsym > int(kConnSymbols)) return FragmentStatus::Corrupt;
@@ -1590,9 +1656,13 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
 
     // Positions (index V: the virtual zero vertex).
     grow(ws.coords, size_t(V) + 1);
-    if (!decode_positions(dec, ws, pos_mode, V, pred, out.vertices.data())) return FragmentStatus::Corrupt;
+    if (!decode_positions(dec, ws, out.layout, pos_mode, V, pred, out.vertices.data())) return FragmentStatus::Corrupt;
     decode_normals(dec, ws, normal_mode, matrix, V, T, pred, out.indices.data(), out.vertices.data());
-    decode_colors(dec, ws, color_parallelogram, color_decorrelate, V, pred, out.vertices.data());
+    if (colors) {
+        decode_colors(dec, ws, out.layout, color_parallelogram, color_decorrelate, V, pred, out.vertices.data());
+    } else if (color_parallelogram || color_decorrelate) {
+        return FragmentStatus::Corrupt;
+    }
     if (!dec.finished_cleanly()) return FragmentStatus::Corrupt;
     return FragmentStatus::Ok;
 }
@@ -1613,6 +1683,7 @@ FragmentStatus decode_fragment(const uint8_t* data, size_t size, FragmentMesh& o
     if (payload_size < 3) return FragmentStatus::Corrupt;
     if (read_u16(payload) != header_fold(data)) return FragmentStatus::Corrupt;
     const uint8_t coding = payload[2];
+    out.layout = fragment_layout(data);
     if (coding == kCodingStored) return decode_stored(payload + 3, payload_size - 3, V, T, out);
     if (coding != kCodingCompressed) return FragmentStatus::Corrupt;
     if (V <= kWorkspaceKeepVertices) {

@@ -26,12 +26,14 @@ struct Built {
     CatpBuildReport report;
 };
 
-Built build(const Mesh& mesh, const std::string& name, size_t leaf_triangles, int leaf_level = -1) {
+Built build(const Mesh& mesh, const std::string& name, size_t leaf_triangles, int leaf_level = -1,
+            LayoutChoice layout = LayoutChoice::Auto) {
     Built b;
     b.path = (scratch_dir() / (name + ".cpq")).string();
     CatpBuildSettings settings;
     settings.leaf_triangles = leaf_triangles;
     settings.leaf_level = leaf_level;
+    settings.layout = layout;
     settings.progress = false;
     b.report = build_catp(mesh, b.path, settings);
     return b;
@@ -70,6 +72,15 @@ TEST(CatpCracks, EveryCutOfAClosedSphereIsClosed) {
     ASSERT_GE(b.report.leaf_level, 6);
     int mixed = expect_every_cut_closed(b.path, 40);
     EXPECT_GT(mixed, 10);  // the random cuts really mix levels
+}
+
+TEST(CatpCracks, EveryCutIsClosedInEveryVertexLayout) {
+    const Mesh sphere = make_sphere(30000, 4);
+    for (LayoutChoice layout : {LayoutChoice::Rgb24, LayoutChoice::Rgb18, LayoutChoice::Position48}) {
+        Built b = build(sphere, "sphere_layout" + std::to_string(int(layout)), 200, -1, layout);
+        SCOPED_TRACE(b.report.layout.name());
+        EXPECT_GT(expect_every_cut_closed(b.path, 20), 5);
+    }
 }
 
 TEST(CatpCracks, EveryCutOfAClosedTorusIsClosed) {

@@ -51,16 +51,18 @@ std::string scratch_dir() {
     return scratch.dir.string();
 }
 
-const std::string& dataset_path(Model model, size_t triangles, int leaf_level) {
-    static std::map<std::tuple<int, size_t, int>, std::string> built;
-    auto key = std::make_tuple(int(model), triangles, leaf_level);
+const std::string& dataset_path(Model model, size_t triangles, int leaf_level, LayoutChoice layout) {
+    static std::map<std::tuple<int, size_t, int, int>, std::string> built;
+    auto key = std::make_tuple(int(model), triangles, leaf_level, int(layout));
     auto it = built.find(key);
     if (it != built.end()) return it->second;
     Mesh mesh = model == Model::Sphere ? make_sphere(triangles, 3) : make_torus(triangles, 5);
     std::string path = scratch_dir() + "/" + (model == Model::Sphere ? "sphere" : "torus") + "_" +
-                       std::to_string(triangles) + "_" + std::to_string(leaf_level) + ".cpq";
+                       std::to_string(triangles) + "_" + std::to_string(leaf_level) + "_" + std::to_string(int(layout)) +
+                       ".cpq";
     CatpBuildSettings settings;
     settings.leaf_level = leaf_level;
+    settings.layout = layout;
     settings.leaf_triangles = 200;
     settings.progress = false;
     build_catp(mesh, path, settings);

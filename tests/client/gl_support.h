@@ -29,8 +29,8 @@ std::string scratch_dir();  // per process, removed at exit
 
 enum class Model { Sphere, Torus };
 // A CATP dataset of the model (built on first use, cached for the process). `leaf_level` is
-// forced; the sphere and torus have `triangles` input triangles.
-const std::string& dataset_path(Model model, size_t triangles, int leaf_level);
+// forced; the sphere and torus have `triangles` input triangles (with colours).
+const std::string& dataset_path(Model model, size_t triangles, int leaf_level, LayoutChoice layout = LayoutChoice::Auto);
 
 // Cameras for a dataset: orbit frames around its bounds plus a close-up.
 std::vector<Camera> test_cameras(const CatpIndex& index, int width, int height);

@@ -99,7 +99,7 @@ TEST(Shaders, EmbeddedSourcesCompile) {
     GlProgram packed(vs, shader_source(ShaderKind::Fragment, gles));
     GlProgram floats(shader_source(ShaderKind::FloatVertex, gles), shader_source(ShaderKind::Fragment, gles));
     EXPECT_GE(packed.uniform("corners"), 0);
-    EXPECT_GE(packed.uniform("anchor_times_grid"), 0);
+    for (const char* name : {"vertex_layout", "grid", "scale", "default_color"}) EXPECT_GE(packed.uniform(name), 0) << name;
     EXPECT_GE(floats.uniform("mvp"), 0);
     // A broken shader reports the compiler's log.
     try {

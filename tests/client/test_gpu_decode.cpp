@@ -1,9 +1,10 @@
 // The vertex shader's decode (shaders/catp_decode.glsl + catp.vert), captured with transform
 // feedback, against the CPU mirror decode_packed_vertex (common_codec/packed_vertex.h).
 //
-// Positions must be bit-identical: the shader does exact integer sums and one float multiply,
-// exactly as the CPU does. Normals (a division, abs, sqrt) are compared with a tolerance and the
-// number of bit-identical ones is reported: positions are what makes cuts crack-free.
+// Positions must be bit-identical in every vertex layout: the shader does exact integer sums and
+// the same few float operations as the CPU. Normals (a division, abs, sqrt) are compared with a
+// tolerance and the number of bit-identical ones is reported: positions are what makes cuts
+// crack-free.
 #include <gtest/gtest.h>
 #include <epoxy/gl.h>
 
@@ -47,13 +48,16 @@ public:
         glDeleteQueries(1, &query_);
     }
 
-    // Runs every vertex of `g` through the shader; 9 floats per vertex (position, normal, colour).
-    std::vector<float> decode(const GpuFragment& g, const std::array<int32_t, 3>& anchor_times_grid, float scale) {
+    // Runs every vertex of `g` through the shader with the decode inputs `p` (offsets: g's
+    // corners minus the anchor); 9 floats per vertex (position, normal, colour).
+    std::vector<float> decode(const GpuFragment& g, const VertexDecodeParams& p) {
         target_.bind();
         glUseProgram(program_.id());
-        glUniform3iv(program_.uniform("corners"), 4, g.corners[0].data());
-        glUniform3iv(program_.uniform("anchor_times_grid"), 1, anchor_times_grid.data());
-        glUniform1f(program_.uniform("scale"), scale);
+        glUniform3iv(program_.uniform("corners"), 4, p.offsets[0].data());
+        glUniform1i(program_.uniform("vertex_layout"), int(p.layout.kind));
+        glUniform1i(program_.uniform("grid"), p.layout.grid);
+        glUniform1f(program_.uniform("scale"), p.scale);
+        glUniform3fv(program_.uniform("default_color"), 1, p.default_color.data());
         const float identity[16] = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1};
         glUniformMatrix4fv(program_.uniform("mvp"), 1, GL_FALSE, identity);
         const size_t bytes = size_t(g.vertex_count) * 9 * sizeof(float);
@@ -102,19 +106,30 @@ struct Comparison {
     double max_normal_error = 0, max_color_error = 0;
 };
 
+// The decode inputs of fragment `g` for an anchor, a cell and the fragment's layout.
+VertexDecodeParams params_for(const GpuFragment& g, const VertexLayout& layout, const LatticePoint& anchor, double cell) {
+    VertexDecodeParams p;
+    for (size_t i = 0; i < 4; ++i)
+        for (size_t k = 0; k < 3; ++k) p.offsets[i][k] = g.corners[i][k] - anchor[k];
+    p.layout = layout;
+    p.scale = float(cell / layout.grid);
+    p.default_color = {0.25f, 0.5f, 0.75f};
+    return p;
+}
+
 // Compares GPU output with decode_packed_vertex for every vertex of the fragment.
-void compare(const FragmentMesh& f, const GpuFragment& g, const std::vector<float>& gpu,
-             const std::array<int32_t, 3>& anchor, float scale, Comparison& c) {
+void compare(const FragmentMesh& f, const std::vector<float>& gpu, const VertexDecodeParams& params, Comparison& c) {
     for (size_t v = 0; v < f.vertices.size(); ++v) {
         DecodedVertex cpu;
-        ASSERT_TRUE(decode_packed_vertex(f.vertices[v], g.corners, anchor, scale, cpu));
+        ASSERT_TRUE(decode_packed_vertex(f.vertices[v], params, cpu));
         const float* out = &gpu[v * 9];
         ++c.vertices;
         bool same = true;
         for (int k = 0; k < 3; ++k) same = same && bits(out[k]) == bits(cpu.position[k]);
         if (!same) {
             if (c.position_mismatches < 5)
-                ADD_FAILURE() << "vertex " << v << " index " << f.vertices[v].position_index() << ": GPU (" << out[0]
+                ADD_FAILURE() << "vertex " << v << " payload " << f.vertices[v].payload() << " (" << params.layout.name()
+                              << "): GPU (" << out[0]
                               << ", " << out[1] << ", " << out[2] << ") CPU (" << cpu.position[0] << ", "
                               << cpu.position[1] << ", " << cpu.position[2] << ")";
             ++c.position_mismatches;
@@ -139,19 +154,32 @@ void report(const char* what, const Comparison& c) {
 }
 
 // Anchors to decode with: zero, a far corner of the lattice, one near the middle, and a random one.
-std::vector<std::array<int32_t, 3>> test_anchors() {
-    std::vector<std::array<int32_t, 3>> anchors;
-    for (LatticePoint a : {LatticePoint{0, 0, 0}, LatticePoint{kLatticeSize, kLatticeSize, kLatticeSize},
-                           LatticePoint{kLatticeSize / 2 + 3, kLatticeSize / 2 - 7, kLatticeSize / 2 + 1},
-                           LatticePoint{123457, 987651, 555557}})
-        anchors.push_back({a[0] * kBaryGrid, a[1] * kBaryGrid, a[2] * kBaryGrid});
-    return anchors;
+std::vector<LatticePoint> test_anchors() {
+    return {LatticePoint{0, 0, 0}, LatticePoint{kLatticeSize, kLatticeSize, kLatticeSize},
+            LatticePoint{kLatticeSize / 2 + 3, kLatticeSize / 2 - 7, kLatticeSize / 2 + 1},
+            LatticePoint{123457, 987651, 555557}};
 }
 
-// Every normal code, the extreme position indices and 60k random ones, several anchors and
+// Every layout at its finest grid, and one coarser grid.
+const VertexLayout kLayouts[] = {{VertexLayoutKind::Rgb24, kBaryGrid},
+                                 {VertexLayoutKind::Rgb18, kMaxIndexGrid},
+                                 {VertexLayoutKind::Position48, kMaxWideGrid},
+                                 {VertexLayoutKind::Position48, 3001}};
+
+// Random valid weights of a grid.
+BaryWeights random_weights(std::mt19937_64& rng, int32_t grid) {
+    BaryWeights w{0, int32_t(rng() % uint64_t(grid + 1)), 0, 0};
+    w[2] = int32_t(rng() % uint64_t(grid - w[1] + 1));
+    w[3] = int32_t(rng() % uint64_t(grid - w[1] - w[2] + 1));
+    w[0] = grid - w[1] - w[2] - w[3];
+    return w;
+}
+
+// Every normal code, the extreme positions (the corners and their neighbours) and 60k random
+// ones, every weight on the edge C0-C3 (the face rule's zero weights), several anchors and
 // scales, in a tetrahedron at the far corner of the lattice (largest coordinates), decoded by
-// the current context.
-Comparison decode_synthetic_vertices() {
+// the current context in `layout`.
+Comparison decode_synthetic_vertices(const VertexLayout& layout) {
     // A fine diamond near (2^20, 2^20, 2^20): the largest corner coordinates, the largest sums.
     DiamondId id = DiamondId::from_centre({kLatticeSize - 1, kLatticeSize - 2, kLatticeSize - 2});
     EXPECT_TRUE(is_valid_diamond_centre(id.centre()));
@@ -160,20 +188,22 @@ Comparison decode_synthetic_vertices() {
     while (!(existing_slots(info) & (1 << slot))) ++slot;
 
     FragmentMesh f;
+    f.layout = layout;
+    const int32_t grid = layout.grid;
     std::mt19937_64 rng(7);
     for (uint32_t n = 0; n < 65536; ++n) {
-        uint32_t index;
+        BaryWeights w;
         if (n < 64)
-            index = n;  // the first indices: corner C0 and neighbours
+            w = {grid - int32_t(n % 4), int32_t(n % 4), 0, 0};  // corner C0 and neighbours
         else if (n < 128)
-            index = kBaryIndexCount - 1 - (n - 64);  // the last: corner C3 and neighbours
+            w = {0, 0, int32_t(n % 4), grid - int32_t(n % 4)};  // corner C3 and neighbours
         else
-            index = uint32_t(rng() % kBaryIndexCount);
-        f.vertices.push_back(PackedVertex::make(index, uint16_t(n), uint8_t(n * 7), uint8_t(n >> 3), uint8_t(255 - n)));
+            w = random_weights(rng, grid);
+        const uint8_t rgb[3] = {uint8_t(n * 7), uint8_t(n >> 3), uint8_t(255 - n)};
+        f.vertices.push_back(pack_vertex(layout, w, uint16_t(n), rgb));
     }
-    // Also every weight tuple on the edge C0-C3 (the face rule's zero weights).
-    for (int w = 0; w <= kBaryGrid; ++w)
-        f.vertices.push_back(PackedVertex::make(bary_pack({kBaryGrid - w, 0, 0, w}), 0, 1, 2, 3));
+    const uint8_t rgb[3] = {1, 2, 3};
+    for (int32_t w = 0; w <= grid; ++w) f.vertices.push_back(pack_vertex(layout, {grid - w, 0, 0, w}, 0, rgb));
     for (uint32_t i = 0; i < f.vertices.size(); ++i) f.indices.push_back(i);
     while (f.indices.size() % 3) f.indices.push_back(0);
 
@@ -184,11 +214,10 @@ Comparison decode_synthetic_vertices() {
     Comparison c;
     if (!g) return c;
     FeedbackDecoder decoder;
-    for (const auto& anchor : test_anchors())
-        for (double cell : {std::ldexp(1.0, -19), 1.0, std::ldexp(1.0, 12), std::ldexp(1.0, -40)}) {
-            float scale = float(cell / kBaryGrid);
-            std::vector<float> gpu = decoder.decode(*g, anchor, scale);
-            compare(f, *g, gpu, anchor, scale, c);
+    for (const LatticePoint& anchor : test_anchors())
+        for (double cell : {std::ldexp(1.0, -19), 1.0, std::ldexp(1.0, 12), std::ldexp(1.0, -40), 0.3}) {
+            const VertexDecodeParams params = params_for(*g, layout, anchor, cell);
+            compare(f, decoder.decode(*g, params), params, c);
         }
     return c;
 }
@@ -197,12 +226,14 @@ Comparison decode_synthetic_vertices() {
 
 TEST(GpuDecode, PositionsAreBitIdenticalToTheCpuMirrorForSyntheticVertices) {
     GL_TEST_CONTEXT();
-    Comparison c = decode_synthetic_vertices();
-    report("synthetic", c);
-    EXPECT_GT(c.vertices, 1000000u);
-    EXPECT_EQ(c.position_mismatches, 0u);
-    EXPECT_LE(c.max_normal_error, 2e-7);  // a couple of float ulps at most
-    EXPECT_LE(c.max_color_error, 1e-7);
+    for (const VertexLayout& layout : kLayouts) {
+        Comparison c = decode_synthetic_vertices(layout);
+        report((std::string("synthetic ") + layout.name() + "/" + std::to_string(layout.grid)).c_str(), c);
+        EXPECT_GT(c.vertices, 1000000u);
+        EXPECT_EQ(c.position_mismatches, 0u) << layout.name();
+        EXPECT_LE(c.max_normal_error, 2e-7);  // a couple of float ulps at most
+        EXPECT_LE(c.max_color_error, 1e-7) << layout.name();
+    }
 }
 
 // The same through an OpenGL ES 3.0 context (#version 300 es shaders, no `precise`).
@@ -220,76 +251,102 @@ TEST(GpuDecode, PositionsAreBitIdenticalToTheCpuMirrorOnGles) {
     EXPECT_TRUE(es->is_gles());
     EXPECT_TRUE(current_context_is_gles());
     std::printf("ES context: %s\n", es->version().c_str());
-    Comparison c = decode_synthetic_vertices();  // its GL objects die before the context
-    report("synthetic, OpenGL ES", c);
-    EXPECT_EQ(c.position_mismatches, 0u);
-    EXPECT_LE(c.max_normal_error, 2e-7);
+    for (const VertexLayout& layout : kLayouts) {
+        Comparison c = decode_synthetic_vertices(layout);  // its GL objects die before the context
+        report((std::string("synthetic, OpenGL ES, ") + layout.name()).c_str(), c);
+        EXPECT_EQ(c.position_mismatches, 0u) << layout.name();
+        EXPECT_LE(c.max_normal_error, 2e-7);
+    }
     es.reset();
     test::gl_context(nullptr);
 }
 
-// The vertex shader's bary_unpack must be exact on every position index. By default the test
-// covers every boundary of the enumeration, where the float estimates and the integer
-// correction loops meet (the first and last index of every (a, b) row, for all 464 values of a,
-// and their neighbours) plus a million random indices; with CATPAQ_EXHAUSTIVE=1 it checks all
-// 16,757,360 indices (about 10 s on llvmpipe, whose vertex shading is single-threaded).
+// The vertex shader's bary_unpack must be exact on every position index of both enumerated
+// layouts. By default the test covers the boundaries of the enumeration, where the float
+// estimates and the integer correction loops meet (24-bit: the first and last index of every
+// (a, b) row and their neighbours, for all 464 values of a; 30-bit: the same for b in
+// {0, 1, a/2, a - 1, a}, for all 1859 values of a) plus a million random indices each; with
+// CATPAQ_EXHAUSTIVE=1 it checks all 16,757,360 indices of the 24-bit layout (about 10 s on
+// llvmpipe, whose vertex shading is single-threaded).
 TEST(GpuDecode, PositionIndicesUnpackExactly) {
     GL_TEST_CONTEXT();
-    std::vector<uint32_t> indices;
     const bool exhaustive = std::getenv("CATPAQ_EXHAUSTIVE") != nullptr;
-    if (exhaustive) {
-        indices.resize(kBaryIndexCount);
-        for (uint32_t i = 0; i < kBaryIndexCount; ++i) indices[i] = i;
-    } else {
-        auto tet = [](uint32_t a) { return a * (a + 1) * (a + 2) / 6; };
-        auto tri = [](uint32_t b) { return b * (b + 1) / 2; };
-        for (uint32_t a = 0; a <= uint32_t(kBaryGrid); ++a)
-            for (uint32_t b = 0; b <= a; ++b) {
-                uint32_t row = tet(a) + tri(b);  // c = 0 .. b
-                for (uint32_t c : {0u, 1u, b > 0 ? b - 1 : 0u, b})
-                    if (c <= b) indices.push_back(row + c);
+    for (const VertexLayout layout : {VertexLayout{VertexLayoutKind::Rgb24, kBaryGrid},
+                                      VertexLayout{VertexLayoutKind::Rgb18, kMaxIndexGrid}}) {
+        const uint32_t count = bary_index_count(layout.grid);
+        std::vector<uint32_t> indices;
+        if (exhaustive && layout.kind == VertexLayoutKind::Rgb24) {
+            indices.resize(count);
+            for (uint32_t i = 0; i < count; ++i) indices[i] = i;
+        } else {
+            auto tet = [](uint64_t a) { return uint32_t(a * (a + 1) * (a + 2) / 6); };
+            auto tri = [](uint32_t b) { return b * (b + 1) / 2; };
+            const bool all_rows = layout.kind == VertexLayoutKind::Rgb24;
+            for (uint32_t a = 0; a <= uint32_t(layout.grid); ++a) {
+                std::set<uint32_t> rows;  // the values of b
+                if (all_rows)
+                    for (uint32_t b = 0; b <= a; ++b) rows.insert(b);
+                else
+                    for (uint32_t b : {0u, 1u, a / 2, a > 0 ? a - 1 : 0u, a})
+                        if (b <= a) rows.insert(b);
+                for (uint32_t b : rows) {
+                    uint32_t row = tet(a) + tri(b);  // c = 0 .. b
+                    for (uint32_t c : {0u, 1u, b > 0 ? b - 1 : 0u, b})
+                        if (c <= b) indices.push_back(row + c);
+                }
             }
-        std::mt19937_64 rng(11);
-        for (int i = 0; i < (1 << 20); ++i) indices.push_back(uint32_t(rng() % kBaryIndexCount));
-    }
-    // Corners chosen so S = w1*(1,0,0) + w2*(0,1,0) + w3*(0,0,1) (C0 = 0): the decoded position
-    // is the weights. The store insists on real tetrahedra, so the corners are overridden in a
-    // copy of the GPU record.
-    DiamondId id = root_diamond();
-    FragmentStore store;
-    FeedbackDecoder decoder;
-    const size_t chunk = size_t(1) << 20;
-    size_t mismatches = 0;
-    for (size_t start = 0; start < indices.size(); start += chunk) {
-        size_t n = std::min(chunk, indices.size() - start);
-        FragmentMesh f;
-        f.vertices.resize(n);
-        for (size_t i = 0; i < n; ++i) f.vertices[i] = PackedVertex::make(indices[start + i], 0, 0, 0, 0);
-        store.upload(id.bits, 0, f);
-        GpuFragment g = *store.find(id.bits, 0);
-        g.corners = {LatticePoint{0, 0, 0}, LatticePoint{1, 0, 0}, LatticePoint{0, 1, 0}, LatticePoint{0, 0, 1}};
-        std::vector<float> gpu = decoder.decode(g, {0, 0, 0}, 1.0f);
-        for (size_t i = 0; i < n; ++i) {
-            BaryWeights w;
-            ASSERT_TRUE(bary_unpack(indices[start + i], w));
-            const float* p = &gpu[i * 9];
-            if (p[0] != float(w[1]) || p[1] != float(w[2]) || p[2] != float(w[3])) {
-                if (mismatches++ < 5)
-                    ADD_FAILURE() << "index " << indices[start + i] << ": GPU weights (" << p[0] << ", " << p[1] << ", "
-                                  << p[2] << ") CPU (" << w[1] << ", " << w[2] << ", " << w[3] << ")";
+            std::mt19937_64 rng(11);
+            for (int i = 0; i < (1 << 20); ++i) indices.push_back(uint32_t(rng() % count));
+        }
+        // Corners chosen so that the decoded position is the weights (w1, w2, w3): C0 = 0 and the
+        // unit vectors, anchor 0, scale 1. The store insists on real tetrahedra, so the corners
+        // are overridden in a copy of the GPU record.
+        DiamondId id = root_diamond();
+        FragmentStore store;
+        FeedbackDecoder decoder;
+        const size_t chunk = size_t(1) << 20;
+        size_t mismatches = 0;
+        for (size_t start = 0; start < indices.size(); start += chunk) {
+            size_t n = std::min(chunk, indices.size() - start);
+            FragmentMesh f;
+            f.layout = layout;
+            f.vertices.resize(n);
+            for (size_t i = 0; i < n; ++i)
+                f.vertices[i] = PackedVertex::from_payload(indices[start + i], 0);  // the index, colour 0
+            store.upload(id.bits, 0, f);
+            GpuFragment g = *store.find(id.bits, 0);
+            g.corners = {LatticePoint{0, 0, 0}, LatticePoint{1, 0, 0}, LatticePoint{0, 1, 0}, LatticePoint{0, 0, 1}};
+            VertexDecodeParams params = params_for(g, layout, {0, 0, 0}, double(layout.grid));
+            std::vector<float> gpu = decoder.decode(g, params);
+            for (size_t i = 0; i < n; ++i) {
+                BaryWeights w;
+                ASSERT_TRUE(bary_unpack(indices[start + i], layout.grid, w));
+                const float* p = &gpu[i * 9];
+                if (p[0] != float(w[1]) || p[1] != float(w[2]) || p[2] != float(w[3])) {
+                    if (mismatches++ < 5)
+                        ADD_FAILURE() << layout.name() << " index " << indices[start + i] << ": GPU weights (" << p[0]
+                                      << ", " << p[1] << ", " << p[2] << ") CPU (" << w[1] << ", " << w[2] << ", "
+                                      << w[3] << ")";
+                }
             }
         }
+        std::printf("%s: %zu position indices checked%s, %zu mismatches\n", layout.name(), indices.size(),
+                    exhaustive && layout.kind == VertexLayoutKind::Rgb24 ? " (all)" : "", mismatches);
+        EXPECT_EQ(mismatches, 0u);
     }
-    std::printf("%zu position indices checked%s, %zu mismatches\n", indices.size(), exhaustive ? " (all)" : "", mismatches);
-    EXPECT_EQ(mismatches, 0u);
 }
 
-// Real fragments of a sphere dataset: every vertex of the finest cut, at several anchors.
+// The layouts a dataset can be converted to.
+const LayoutChoice kDatasetLayouts[] = {LayoutChoice::Rgb24, LayoutChoice::Rgb18, LayoutChoice::Position48};
+
+// Real fragments of a sphere dataset in every layout: every vertex of the finest cut, at several
+// anchors.
 TEST(GpuDecode, PositionsAreBitIdenticalToTheCpuMirrorForDatasetFragments) {
     GL_TEST_CONTEXT();
-    CatpFile file(test::dataset_path(test::Model::Sphere, 20000, 5));
+    for (LayoutChoice choice : kDatasetLayouts) {
+    CatpFile file(test::dataset_path(test::Model::Sphere, 20000, 5, choice));
     const CatpMeta& meta = file.index().meta();
-    float scale = float(meta.cell / kBaryGrid);
+    SCOPED_TRACE(meta.layout.name());
     StaticRenderer renderer(file);
     std::vector<DrawItem> items = renderer.draw_items(finest_cut(file.index()));
     ASSERT_GT(items.size(), 20u);
@@ -303,22 +360,27 @@ TEST(GpuDecode, PositionsAreBitIdenticalToTheCpuMirrorForDatasetFragments) {
         const FragmentMesh& f = it->second.slots[size_t(item.slot)];
         const GpuFragment* g = renderer.store().find(item.diamond_key, item.slot);
         ASSERT_NE(g, nullptr);
-        for (const auto& anchor : test_anchors()) compare(f, *g, decoder.decode(*g, anchor, scale), anchor, scale, c);
+        for (const LatticePoint& anchor : test_anchors()) {
+            const VertexDecodeParams params = params_for(*g, meta.layout, anchor, meta.cell);
+            compare(f, decoder.decode(*g, params), params, c);
+        }
     }
-    report("sphere finest cut", c);
+    report((std::string("sphere finest cut, ") + meta.layout.name()).c_str(), c);
     EXPECT_GT(c.vertices, 10000u);
     EXPECT_EQ(c.position_mismatches, 0u);
     EXPECT_LE(c.max_normal_error, 2e-7);
+    }
 }
 
 // A vertex on a face shared by two tetrahedra (of different slots, diamonds and levels) has
 // different weights in each, yet decodes to the same bits through the GPU path from both.
 TEST(GpuDecode, SharedFaceVerticesAreBitIdenticalFromBothTetrahedra) {
     GL_TEST_CONTEXT();
-    CatpFile file(test::dataset_path(test::Model::Sphere, 40000, 6));
+    for (LayoutChoice choice : kDatasetLayouts) {
+    CatpFile file(test::dataset_path(test::Model::Sphere, 40000, 6, choice));
     const CatpIndex& index = file.index();
     const CatpMeta& meta = index.meta();
-    float scale = float(meta.cell / kBaryGrid);
+    SCOPED_TRACE(meta.layout.name());
 
     // The finest cut and a mixed one (refined near a point on the surface), so shared faces
     // join tetrahedra of equal and of different levels.
@@ -340,8 +402,7 @@ TEST(GpuDecode, SharedFaceVerticesAreBitIdenticalFromBothTetrahedra) {
     FeedbackDecoder decoder;
     std::map<uint64_t, DiamondFragments> nodes;
     // Anchor: the lattice point nearest a camera close to the surface (what the renderer uses).
-    std::array<int32_t, 3> anchor{int32_t(kLatticeSize / 2) * kBaryGrid, int32_t(kLatticeSize / 2) * kBaryGrid,
-                                  int32_t(kLatticeSize * 0.8) * kBaryGrid};
+    const LatticePoint anchor{int32_t(kLatticeSize / 2), int32_t(kLatticeSize / 2), int32_t(kLatticeSize * 0.8)};
     size_t shared = 0, shared_other_diamond = 0, shared_other_level = 0, different_weights = 0, mismatches = 0;
     for (size_t ci = 0; ci < cuts.size(); ++ci) {
         std::vector<DrawItem> items = renderer.draw_items(cuts[ci]);
@@ -368,10 +429,10 @@ TEST(GpuDecode, SharedFaceVerticesAreBitIdenticalFromBothTetrahedra) {
             ASSERT_TRUE(decode_fragment_integer_positions(f, info, item.slot, exact));
             const GpuFragment* g = renderer.store().find(item.diamond_key, item.slot);
             ASSERT_NE(g, nullptr);
-            std::vector<float> gpu = decoder.decode(*g, anchor, scale);
+            std::vector<float> gpu = decoder.decode(*g, params_for(*g, meta.layout, anchor, meta.cell));
             for (size_t v = 0; v < exact.size(); ++v) {
                 Seen s{bits(gpu[v * 9]), bits(gpu[v * 9 + 1]), bits(gpu[v * 9 + 2]), item.diamond_key, item.slot, info.level, {}};
-                bary_unpack(f.vertices[v].position_index(), s.w);
+                vertex_weights(f.vertices[v], f.layout, s.w);
                 auto [at, inserted] = first.emplace(exact[v], s);
                 if (inserted) continue;
                 const Seen& o = at->second;
@@ -388,12 +449,13 @@ TEST(GpuDecode, SharedFaceVerticesAreBitIdenticalFromBothTetrahedra) {
             }
         }
     }
-    std::printf("shared vertices compared: %zu (across diamonds %zu, across levels %zu, with different weights %zu), "
-                "mismatches %zu\n",
-                shared, shared_other_diamond, shared_other_level, different_weights, mismatches);
+    std::printf("%s: shared vertices compared: %zu (across diamonds %zu, across levels %zu, with different weights "
+                "%zu), mismatches %zu\n",
+                meta.layout.name(), shared, shared_other_diamond, shared_other_level, different_weights, mismatches);
     EXPECT_EQ(mismatches, 0u);
     EXPECT_GT(shared, 1000u);
     EXPECT_GT(shared_other_diamond, 100u);
     EXPECT_GT(shared_other_level, 10u);
     EXPECT_GT(different_weights, shared / 2);  // the same point, different corners and weights
+    }
 }

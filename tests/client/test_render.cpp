@@ -111,8 +111,8 @@ size_t level_count(const CatpIndex& index, const std::vector<DrawItem>& items) {
     return levels.size();
 }
 
-void expect_mixed_cuts_have_no_holes(test::Model model, const char* name) {
-    CatpFile file(test::dataset_path(model, 40000, kCrackLeafLevel));
+void expect_mixed_cuts_have_no_holes(test::Model model, const char* name, LayoutChoice layout = LayoutChoice::Auto) {
+    CatpFile file(test::dataset_path(model, 40000, kCrackLeafLevel, layout));
     const CatpIndex& index = file.index();
     StaticRenderer renderer(file);
     RenderSettings settings = flat_settings();
@@ -172,6 +172,14 @@ TEST(RenderCracks, MixedCutsOfAClosedSphereHaveNoHoles) {
 TEST(RenderCracks, MixedCutsOfAClosedTorusHaveNoHoles) {
     GL_TEST_CONTEXT();
     expect_mixed_cuts_have_no_holes(test::Model::Torus, "torus");
+}
+
+// The same in every vertex layout (the sphere has colours: Auto chose one of the coloured ones).
+TEST(RenderCracks, MixedCutsHaveNoHolesInEveryVertexLayout) {
+    GL_TEST_CONTEXT();
+    expect_mixed_cuts_have_no_holes(test::Model::Sphere, "sphere_rgb24", LayoutChoice::Rgb24);
+    expect_mixed_cuts_have_no_holes(test::Model::Sphere, "sphere_rgb18", LayoutChoice::Rgb18);
+    expect_mixed_cuts_have_no_holes(test::Model::Torus, "torus_position48", LayoutChoice::Position48);
 }
 
 // The detector works: drop the front fragment nearest the image centre from the finest cut and

@@ -13,17 +13,41 @@ TEST(Barycentric, PackUnpackIsABijectionOnAllValidWeights) {
     // Every index decodes to valid weights, and packing them gives the index back.
     for (uint32_t index = 0; index < kBaryIndexCount; ++index) {
         BaryWeights w;
-        ASSERT_TRUE(bary_unpack(index, w));
+        ASSERT_TRUE(bary_unpack(index, kBaryGrid, w));
         ASSERT_TRUE(w[0] >= 0 && w[1] >= 0 && w[2] >= 0 && w[3] >= 0) << index;
         ASSERT_EQ(w[0] + w[1] + w[2] + w[3], kBaryGrid);
         ASSERT_EQ(bary_pack(w), index);
     }
 }
 
+TEST(Barycentric, ThirtyBitIndexIsABijectionOnTheRgb18Grid) {
+    // Every index near the table's block boundaries and the ends, and 20 million random ones.
+    const uint32_t count = bary_index_count(kMaxIndexGrid);
+    ASSERT_LE(count, 1u << 30);
+    std::vector<uint32_t> indices = {0, 1, count - 1, count - 2};
+    for (uint32_t block = 8192; block < count; block += 8192)
+        for (uint32_t d : {block - 1, block, block + 1}) indices.push_back(d);
+    std::mt19937_64 rng(11);
+    for (int i = 0; i < 20000000; ++i) indices.push_back(uint32_t(rng() % count));
+    for (uint32_t index : indices) {
+        BaryWeights w;
+        ASSERT_TRUE(bary_unpack(index, kMaxIndexGrid, w)) << index;
+        ASSERT_TRUE(w[0] >= 0 && w[1] >= 0 && w[2] >= 0 && w[3] >= 0) << index;
+        ASSERT_EQ(w[0] + w[1] + w[2] + w[3], kMaxIndexGrid);
+        ASSERT_EQ(bary_pack(w), index);
+    }
+    BaryWeights w;
+    EXPECT_FALSE(bary_unpack(count, kMaxIndexGrid, w));
+}
+
 TEST(Barycentric, IndicesBeyondTheGridAreRejected) {
     BaryWeights w;
-    EXPECT_FALSE(bary_unpack(kBaryIndexCount, w));
-    EXPECT_FALSE(bary_unpack(0xffffff, w));
+    EXPECT_FALSE(bary_unpack(kBaryIndexCount, kBaryGrid, w));
+    EXPECT_FALSE(bary_unpack(0xffffff, kBaryGrid, w));
+    // A smaller grid uses the first indices of the same enumeration.
+    EXPECT_TRUE(bary_unpack(bary_index_count(100) - 1, 100, w));
+    EXPECT_EQ(w, (BaryWeights{0, 0, 0, 100}));
+    EXPECT_FALSE(bary_unpack(bary_index_count(100), 100, w));
 }
 
 static std::array<LatticePoint, 4> sample_tet() {
@@ -33,28 +57,71 @@ static std::array<LatticePoint, 4> sample_tet() {
     return c;
 }
 
-TEST(Barycentric, QuantizationErrorIsBoundedByTheGridStep) {
+TEST(Barycentric, QuantizationErrorIsBoundedByTheGridStepOnEveryGrid) {
+    // The converter's precision guarantee: a quantized position is within longest edge / grid of
+    // the point. Largest-remainder rounding moves weights by e_i (|e_i| < 1, summing to 0), so
+    // the displacement is m (P - N) / grid with P, N points of the tetrahedron and m the total
+    // positive change, at most 1 for four weights (the r largest fractions of four summing to r
+    // round up: m <= r (4 - r) / 4).
     auto c = sample_tet();
-    std::mt19937_64 rng(7);
-    std::uniform_real_distribution<double> u(0, 1);
-    double max_err = 0;
-    for (int i = 0; i < 200000; ++i) {
-        double l[4] = {u(rng), u(rng), u(rng), u(rng)};
-        double s = l[0] + l[1] + l[2] + l[3];
-        double p[3] = {0, 0, 0};
-        for (int k = 0; k < 4; ++k)
-            for (int j = 0; j < 3; ++j) p[j] += l[k] / s * c[k][j];
-        BaryWeights w = bary_quantize(p, c, 0xf);
-        float q[3];
-        bary_decode(w, c, {0, 0, 0}, 1.0f / kBaryGrid, q);
-        double e = std::sqrt((q[0] - p[0]) * (q[0] - p[0]) + (q[1] - p[1]) * (q[1] - p[1]) + (q[2] - p[2]) * (q[2] - p[2]));
-        max_err = std::max(max_err, e);
+    const double longest_edge = 64.0 * std::sqrt(3.0);
+    for (int32_t grid : {kBaryGrid, 100, kMaxIndexGrid, kMaxWideGrid}) {
+        std::mt19937_64 rng(7);
+        std::uniform_real_distribution<double> u(0, 1);
+        double max_err = 0;
+        for (int i = 0; i < 200000; ++i) {
+            double l[4] = {u(rng), u(rng), u(rng), u(rng)};
+            double s = l[0] + l[1] + l[2] + l[3];
+            double p[3] = {0, 0, 0};
+            for (int k = 0; k < 4; ++k)
+                for (int j = 0; j < 3; ++j) p[j] += l[k] / s * c[k][j];
+            BaryWeights w = bary_quantize(p, c, 0xf, grid);
+            ASSERT_EQ(w[0] + w[1] + w[2] + w[3], grid);
+            std::array<int64_t, 3> exact = bary_integer_sum(w, c);
+            double e2 = 0;
+            for (int j = 0; j < 3; ++j) e2 += (double(exact[j]) / grid - p[j]) * (double(exact[j]) / grid - p[j]);
+            max_err = std::max(max_err, std::sqrt(e2));
+        }
+        EXPECT_LT(max_err, longest_edge / grid) << "grid " << grid;
+        std::printf("grid %5d: max quantization error %.5f lattice units = %.3f steps (edge %.1f)\n", grid, max_err,
+                    max_err * grid / longest_edge, longest_edge);
     }
-    // Largest-remainder rounding moves each weight by less than one step, so the error is below
-    // the sum of the corner distances from the centroid divided by the grid.
-    double longest_edge = 64.0 * std::sqrt(3.0);
-    EXPECT_LT(max_err, longest_edge / kBaryGrid);
-    std::printf("max quantization error %.4f lattice units (edge %.1f, grid %d)\n", max_err, longest_edge, kBaryGrid);
+}
+
+TEST(Barycentric, DecodeMatchesTheExactPositionToFloatPrecision) {
+    // The two-sum float decode is the exact rational position, rounded, for every grid and far
+    // anchors.
+    std::mt19937_64 rng(9);
+    std::uniform_int_distribution<int32_t> coord(0, 1 << 20);
+    for (int32_t grid : {kBaryGrid, kMaxIndexGrid, kMaxWideGrid}) {
+        for (int i = 0; i < 100000; ++i) {
+            std::array<LatticePoint, 4> c;
+            for (auto& p : c) p = {coord(rng), coord(rng), coord(rng)};
+            const LatticePoint anchor{coord(rng), coord(rng), coord(rng)};
+            BaryWeights w{0, int32_t(rng() % uint64_t(grid + 1)), 0, 0};
+            w[2] = int32_t(rng() % uint64_t(grid - w[1] + 1));
+            w[3] = int32_t(rng() % uint64_t(grid - w[1] - w[2] + 1));
+            w[0] = grid - w[1] - w[2] - w[3];
+            std::array<LatticePoint, 4> offsets;
+            for (int k = 0; k < 4; ++k)
+                for (int j = 0; j < 3; ++j) offsets[k][j] = c[k][j] - anchor[j];
+            float q[3];
+            bary_decode(w, offsets, 1.0f / float(grid), q);
+            std::array<int64_t, 3> exact = bary_integer_sum(w, offsets);
+            // Three roundings, of the high sum (at most grid x the largest offset, after the
+            // exact x128), of the low sum (at most 4 x 127 x it) and of the result, plus the
+            // scale's: bounded relative to the largest offset, which near the camera, where
+            // tetrahedra are small, is about the distance to the anchor.
+            int64_t largest = 1;
+            for (const LatticePoint& o : offsets)
+                for (int32_t x : o) largest = std::max<int64_t>(largest, std::llabs(int64_t(x)));
+            for (int j = 0; j < 3; ++j) {
+                const double truth = double(exact[j]) / grid;
+                const double bound = std::ldexp(1.0, -24) * (double(largest) * (2.0 + 508.0 / grid) + 2.0 * std::fabs(truth));
+                ASSERT_NEAR(q[j], truth, bound) << "grid " << grid;
+            }
+        }
+    }
 }
 
 TEST(Barycentric, FaceRuleGivesZeroWeightOutsideTheSupport) {
@@ -86,8 +153,9 @@ TEST(Barycentric, SharedFaceVertexDecodesBitIdenticallyFromBothTetrahedra) {
         double a = u(rng), b = u(rng) * (1 - a);
         double p[3];
         for (int j = 0; j < 3; ++j) p[j] = a * A[j] + b * B[j] + (1 - a - b) * C[j];
-        BaryWeights w1 = bary_quantize(p, t1, mask_for(t1, D1));
-        BaryWeights w2 = bary_quantize(p, t2, mask_for(t2, D2));
+        const int32_t grid = std::array<int32_t, 3>{kBaryGrid, kMaxIndexGrid, kMaxWideGrid}[size_t(i % 3)];
+        BaryWeights w1 = bary_quantize(p, t1, mask_for(t1, D1), grid);
+        BaryWeights w2 = bary_quantize(p, t2, mask_for(t2, D2), grid);
         auto weight_of = [](const std::array<LatticePoint, 4>& t, const BaryWeights& w, const LatticePoint& x) {
             for (int k = 0; k < 4; ++k)
                 if (t[k] == x) return w[k];
@@ -98,10 +166,16 @@ TEST(Barycentric, SharedFaceVertexDecodesBitIdenticallyFromBothTetrahedra) {
         ASSERT_EQ(weight_of(t1, w1, C), weight_of(t2, w2, C));
         ASSERT_EQ(weight_of(t1, w1, D1), 0);
         ASSERT_EQ(weight_of(t2, w2, D2), 0);
-        const std::array<int32_t, 3> anchor{kBaryGrid * 13, kBaryGrid * -7, kBaryGrid * 5};
+        const LatticePoint anchor{13, -7, 5};
+        auto offsets = [&](const std::array<LatticePoint, 4>& t) {
+            std::array<LatticePoint, 4> o;
+            for (int k = 0; k < 4; ++k)
+                for (int j = 0; j < 3; ++j) o[k][j] = t[k][j] - anchor[j];
+            return o;
+        };
         float q1[3], q2[3];
-        bary_decode(w1, t1, anchor, 0.001953125f, q1);
-        bary_decode(w2, t2, anchor, 0.001953125f, q2);
+        bary_decode(w1, offsets(t1), 0.001953125f, q1);
+        bary_decode(w2, offsets(t2), 0.001953125f, q2);
         for (int j = 0; j < 3; ++j) ASSERT_EQ(q1[j], q2[j]);
     }
 }
@@ -118,10 +192,46 @@ TEST(PackedVertex, FieldsRoundTripThroughTheTwoWords) {
 }
 
 TEST(PackedVertex, CorruptPositionIndexIsRejectedByTheDecoder) {
-    auto c = sample_tet();
+    VertexDecodeParams params;
+    params.offsets = sample_tet();
     DecodedVertex out;
-    EXPECT_FALSE(decode_packed_vertex(PackedVertex::make(0xffffff, 0, 0, 0, 0), c, {0, 0, 0}, 1.0f, out));
-    EXPECT_TRUE(decode_packed_vertex(PackedVertex::make(0, 0, 0, 0, 0), c, {0, 0, 0}, 1.0f, out));
+    EXPECT_FALSE(decode_packed_vertex(PackedVertex::make(0xffffff, 0, 0, 0, 0), params, out));
+    EXPECT_TRUE(decode_packed_vertex(PackedVertex::make(0, 0, 0, 0, 0), params, out));
+    params.layout = VertexLayout{VertexLayoutKind::Position48, 1000};
+    EXPECT_FALSE(decode_packed_vertex(PackedVertex::from_payload(uint64_t(600) | (uint64_t(401) << 16), 0), params, out))
+        << "weights summing above the grid";
+    EXPECT_TRUE(decode_packed_vertex(PackedVertex::from_payload(uint64_t(600) | (uint64_t(400) << 16), 0), params, out));
+}
+
+TEST(PackedVertex, EveryLayoutRoundTripsWeightsNormalAndColour) {
+    std::mt19937_64 rng(21);
+    const VertexLayout layouts[] = {{VertexLayoutKind::Rgb24, kBaryGrid},
+                                    {VertexLayoutKind::Rgb18, kMaxIndexGrid},
+                                    {VertexLayoutKind::Position48, kMaxWideGrid},
+                                    {VertexLayoutKind::Position48, 77}};
+    for (const VertexLayout& layout : layouts) {
+        ASSERT_TRUE(layout.valid());
+        for (int i = 0; i < 100000; ++i) {
+            const int32_t g = layout.grid;
+            BaryWeights w{0, int32_t(rng() % uint64_t(g + 1)), 0, 0};
+            w[2] = int32_t(rng() % uint64_t(g - w[1] + 1));
+            w[3] = int32_t(rng() % uint64_t(g - w[1] - w[2] + 1));
+            w[0] = g - w[1] - w[2] - w[3];
+            const uint16_t normal = uint16_t(rng());
+            const uint8_t rgb[3] = {uint8_t(rng()), uint8_t(rng()), uint8_t(rng())};
+            PackedVertex v = pack_vertex(layout, w, normal, rgb);
+            BaryWeights back;
+            ASSERT_TRUE(vertex_weights(v, layout, back)) << layout.name();
+            ASSERT_EQ(back, w) << layout.name();
+            ASSERT_EQ(v.normal(), normal);
+            if (!layout.has_color()) continue;
+            float color[3];
+            vertex_color(v, layout, color);
+            // 8 bits exact; 6 bits within half a step of 1/63.
+            const float tolerance = layout.color_bits() == 8 ? 0.0f : 0.5f / 63.0f + 1e-6f;
+            for (int k = 0; k < 3; ++k) ASSERT_NEAR(color[k], rgb[k] / 255.0f, tolerance) << layout.name();
+        }
+    }
 }
 
 namespace {

@@ -107,13 +107,11 @@ std::array<LatticePoint, 4> kuhn_tet() {
     return c;
 }
 
-uint32_t quantize_point(const double p[3]) { return bary_pack(bary_quantize(p, kuhn_tet(), 0xf)); }
-
-PackedVertex smooth_vertex(const double p[3], const double n[3]) {
+PackedVertex smooth_vertex(const double p[3], const double n[3], const VertexLayout& layout) {
     uint16_t normal = oct_encode_precise(float(n[0]), float(n[1]), float(n[2]));
     auto chan = [](double x) { return uint8_t(std::clamp(128.0 + 100.0 * std::sin(x), 0.0, 255.0)); };
-    return PackedVertex::make(quantize_point(p), normal, chan(p[0] * 0.01), chan(p[1] * 0.013 + 1.0),
-                              chan(p[2] * 0.017 + 2.0));
+    const uint8_t rgb[3] = {chan(p[0] * 0.01), chan(p[1] * 0.013 + 1.0), chan(p[2] * 0.017 + 2.0)};
+    return pack_vertex(layout, bary_quantize(p, kuhn_tet(), 0xf, layout.grid), normal, rgb);
 }
 
 // A regular grid patch of n x n vertices (2 (n-1)^2 triangles) on a gently curved surface inside
@@ -126,7 +124,7 @@ void add_grid(FragmentMesh& m, int n, double x0, double y0, double step) {
             double gx = x0 + i * step, gy = y0 + j * step;
             double p[3] = {400.0 + 0.95 * gx, 20.0 + 0.6 * gy, 12.0 + 6.0 * std::sin(gx * 0.02) * std::cos(gy * 0.03)};
             double nn[3] = {-0.1 * std::cos(gx * 0.02), 0.2 * std::sin(gy * 0.03), 1.0};
-            m.vertices.push_back(smooth_vertex(p, nn));
+            m.vertices.push_back(smooth_vertex(p, nn, m.layout));
         }
     for (int j = 0; j + 1 < n; ++j)
         for (int i = 0; i + 1 < n; ++i) {
@@ -135,14 +133,15 @@ void add_grid(FragmentMesh& m, int n, double x0, double y0, double step) {
         }
 }
 
-FragmentMesh grid_patch(int n) {
+FragmentMesh grid_patch(int n, const VertexLayout& layout = {}) {
     FragmentMesh m;
+    m.layout = layout;
     add_grid(m, n, 0.0, 0.0, 600.0 / (n - 1));
     return m;
 }
 
 // Subdivided icosahedron inside the Kuhn tetrahedron, with exact sphere normals.
-FragmentMesh icosphere(int subdivisions) {
+FragmentMesh icosphere(int subdivisions, const VertexLayout& layout = {}) {
     const double t = (1.0 + std::sqrt(5.0)) / 2.0;
     std::vector<std::array<double, 3>> p = {{-1, t, 0}, {1, t, 0}, {-1, -t, 0}, {1, -t, 0}, {0, -1, t}, {0, 1, t},
                                             {0, -1, -t}, {0, 1, -t}, {t, 0, -1}, {t, 0, 1}, {-t, 0, -1}, {-t, 0, 1}};
@@ -175,10 +174,11 @@ FragmentMesh icosphere(int subdivisions) {
         f = g;
     }
     FragmentMesh m;
+    m.layout = layout;
     const double center[3] = {700, 450, 200}, radius = 170;
     for (const auto& v : p) {
         double q[3] = {center[0] + radius * v[0], center[1] + radius * v[1], center[2] + radius * v[2]};
-        m.vertices.push_back(smooth_vertex(q, v.data()));
+        m.vertices.push_back(smooth_vertex(q, v.data(), layout));
     }
     m.indices = f;
     return m;
@@ -235,7 +235,7 @@ TEST(FragmentCodec, WeightSpacePositionCodingIsChosenWhenCheaperAndRoundTrips) {
     std::mt19937_64 rng(7);
     for (PackedVertex& v : m.vertices) {
         BaryWeights w;
-        ASSERT_TRUE(bary_unpack(v.position_index(), w));
+        ASSERT_TRUE(bary_unpack(v.position_index(), kBaryGrid, w));
         int d = int(rng() % 9) - 4;
         if (w[2] + d >= 0 && w[0] - d >= 0) {
             w[2] += d;
@@ -513,6 +513,101 @@ TEST(FragmentCodec, FuzzedInputNeverCrashesTheDecoder) {
     EXPECT_LT(parsed_ok, 1000);
 }
 
+// ---- vertex layouts -------------------------------------------------------------------------
+
+namespace {
+
+// Every layout at its finest grid and at a coarser one.
+const VertexLayout kLayouts[] = {
+    {VertexLayoutKind::Rgb24, kBaryGrid},    {VertexLayoutKind::Rgb24, 100},
+    {VertexLayoutKind::Rgb18, kMaxIndexGrid}, {VertexLayoutKind::Rgb18, 700},
+    {VertexLayoutKind::Position48, kMaxWideGrid}, {VertexLayoutKind::Position48, 2000},
+};
+
+std::string describe(const VertexLayout& l) { return std::string(l.name()) + "/" + std::to_string(l.grid); }
+
+}  // namespace
+
+TEST(FragmentCodec, RoundTripIsLosslessInEveryVertexLayout) {
+    for (const VertexLayout& layout : kLayouts) {
+        SCOPED_TRACE(describe(layout));
+        FragmentMesh patch = grid_patch(30, layout);
+        add_grid(patch, 7, 50.0, 400.0, 10.0);
+        patch.indices.insert(patch.indices.end(), {0, 1, 1});  // a degenerate triangle
+        for (const FragmentMesh& m : {patch, icosphere(3, layout)}) {
+            std::vector<uint8_t> bytes = expect_round_trip(m);
+            EXPECT_EQ(bytes[kCodingOffset], 0) << "smooth content compresses";
+            EXPECT_EQ(fragment_layout(bytes.data()), layout);
+            FragmentMesh out;
+            ASSERT_EQ(fragment_decode(bytes.data(), bytes.size(), out), FragmentStatus::Ok);
+            EXPECT_EQ(out.layout, layout);
+            EXPECT_NE(bytes[kModesOffset] & 3, 2) << "valid positions are predicted, not stored raw";
+        }
+    }
+}
+
+TEST(FragmentCodec, ArbitraryWordsRoundTripInEveryVertexLayout) {
+    // Positions beyond the grid (raw position bits of the layout's width), any normal and
+    // colour bits: still lossless, through the raw-position or the stored coding.
+    std::mt19937_64 rng(5);
+    for (const VertexLayout& layout : kLayouts) {
+        SCOPED_TRACE(describe(layout));
+        for (int round = 0; round < 6; ++round) {
+            FragmentMesh m = grid_patch(8 + round, layout);
+            std::vector<PackedVertex> words = random_vertices(rng, m.vertices.size());
+            if (round % 2)  // valid positions, random everything else: only some vertices raw
+                for (size_t i = 0; i < words.size(); i += 3) words[i] = m.vertices[i];
+            m.vertices = words;
+            expect_round_trip(m);
+        }
+    }
+}
+
+TEST(FragmentCodec, ColourlessLayoutSpendsNoBytesOnColour) {
+    FragmentEncodeStats with, without;
+    encode(icosphere(3, VertexLayout{VertexLayoutKind::Rgb24, kBaryGrid}), &with);
+    encode(icosphere(3, VertexLayout{VertexLayoutKind::Position48, kBaryGrid}), &without);
+    EXPECT_GT(with.color_bytes, 0u);
+    EXPECT_EQ(without.color_bytes, 0u);
+    // The same grid: the same positions, so the same position cost up to table details.
+    EXPECT_NEAR(double(without.position_bytes), double(with.position_bytes), 0.02 * double(with.position_bytes));
+}
+
+TEST(FragmentCodec, HeaderNamesTheLayoutAndInvalidLayoutsAreRejected) {
+    FragmentMesh out;
+    uint32_t vc, tc;
+    // The first datasets' layout keeps its bytes: layout 0, grid field 0.
+    std::vector<uint8_t> legacy = encode(grid_patch(5));
+    EXPECT_EQ(legacy[5], 0);
+    EXPECT_EQ(legacy[6] | (legacy[7] << 8), 0);
+    std::vector<uint8_t> wide = encode(grid_patch(5, VertexLayout{VertexLayoutKind::Position48, 5000}));
+    EXPECT_EQ(wide[5], 1);
+    EXPECT_EQ(wide[6] | (wide[7] << 8), 5000);
+    auto with_header = [&](uint8_t layout, uint16_t grid) {
+        std::vector<uint8_t> b = wide;
+        b[5] = layout;
+        b[6] = uint8_t(grid);
+        b[7] = uint8_t(grid >> 8);
+        refresh_integrity(b);
+        return b;
+    };
+    std::vector<uint8_t> b = with_header(3, 5000);
+    EXPECT_EQ(fragment_peek(b.data(), b.size(), vc, tc), FragmentStatus::UnsupportedVersion);
+    b = with_header(1, 0);  // Position48 has no default grid
+    EXPECT_EQ(fragment_peek(b.data(), b.size(), vc, tc), FragmentStatus::Corrupt);
+    b = with_header(1, uint16_t(kMaxWideGrid + 1));
+    EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::Corrupt);
+    b = with_header(0, 5000);  // beyond the 24-bit index's grid
+    EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::Corrupt);
+    // A changed layout (to a valid one) is caught by the header fold even when the checksum was
+    // recomputed.
+    b = encode(grid_patch(5, VertexLayout{VertexLayoutKind::Position48, 1000}));
+    b[5] = 2;
+    uint64_t sum = checksum64(b.data() + kHeaderSize, b.size() - kHeaderSize);
+    for (int i = 0; i < 8; ++i) b[16 + size_t(i)] = uint8_t(sum >> (8 * i));
+    EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::Corrupt);
+}
+
 // ---- format stability -----------------------------------------------------------------------
 
 TEST(FragmentCodec, GoldenBytesOfATinyFragmentAreStable) {
@@ -569,7 +664,7 @@ TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreUnchanged) {
         std::mt19937_64 rng(7);
         for (PackedVertex& v : m.vertices) {
             BaryWeights w;
-            bary_unpack(v.position_index(), w);
+            bary_unpack(v.position_index(), kBaryGrid, w);
             int d = int(rng() % 9) - 4;
             if (w[2] + d >= 0 && w[0] - d >= 0) {
                 w[2] += d;

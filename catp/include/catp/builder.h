@@ -2,7 +2,10 @@
 // The CATP converter: a mesh in, a CATP dataset (catp/format.h) out.
 //
 // 1. The model is placed in a power-of-two cube and mapped to the integer lattice.
-// 2. The leaf level is chosen from the triangle density (about `leaf_triangles` per tetrahedron).
+// 2. The leaf level is chosen from the triangle density (about `leaf_triangles` per tetrahedron)
+//    and the precision asked for: the vertex layout and its barycentric grid are chosen so that
+//    the leaves' quantization step, which bounds the finest level's distance to the input, is
+//    at most the precision; where the layout's finest grid is not enough, the leaves go deeper.
 // 3. Leaves: the mesh is clipped by the leaf tetrahedra (catp/src/clip.h: canonical, exactly
 //    snapped constructions decided by exact predicates).
 // 4. Coarser diamonds, bottom-up: the fragments of a diamond's children are gathered and welded,
@@ -20,13 +23,36 @@
 #include <string>
 #include <vector>
 
+#include "catp/format.h"
 #include "mesh/mesh.h"
 
 namespace catpaq {
 
+// The finest level's largest distance from the input the converter guarantees: `model_units` if
+// positive, else `mean_edges` times the input's mean edge length.
+struct Precision {
+    double model_units = 0;
+    double mean_edges = 0.1;
+};
+// Parses "0.001" (model units) or "0.1e" (a fraction of the mean input edge); false if invalid.
+bool parse_precision(const std::string& text, Precision& out);
+
+// Vertex layouts to choose from (common_codec/packed_vertex.h).
+enum class LayoutChoice : uint8_t {
+    Auto,        // without colours Position48; with colours Rgb24 if its grid reaches the
+                 // precision at the leaf level the density chooses, else Rgb18, else deeper
+    Rgb24,       // full colour; the leaves go deeper when the precision needs it
+    Rgb18,
+    Position48,  // drops the input's colours
+};
+bool parse_layout_choice(const std::string& text, LayoutChoice& out);
+
 struct CatpBuildSettings {
     size_t leaf_triangles = 2000;  // target triangles per leaf tetrahedron
-    int leaf_level = -1;           // force a leaf level (-1: choose from the density)
+    int leaf_level = -1;           // force a leaf level (-1: choose from the density and precision)
+    Precision precision;
+    LayoutChoice layout = LayoutChoice::Auto;
+    UpAxis up = UpAxis::PosY;      // stored for viewers
     unsigned threads = 0;          // 0: all cores
     bool progress = true;          // progress bar on a terminal
     // Working memory the build may use, in bytes (0: default_memory_budget()). It covers the
@@ -62,6 +88,12 @@ struct CatpLevelStats {
 struct CatpBuildReport {
     size_t input_vertices = 0, input_triangles = 0;
     int leaf_level = 0;
+    int density_leaf_level = 0;    // the leaf level the density alone chose
+    VertexLayout layout;
+    double mean_edge = 0;          // world units
+    double precision = 0;          // asked for, world units
+    double leaf_step = 0;          // the leaves' quantization step (<= precision), world units
+    std::vector<std::string> warnings;  // for the user: what was not as asked
     size_t nodes = 0;
     uint64_t file_bytes = 0;
     double seconds = 0;

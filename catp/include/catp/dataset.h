@@ -55,15 +55,20 @@ private:
     std::unique_ptr<CatpIndex> index_;
 };
 
-// Decodes one fragment of a diamond slot to positions exactly as the vertex shader does (see
-// common_codec/barycentric.h): anchor and scale as uniforms. Positions are appended as xyz floats.
-// Returns false if a vertex is corrupt.
-bool decode_fragment_positions(const FragmentMesh& fragment, const DiamondInfo& diamond, int slot,
-                               const std::array<int32_t, 3>& anchor_times_grid, float scale,
+// The vertex shader's inputs for slot `slot` of `diamond` in a dataset: the slot's canonical
+// corners minus `anchor`, the dataset's layout and default colour, and the scale for positions in
+// a frame whose unit is `cell_in_frame` lattice cells' worth (meta.cell for world units).
+VertexDecodeParams slot_decode_params(const CatpMeta& meta, const DiamondInfo& diamond, int slot,
+                                      const LatticePoint& anchor, double cell_in_frame);
+
+// Decodes a fragment's positions exactly as the vertex shader does (see
+// common_codec/barycentric.h), appending them as xyz floats. Returns false if a vertex is corrupt.
+bool decode_fragment_positions(const FragmentMesh& fragment, const VertexDecodeParams& params,
                                std::vector<float>& positions_out);
 
-// The exact integer position (sum w_i C_i, i.e. kBaryGrid times the lattice position) of every
-// vertex: identical integers mean bit-identical decoded positions in every frame.
+// The exact integer position (sum w_i C_i, i.e. the grid times the lattice position) of every
+// vertex (in the fragment's layout): identical integers mean bit-identical decoded positions in
+// every frame.
 bool decode_fragment_integer_positions(const FragmentMesh& fragment, const DiamondInfo& diamond, int slot,
                                        std::vector<std::array<int64_t, 3>>& out);
 

@@ -2,11 +2,18 @@
 // The CATP dataset: an archive (common_codec/archive.h) of kind Catp whose nodes are diamonds.
 //
 // Meta (little-endian):
-//   char[8] "CATPMETA" | u32 version (1) | u32 lattice_bits
+//   char[8] "CATPMETA" | u32 version (2; 1 is read too) | u32 lattice_bits
 //   f64 origin[3] | f64 cell            world = origin + lattice * cell (cell is a power of two)
 //   u32 leaf_level | u32 flags (bit 0: input had colours, bit 1: input had normals)
 //   u64 input_vertices | u64 input_triangles | f64 bounds_min[3] | f64 bounds_max[3] (world)
 //   u32 default_rgb (0x00BBGGRR used when the input has no colours)
+// version 2 adds:
+//   u8 vertex layout (common_codec/packed_vertex.h) | u8 up axis (UpAxis) | u16 grid
+//   f64 precision   the largest distance of the finest level from the input that the converter
+//                   guaranteed (world units: its quantization step bound), as asked for
+//   f64 mean_edge   the input's mean edge length (world units)
+// Version 1 datasets read as the Rgb24 layout with grid 463, up axis unknown, precision and mean
+// edge 0 (not recorded).
 //
 // Node (one diamond; key = DiamondId bits, level = diamond level, flags = slot mask (bits 0-7) |
 // leaf (bit 8), count = triangles, error = object-space error bound in world units):
@@ -15,6 +22,7 @@
 // (catp/lattice.h: diamond_tetrahedron + canonical_tetrahedron).
 #include <array>
 #include <cstdint>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -23,7 +31,15 @@
 
 namespace catpaq {
 
-constexpr uint32_t kCatpMetaVersion = 1;
+constexpr uint32_t kCatpMetaVersion = 2;
+
+// Which world axis points up (for viewers; stored from the input's convention or `convert --up`).
+enum class UpAxis : uint8_t { Unknown = 0, PosX, PosY, PosZ, NegX, NegY, NegZ };
+// "x", "y", "z", "-x", "-y", "-z" (or "" for Unknown); parse returns false on anything else.
+const char* up_axis_name(UpAxis axis);
+bool parse_up_axis(const std::string& text, UpAxis& out);
+// The unit vector of an axis (+z for Unknown).
+std::array<double, 3> up_axis_vector(UpAxis axis);
 constexpr uint16_t kCatpLeafFlag = 1u << 8;
 
 struct CatpMeta {
@@ -35,6 +51,10 @@ struct CatpMeta {
     uint64_t input_vertices = 0, input_triangles = 0;
     double bounds_min[3] = {0, 0, 0}, bounds_max[3] = {0, 0, 0};
     uint32_t default_rgb = 0x00b4b4b4;
+    VertexLayout layout;  // of every fragment
+    UpAxis up = UpAxis::Unknown;
+    double precision = 0;  // world units; 0: not recorded
+    double mean_edge = 0;  // world units; 0: not recorded
 };
 
 std::vector<uint8_t> encode_catp_meta(const CatpMeta& meta);
@@ -48,7 +68,9 @@ struct DiamondFragments {
 };
 
 std::vector<uint8_t> encode_diamond_node(const DiamondFragments& fragments);
-// Empty string on success, else what is wrong (truncated, corrupt fragment, ...).
-std::string decode_diamond_node(const uint8_t* data, size_t size, DiamondFragments& out);
+// Empty string on success, else what is wrong (truncated, corrupt fragment, a fragment of
+// another vertex layout than the dataset's `layout` when given, ...).
+std::string decode_diamond_node(const uint8_t* data, size_t size, const std::optional<VertexLayout>& layout,
+                                DiamondFragments& out);
 
 }  // namespace catpaq

@@ -5,6 +5,7 @@
 #include <string>
 #include <vector>
 
+#include "common_codec/packed_vertex.h"
 #include "mesh/mesh.h"
 
 namespace catpaq {
@@ -28,11 +29,16 @@ struct VerifyReport {
     double diagonal = 0;  // of the stored bounds
     size_t checksum_failures = 0, corrupt_nodes = 0, monotonicity_violations = 0, bad_flags = 0;
     size_t face_mismatches = 0, faces_checked = 0;
+    VertexLayout layout;   // of the dataset's vertices
+    double precision = 0;  // the finest level's guaranteed distance to the input (world; 0: none recorded)
+    double mean_edge = 0;  // of the input (world; 0: not recorded)
+    // With the original: the finest level's measured distance (either direction) exceeds it.
+    bool precision_exceeded = false;
     std::vector<VerifyLevel> levels;
     std::vector<std::string> problems;  // first few, human readable
     bool ok() const {
         return checksum_failures == 0 && corrupt_nodes == 0 && monotonicity_violations == 0 && bad_flags == 0 &&
-               face_mismatches == 0;
+               face_mismatches == 0 && !precision_exceeded;
     }
 };
 

@@ -63,8 +63,8 @@ public:
 
     // Uploads (replacing any previous upload of the same item) slot `slot` of diamond
     // `diamond_key`. The fragment is validated first: the diamond and slot must exist, indices
-    // be in range and position indices below kBaryIndexCount; throws Error otherwise, leaving the
-    // store unchanged. The new fragment counts as used this frame. Then evicts down to the
+    // be in range and positions valid for the fragment's layout; throws Error otherwise, leaving
+    // the store unchanged. The new fragment counts as used this frame. Then evicts down to the
     // budget (see evict_to_budget).
     void upload(uint64_t diamond_key, int slot, const FragmentMesh& fragment);
     // The float comparison path: decodes on the CPU (decode_packed_vertex, positions relative to
@@ -148,12 +148,15 @@ struct RenderStats {
 // The per-frame transform the renderer uses: the integer lattice anchor nearest the eye
 // (clamped to the lattice cube), the shader uniforms derived from it, and the matrices.
 struct FrameTransform {
-    LatticePoint anchor{};                    // A
-    std::array<int32_t, 3> anchor_times_grid{};  // kBaryGrid * A
-    glm::dvec3 anchor_world{};                // origin + A * cell
-    float scale = 0;                          // float(cell / kBaryGrid)
-    glm::mat4 mvp_packed{1.0f};               // projection * view_relative(anchor_world)
-    glm::mat4 mvp_float{1.0f};                // projection * view_relative(origin)
+    LatticePoint anchor{};       // A
+    glm::dvec3 anchor_world{};   // origin + A * cell
+    float scale = 0;             // float(cell / grid)
+    glm::mat4 mvp_packed{1.0f};  // projection * view_relative(anchor_world)
+    glm::mat4 mvp_float{1.0f};   // projection * view_relative(origin)
+    VertexDecodeParams decode;   // the dataset's layout, scale and default colour (offsets unset)
+
+    // The vertex shader's inputs for a tetrahedron with canonical corners `corners`.
+    VertexDecodeParams params(const std::array<LatticePoint, 4>& corners) const;
 };
 // The camera must have clip planes (Camera::fit_clip_planes).
 FrameTransform frame_transform(const Camera& camera, const CatpMeta& meta);
@@ -177,7 +180,7 @@ public:
 
 private:
     struct Uniforms {
-        int corners = -1, anchor = -1, scale = -1, mvp = -1;
+        int corners = -1, layout = -1, grid = -1, scale = -1, default_color = -1, mvp = -1;
         int flat_mode = -1, flat_color = -1, light = -1, ambient = -1;
     };
     void set_shading(const GlProgram& program, const Uniforms& u, const RenderSettings& settings,

@@ -27,6 +27,7 @@
 #include <deque>
 #include <functional>
 #include <memory>
+#include <optional>
 #include <mutex>
 #include <string>
 #include <thread>
@@ -189,7 +190,8 @@ struct FetcherSettings {
     uint32_t max_attempts = 6;                          // then reported failed
     std::chrono::milliseconds failed_retry_delay{5000};  // a failed node requested again waits this
     bool abort_stale_in_flight = false;  // stale transfers already running: finish (default) or abort
-    // Decodes verified bytes (default: decode_diamond_node). Empty string on success.
+    std::optional<VertexLayout> layout;  // the dataset's, checked by the default decoder when set
+    // Decodes verified bytes (default: decode_diamond_node with `layout`). Empty string on success.
     std::function<std::string(const FetchRequest&, const uint8_t*, size_t, DiamondFragments&)> decode;
 };
 
