@@ -190,7 +190,7 @@ void load_node(Dataset& d, uint32_t n) {
     const uint8_t* payload = d.file->archive().node(node.entry, &error);
     if (!payload) fail("%s", error.c_str());
     DiamondFragments fragments;
-    std::string problem = decode_diamond_node(payload, entry.size, fragments);
+    std::string problem = decode_diamond_node(payload, entry.size, index.meta().layout, fragments);
     if (!problem.empty()) fail("diamond %llu: %s", (unsigned long long)node.key, problem.c_str());
     std::array<uint32_t, 8> sizes = slot_sizes(payload, entry.size, node.key);
     DiamondInfo info = diamond_info(DiamondId{node.key});
