@@ -195,7 +195,7 @@ CutEngine::CutEngine(const Hierarchy& hierarchy, const DrawCounter& counter, Cut
     size_t n = h_.size();
     par_off_.resize(n + 1);
     ch_off_.resize(n + 1);
-    box_.resize(n);
+    box_off_.resize(n + 1);
     error_.resize(n);
     flags_.resize(n);
     level_.resize(n);
@@ -205,14 +205,16 @@ CutEngine::CutEngine(const Hierarchy& hierarchy, const DrawCounter& counter, Cut
         par_.insert(par_.end(), node.parents.begin(), node.parents.end());
         ch_off_[i] = uint32_t(ch_.size());
         ch_.insert(ch_.end(), node.children.begin(), node.children.end());
-        box_[i] = {node.bounds.min[0], node.bounds.min[1], node.bounds.min[2],
-                   node.bounds.max[0], node.bounds.max[1], node.bounds.max[2]};
+        box_off_[i] = uint32_t(box_.size());
+        for (const Aabb& b : h_.has_view_boxes() ? node.view_boxes : std::vector<Aabb>{node.bounds})
+            if (!b.empty()) box_.push_back({b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]});
         error_[i] = node.error;
         flags_[i] = uint8_t((node.has_data ? 1 : 0) | (node.leaf ? 2 : 0));
         level_[i] = node.level;
     }
     par_off_[n] = uint32_t(par_.size());
     ch_off_[n] = uint32_t(ch_.size());
+    box_off_[n] = uint32_t(box_.size());
     reset();
 }
 
@@ -283,19 +285,25 @@ inline double box_distance(const std::array<double, 6>& b, const std::array<doub
 double CutEngine::proj(uint32_t n) {
     if (proj_frame_[n] == frame_number_) return proj_[n];
     proj_frame_[n] = frame_number_;
-    const std::array<double, 6>& box = box_[n];
-    if (!(box[0] <= box[3] && box[1] <= box[4] && box[2] <= box[5])) {  // empty: nothing to see
-        visible_[n] = 0;
-        proj_[n] = keep_proj_[n] = 0;
-        return 0;
+    // The nearest box in the frustum sets the projected error; the nearest within the grown
+    // frustum (visibility hysteresis) the one coarsening decisions keep. No box: nothing to see.
+    constexpr double kFar = std::numeric_limits<double>::infinity();
+    double nearest = kFar, nearest_kept = kFar;
+    for (uint32_t b = box_off_[n]; b < box_off_[n + 1]; ++b) {
+        const std::array<double, 6>& box = box_[b];
+        const double distance = box_distance(box, view_.eye);
+        if (distance >= nearest) continue;  // improves neither (nearest_kept <= nearest)
+        if (box_visible(view_, box, 0)) {
+            nearest = distance;
+            nearest_kept = std::min(nearest_kept, distance);
+        } else if (distance < nearest_kept && view_.frustum_margin > 0 &&
+                   box_visible(view_, box, view_.frustum_margin * distance)) {
+            nearest_kept = distance;
+        }
     }
-    double distance = box_distance(box, view_.eye);
-    double unculled = error_[n] * k_ / std::max(distance, view_.near);
-    bool visible = box_visible(view_, box, 0);
-    visible_[n] = visible;
-    proj_[n] = visible ? unculled : 0.0;
-    keep_proj_[n] =
-        visible || (view_.frustum_margin > 0 && box_visible(view_, box, view_.frustum_margin * distance)) ? unculled : 0.0;
+    visible_[n] = nearest < kFar;
+    proj_[n] = nearest < kFar ? error_[n] * k_ / std::max(nearest, view_.near) : 0.0;
+    keep_proj_[n] = nearest_kept < kFar ? error_[n] * k_ / std::max(nearest_kept, view_.near) : 0.0;
     return proj_[n];
 }
 
@@ -312,9 +320,10 @@ bool CutEngine::in_view(uint32_t n) {
 double CutEngine::projected_error(uint32_t node) const {
     if (frame_number_ == 0) return 0;
     if (proj_frame_[node] == frame_number_) return proj_[node];
-    const HierarchyNode& n = h_.node(node);
-    if (!view_.may_see(n.bounds)) return 0;
-    return n.error * view_.k() / std::max(n.bounds.distance_to(view_.eye), view_.near);
+    double nearest = std::numeric_limits<double>::infinity();
+    for (uint32_t b = box_off_[node]; b < box_off_[node + 1]; ++b)
+        if (box_visible(view_, box_[b], 0)) nearest = std::min(nearest, box_distance(box_[b], view_.eye));
+    return std::isfinite(nearest) ? error_[node] * view_.k() / std::max(nearest, view_.near) : 0.0;
 }
 
 void CutEngine::recount(uint32_t n) {

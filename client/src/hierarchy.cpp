@@ -122,6 +122,14 @@ std::string Hierarchy::check() const {
             if (pn.error < n.error) return strprintf("node %llu: error above its parent's", (unsigned long long)n.key);
             if (!pn.bounds.contains(n.bounds)) return strprintf("node %llu: box outside its parent's", (unsigned long long)n.key);
         }
+        for (const Aabb& box : n.view_boxes) {
+            if (!n.bounds.contains(box)) return strprintf("node %llu: view box outside its bounds", (unsigned long long)n.key);
+            if (n.parents.empty()) continue;
+            bool nested = false;
+            for (uint32_t p : n.parents)
+                for (const Aabb& pb : nodes_[p].view_boxes) nested |= pb.contains(box);
+            if (!nested) return strprintf("node %llu: a view box in no parent's", (unsigned long long)n.key);
+        }
         for (uint32_t c : n.children)
             if (!std::binary_search(nodes_[c].parents.begin(), nodes_[c].parents.end(), n.index))
                 return strprintf("node %llu: child does not list it as a parent", (unsigned long long)n.key);
@@ -139,19 +147,54 @@ std::string Hierarchy::check() const {
 
 namespace {
 
+Aabb tetrahedron_bounds(const CatpIndex& index, const Tetrahedron& t) {
+    Aabb box;
+    for (const LatticePoint& p : t) {
+        double lattice[3] = {double(p[0]), double(p[1]), double(p[2])};
+        double world[3];
+        index.lattice_to_world(lattice, world);
+        box.extend(std::array<double, 3>{world[0], world[1], world[2]});
+    }
+    return box;
+}
+
 Aabb tetrahedra_bounds(const CatpIndex& index, const DiamondInfo& info) {
     Aabb box;
     uint8_t mask = existing_slots(info);
-    for (int s = 0; s < info.ring_size; ++s) {
-        if (!(mask & (1 << s))) continue;
-        for (const LatticePoint& p : diamond_tetrahedron(info, s)) {
-            double lattice[3] = {double(p[0]), double(p[1]), double(p[2])};
-            double world[3];
-            index.lattice_to_world(lattice, world);
-            box.extend(std::array<double, 3>{world[0], world[1], world[2]});
-        }
-    }
+    for (int s = 0; s < info.ring_size; ++s)
+        if (mask & (1 << s)) box.extend(tetrahedron_bounds(index, diamond_tetrahedron(info, s)));
     return box;
+}
+
+// The view boxes of every node (see build_catp_hierarchy): bottom-up, a slot is kept when it has
+// geometry or one of the two tetrahedra it splits into is kept in its child diamond.
+void set_view_boxes(const CatpIndex& index, Hierarchy& h) {
+    std::vector<uint32_t> order(h.size());
+    for (uint32_t i = 0; i < order.size(); ++i) order[i] = i;
+    std::stable_sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return h.node(a).level > h.node(b).level; });
+    std::vector<uint8_t> kept(h.size(), 0);
+    for (uint32_t n : order) {
+        HierarchyNode& node = h.mutable_node(n);
+        DiamondInfo info = diamond_info(DiamondId{node.key});
+        uint8_t mask = node.has_data ? uint8_t(node.flags & 0xff) : 0;
+        const uint8_t existing = existing_slots(info);
+        for (int s = 0; s < info.ring_size; ++s) {
+            if (!(existing & (1 << s)) || (mask & (1 << s))) continue;
+            for (const Tetrahedron& half : split_tetrahedron(info, s)) {
+                DiamondId child;
+                int slot;
+                if (!tetrahedron_diamond(half, child, slot)) continue;
+                const uint32_t c = h.find(child.bits);
+                if (c != kNoNode && (kept[c] & (1 << slot))) mask |= uint8_t(1 << s);
+            }
+        }
+        kept[n] = mask;
+        for (int s = 0; s < info.ring_size; ++s)
+            if (mask & (1 << s)) {
+                node.view_boxes.push_back(tetrahedron_bounds(index, diamond_tetrahedron(info, s)));
+                node.bounds.extend(node.view_boxes.back());  // a virtual node's bounds start empty
+            }
+    }
 }
 
 }  // namespace
@@ -223,6 +266,8 @@ Hierarchy build_catp_hierarchy(const CatpIndex& index) {
             node.parts.push_back(part);
         }
     }
+    set_view_boxes(index, h);
+    h.set_has_view_boxes(true);
     h.finalize();
     // The leaf flag of an entry stays (finalize only adds leaves); a flagged leaf with children
     // would be inconsistent data, but refining it is never needed.

@@ -30,9 +30,13 @@
 //     requests per frame; requests made earlier and no longer wanted are reported as cancelled.
 //
 // Projected error of a node: error * k / max(distance from the eye to the closest point of its
-// box, near), k = viewport height / (2 tan(fov / 2)) pixels per unit at distance 1 — an upper
-// bound of the on-screen size of the node's error, monotone from child to parent because boxes
-// and errors nest.
+// view boxes in the frustum, near), k = viewport height / (2 tan(fov / 2)) pixels per unit at
+// distance 1 — an upper bound of the on-screen size of the node's error. View boxes
+// (HierarchyNode::view_boxes: for CATP, the node's tetrahedra that hold geometry) nest along
+// parent edges and errors are monotone, so a node that needs refinement has a parent that needs
+// it at least as much: refining from the roots reaches it. (The nodes' full bounds, which also
+// hold what descendants add through their other parents, made close views refine diamonds for
+// their neighbours' sake: 14-17% of the dataset on the report's close views, fetch_bench.)
 #include <array>
 #include <cstdint>
 #include <limits>
@@ -288,6 +292,7 @@ private:
     const Hierarchy& h_;
     // The hierarchy in a compact layout for the per-frame loops (no pointer chasing).
     std::vector<uint32_t> par_off_, par_, ch_off_, ch_;
+    std::vector<uint32_t> box_off_;           // view boxes of node n: box_[box_off_[n] .. box_off_[n + 1])
     std::vector<std::array<double, 6>> box_;  // min xyz, max xyz
     std::vector<double> error_;
     std::vector<uint8_t> flags_;  // bit 0 has data, bit 1 leaf

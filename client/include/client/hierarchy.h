@@ -63,6 +63,12 @@ struct HierarchyNode {
     std::vector<uint32_t> parents, children;  // sorted node indices
     double error = 0;       // object-space error bound, world units (monotone)
     Aabb bounds;            // world box of the node's geometry and of all its descendants
+    // The boxes the cut engine projects the node's error with and culls it by: where the node's
+    // own geometry may be, tighter than `bounds` (which also holds the descendants' reaching out
+    // of it through their other parents). Nested along parent edges: each box of a child lies in
+    // a box of one of its parents, so a child that needs refinement has a parent that needs it
+    // more. Used when the hierarchy has view boxes (Hierarchy::has_view_boxes), else `bounds`.
+    std::vector<Aabb> view_boxes;
     bool has_data = false;  // false: virtual node (no bytes, draws nothing)
     bool leaf = false;      // never refined (no children, or the format says so)
     // Where the bytes are (valid when has_data).
@@ -95,6 +101,10 @@ public:
     // Node with `key`, or kNoNode.
     uint32_t find(uint64_t key) const;
     const std::vector<uint32_t>& roots() const { return roots_; }
+    // True when the nodes' view boxes are given (a node without any is never seen for its own
+    // sake); false: the engine projects with `bounds`.
+    bool has_view_boxes() const { return has_view_boxes_; }
+    void set_has_view_boxes(bool given) { has_view_boxes_ = given; }
     size_t virtual_count() const;
     size_t data_count() const { return nodes_.size() - virtual_count(); }
     // Empty string if the invariants hold, else the first problem (used by finalize and tests).
@@ -104,12 +114,16 @@ private:
     std::vector<HierarchyNode> nodes_;
     std::unordered_map<uint64_t, uint32_t> by_key_;
     std::vector<uint32_t> roots_;
+    bool has_view_boxes_ = false;
 };
 
 // The CATP hierarchy of a dataset: every index entry is a node (has_data); every missing parent
 // (diamond_parents) of a node is added, recursively up to the root, as a virtual node. Bounds:
 // the box of the diamond's existing tetrahedra in world units (origin + lattice * cell), grown
-// to hold its children's; virtual nodes: the union of their children's boxes. Parts: one per slot
+// to hold its children's; virtual nodes: the union of their children's boxes. View boxes: one
+// per tetrahedron of the diamond that holds geometry, its own or in a descendant tetrahedron
+// inside it (bisection nests a child's tetrahedron in the tetrahedron of its creating parent,
+// so these boxes nest along creating edges). Parts: one per slot
 // with geometry (the entry's slot mask), created by slot_parent(slot) (kNoNode for the root).
 // Part primitive counts are estimates (the diamond's count split evenly over its slots) until the
 // node is decoded.
