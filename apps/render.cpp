@@ -29,6 +29,9 @@ static const char* kRenderUsage =
     "  --up y|z               the model's up axis, for the default orbit (default z)\n"
     "  --size WxH             image size (default 640x480; overrides the path's)\n"
     "  --tolerance PX         screen-space error tolerance in pixels (default 1.5)\n"
+    "  --skip F               skip levels: nodes within F times the tolerance are not fetched\n"
+    "                         when their descendants are drawn instead (default 8; 0: fetch\n"
+    "                         every level)\n"
     "  --max-triangles N      triangle budget per frame\n"
     "  --gpu-budget SIZE      GPU bytes of the cut (e.g. 256M)\n"
     "  --cpu-budget SIZE      CPU bytes of the cut\n"
@@ -103,6 +106,7 @@ int cmd_render(int argc, char** argv) {
     if (size_given) parse_size(options.get("size", ""), width, height);
     SessionSettings settings;
     settings.tolerance_px = options.number("tolerance", 1.5, 0.05, 1000);
+    settings.skip_factor = options.number("skip", 8, 0, 1e6);
     if (options.has("max-triangles"))
         settings.budgets.max_primitives = uint64_t(options.integer("max-triangles", 0, 1, int64_t(1) << 40));
     if (options.has("gpu-budget")) settings.budgets.max_gpu_bytes = options.bytes("gpu-budget", 0);

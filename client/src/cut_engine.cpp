@@ -386,6 +386,10 @@ void CutEngine::closure(uint32_t n, std::vector<uint32_t>& out) {
         std::fill(mark_.begin(), mark_.end(), 0);
         stamp_ = 1;
     }
+    add_closure(n, out);
+}
+
+void CutEngine::add_closure(uint32_t n, std::vector<uint32_t>& out) {
     // Parents first (iterative depth-first), so applying `out` in order keeps R closed.
     std::vector<uint32_t>& stack = stack_;
     stack.clear();
@@ -543,6 +547,7 @@ void CutEngine::refine_phase() {
         return a.n > b.n;
     };
     double tol = view_.tolerance_px;
+    const double skip_limit = view_.skip_factor > 1 ? tol * view_.skip_factor : tol;
     std::vector<Candidate> heap;
     // Virtual nodes draw nothing: refining one for its own sake gains nothing, so they are
     // refined only as ancestors a refinement needs (closure).
@@ -562,9 +567,19 @@ void CutEngine::refine_phase() {
         if (!is_active(n)) continue;
         closure(n, closure_set);
         missing.clear();
-        for (uint32_t s : closure_set)
-            for (uint32_t c : children(s))
-                if (mark_[c] != stamp_ && has_data(c) && !residency_->resident(c)) missing.push_back(c);
+        // The set grows while it is scanned: skipped children join it with their closures.
+        for (size_t i = 0; i < closure_set.size(); ++i)
+            for (uint32_t c : children(closure_set[i])) {
+                if (mark_[c] == stamp_ || !has_data(c) || residency_->resident(c)) continue;
+                const double e = leaf(c) ? 0.0 : proj(c);
+                if (e > tol && e <= skip_limit)
+                    add_closure(c, closure_set);
+                else
+                    missing.push_back(c);
+            }
+        // A missing child that joined the set later (a parent of a skipped node) is refined, not drawn.
+        missing.erase(std::remove_if(missing.begin(), missing.end(), [&](uint32_t c) { return mark_[c] == stamp_; }),
+                      missing.end());
         bool capped = uint64_t(frame_.stats.refinements) + closure_set.size() > budgets_.max_refinements;
         Totals before = totals_;
         log.clear();

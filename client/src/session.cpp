@@ -81,6 +81,7 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
                                           {camera.up.x, camera.up.y, camera.up.z}, camera.fov_y_degrees * 3.14159265358979323846 / 180.0,
                                           camera.width, camera.height, cam.near_plane, cam.far_plane);
     view.tolerance_px = settings_.tolerance_px;
+    view.skip_factor = settings_.skip_factor;
     const CutFrame& frame = engine_->update(view, *residency_);
 
     std::vector<FetchRequest> wanted;

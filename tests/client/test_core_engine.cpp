@@ -312,6 +312,46 @@ TEST(CutEngine, UpdateNeverWaitsAndRefinesOnlyOnceDataHasArrived) {
     EXPECT_GT(delivery.delivered(), 20u);
 }
 
+// Skipping levels: from a cold start, with data arriving a few frames after each request, the
+// engine converges to the same cut as without skipping (the cut depends on projected errors
+// only), fetching fewer nodes (nodes the cut refines are not fetched when their descendants can
+// be drawn at once), and every drawn node with data is still resident (no holes).
+TEST(CutEngine, SkippingLevelsConvergesToTheSameCutFetchingLess) {
+    Hierarchy h = terrain(61, 8);
+    PartDrawCounter counter(h);
+    std::mt19937_64 rng(3);
+    size_t views = 0, fewer = 0;
+    for (int trial = 0; trial < 12; ++trial) {
+        ViewParams v = random_view(rng, 1.0);
+        std::set<uint32_t> cut[2];
+        size_t fetched[2];
+        for (int mode = 0; mode < 2; ++mode) {
+            v.skip_factor = mode == 0 ? 0.0 : 8.0;
+            FakeResidency residency(h, false);
+            DelayedDelivery delivery(residency, 2);
+            CutEngine engine(h, counter);
+            for (int f = 0; f < 400; ++f) {
+                const CutFrame& frame = engine.update(v, residency);
+                for (uint32_t n : engine.drawn_nodes())
+                    if (h.node(n).has_data && !residency.resident(n)) {
+                        EXPECT_TRUE(h.node(n).parents.empty()) << "a hole below the root";
+                    }
+                delivery.frame(frame);
+                if (frame.requests.empty() && frame.stats.refinements == 0 && f > 3) break;
+            }
+            EXPECT_EQ(engine.check(residency), "");
+            cut[mode] = refined_set(engine);
+            fetched[mode] = residency.count();
+        }
+        EXPECT_EQ(cut[0], cut[1]) << "trial " << trial;
+        EXPECT_LE(fetched[1], fetched[0]) << "trial " << trial;
+        std::printf("view %d: %zu refined, fetched %zu nodes, skipping %zu\n", trial, cut[0].size(), fetched[0], fetched[1]);
+        views++;
+        fewer += fetched[1] < fetched[0];
+    }
+    EXPECT_GE(fewer, views / 2) << "skipping saves fetches on most views";
+}
+
 TEST(CutEngine, HysteresisPreventsThrashingWhenTheCameraOscillatesSlightly) {
     Hierarchy h = terrain(61, 7, 1.0, 0.05);
     PartDrawCounter counter(h);

@@ -17,7 +17,9 @@
 //  4. refines active nodes in order of decreasing projected error (a priority queue), while their
 //     projected error exceeds the tolerance: a node P is refined together with the ancestors it
 //     needs (closure under parents), only if every child that would become drawn is resident —
-//     otherwise P stays coarse and its missing children are requested (never waits) — and only if
+//     otherwise P stays coarse and its missing children are requested (never waits); with
+//     skip_factor, a missing child close enough to the tolerance is refined with P instead, its
+//     own children then needed in its place — and only if
 //     the budgets still hold; when they do not, frontier nodes whose projected error is below
 //     P's * hysteresis are coarsened to make room (all or nothing), so under a budget the cut
 //     converges to the best one by projected error without thrashing. Virtual nodes (no data)
@@ -65,6 +67,12 @@ struct ViewParams {
     // decisions until its box, grown by frustum_margin times its distance from the eye (about
     // that many radians), is outside too — so nodes at the frustum's edge do not flip.
     double frustum_margin = 0.1;
+    // Skipping levels: a refinement that needs a child that is not resident, and whose projected
+    // error is within (1, skip_factor] times the tolerance, refines that child at once too
+    // instead of waiting for it: the child would be refined again as soon as it is drawn, so its
+    // data is never fetched (only what the view finally draws, and children coarser than
+    // skip_factor times the tolerance as a preview). 0: never skip (every level is fetched).
+    double skip_factor = 0;
 
     double k() const;
     // Planes of an OpenGL view-projection matrix (clip = M * world, column-major, clip volume
@@ -281,6 +289,7 @@ private:
     bool fits(const Totals& before) const;
     bool exceeds() const;
     void closure(uint32_t n, std::vector<uint32_t>& out);
+    void add_closure(uint32_t n, std::vector<uint32_t>& out);  // to a set started by closure()
     void want(uint32_t n, RequestReason reason, double priority);
     void coarsen_phase();
     bool try_coarsen(uint32_t n, std::vector<Op>& log);
