@@ -16,8 +16,14 @@
 // Output: one line per encoding
 //   rd|CODEC|SETTING|BYTES|VERTICES|TRIANGLES|BITS_PER_VERTEX|DECODE_MS|DECODED_MTRI_S|
 //      ENC->ORIG_MAX|ORIG->ENC_MAX|ENC->ORIG_RMS|ORIG->ENC_RMS
-// distances relative to the bounding-box diagonal (-1 where not measured). Exit status 1 if a
-// tool fails (Draco missing included: the comparison is the point).
+// distances relative to the bounding-box diagonal (-1 where not measured). With --cpq, also one
+// line per level of the dataset: where its bytes go, each fragment re-encoded for the codec's
+// per-stream sizes (the encoder is deterministic: the same bytes as stored)
+//   bytes|LEVEL|NODES|FRAGMENTS|VERTICES|TRIANGLES|NODE_BYTES|OVERHEAD|CONNECTIVITY|POSITION|
+//      NORMAL|COLOUR|FACE_VERTICES
+// OVERHEAD: fragment headers and the node's framing (slot mask, sizes); FACE_VERTICES: stored
+// vertices on a face, edge or corner of their tetrahedron (the ones neighbours share).
+// Exit status 1 if a tool fails (Draco missing included: the comparison is the point).
 #include <meshoptimizer.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -28,6 +34,7 @@
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
+#include <map>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -36,6 +43,7 @@
 #include "base/sysinfo.h"
 #include "catp/dataset.h"
 #include "catp/distance.h"
+#include "common_codec/fragment_codec.h"
 #include "common_codec/octahedral.h"
 #include "mesh/io.h"
 
@@ -210,6 +218,50 @@ void run_meshopt(const Reference& ref, const std::vector<int>& bits_list) {
     }
 }
 
+// Per level: where a dataset's bytes go (the bytes| lines described at the top).
+void print_level_bytes(const CatpFile& file) {
+    struct Level {
+        size_t nodes = 0, fragments = 0, vertices = 0, triangles = 0, face_vertices = 0;
+        uint64_t bytes = 0, overhead = 0, connectivity = 0, position = 0, normal = 0, colour = 0;
+    };
+    std::map<int, Level> levels;
+    std::vector<uint8_t> scratch;
+    for (const ArchiveEntry& e : file.index().entries()) {
+        Level& l = levels[e.level];
+        const DiamondFragments d = file.decode(e);
+        l.nodes++;
+        l.bytes += e.size;
+        uint64_t fragment_bytes = 0;
+        for (int s = 0; s < 8; ++s) {
+            if (!(d.slot_mask & (1 << s))) continue;
+            const FragmentMesh& m = d.slots[size_t(s)];
+            FragmentEncodeStats st;
+            scratch.clear();
+            fragment_bytes += fragment_encode(m, scratch, &st);
+            l.fragments++;
+            l.vertices += m.vertices.size();
+            l.triangles += m.triangle_count();
+            l.overhead += st.header_bytes;
+            l.connectivity += st.connectivity_bytes;
+            l.position += st.position_bytes;
+            l.normal += st.normal_bytes;
+            l.colour += st.color_bytes;
+            for (const PackedVertex& v : m.vertices) {
+                BaryWeights w;
+                if (vertex_weights(v, m.layout, w)) l.face_vertices += w[0] == 0 || w[1] == 0 || w[2] == 0 || w[3] == 0;
+            }
+        }
+        l.overhead += e.size - std::min<uint64_t>(e.size, fragment_bytes);  // slot mask and sizes
+    }
+    std::printf("# bytes|level|nodes|fragments|vertices|triangles|node bytes|overhead|connectivity|position|normal|"
+                "colour|face vertices\n");
+    for (const auto& [level, l] : levels)
+        std::printf("bytes|%d|%zu|%zu|%zu|%zu|%llu|%llu|%llu|%llu|%llu|%llu|%zu\n", level, l.nodes, l.fragments, l.vertices,
+                    l.triangles, (unsigned long long)l.bytes, (unsigned long long)l.overhead,
+                    (unsigned long long)l.connectivity, (unsigned long long)l.position, (unsigned long long)l.normal,
+                    (unsigned long long)l.colour, l.face_vertices);
+}
+
 void run_catpaq(const std::string& path, size_t vertices) {
     CatpFile file(path);
     size_t triangles = 0;
@@ -219,6 +271,7 @@ void run_catpaq(const std::string& path, size_t vertices) {
     });
     // Whole-dataset decode: every level, so the triangles are those of all levels together.
     print_row("catpaq", "all nodes", fs::file_size(path), vertices, triangles, s, Distances{});
+    print_level_bytes(file);
 }
 
 }  // namespace

@@ -166,7 +166,7 @@ void add_finest_slot(const CatpIndex& index, const DiamondInfo& info, int slot, 
     size_t base = out.vertices.size();
     for (const auto& s : integer) {
         Vec3 p;
-        for (int k = 0; k < 3; ++k) p[size_t(k)] = m.origin[k] + double(s[size_t(k)]) / kBaryGrid * m.cell;
+        for (int k = 0; k < 3; ++k) p[size_t(k)] = m.origin[k] + double(s[size_t(k)]) / m.layout.grid * m.cell;
         out.vertices.push_back(p);
     }
     size_t triangles = fragment.triangle_count();

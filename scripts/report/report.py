@@ -418,9 +418,17 @@ def plot_rd(levels, outpng):
 
 
 def parse_rd(text, what):
-    """rd| lines of bench/catp/rd_bench."""
-    out = {"rows": [], "vertices": 0}
+    """rd| and bytes| lines of bench/catp/rd_bench."""
+    out = {"rows": [], "vertices": 0, "levels": []}
     for l in text.splitlines():
+        if l.startswith("bytes|"):
+            p = l.split("|")
+            if len(p) != 13:
+                raise ReportError("%s: malformed line: %s" % (what, l))
+            k = ["level", "nodes", "fragments", "vertices", "triangles", "bytes", "overhead", "connectivity",
+                 "position", "normal", "colour", "face_vertices"]
+            out["levels"].append(dict(zip(k, (int(x) for x in p[1:]))))
+            continue
         if not l.startswith("rd|"):
             continue
         p = l.split("|")
@@ -433,7 +441,33 @@ def parse_rd(text, what):
     require(any(r["codec"] == "draco" for r in out["rows"]), what + ": no Draco rows")
     require(any(r["codec"] == "meshopt" for r in out["rows"]), what + ": no meshoptimizer rows")
     require(any(r["codec"] == "catpaq" for r in out["rows"]), what + ": no catpaq decode row")
+    require(out["levels"], what + ": no per-level byte breakdown")
     return out
+
+
+BYTE_PARTS = ("overhead", "connectivity", "position", "normal", "colour")
+
+
+def plot_level_bytes(series, outpng):
+    """Bits per stored vertex by part, per level (one panel per dataset)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, axes = plt.subplots(1, len(series), figsize=(6 * len(series), 4), squeeze=False)
+    for ax, (title, levels) in zip(axes[0], series):
+        xs = [l["level"] for l in levels]
+        bottom = [0.0] * len(levels)
+        for part in BYTE_PARTS:
+            ys = [8.0 * l[part] / max(1, l["vertices"]) for l in levels]
+            ax.bar(xs, ys, bottom=bottom, label=part)
+            bottom = [b + y for b, y in zip(bottom, ys)]
+        ax.set_title(title)
+        ax.set_xlabel("level")
+        ax.set_ylabel("bits per stored vertex")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(outpng, dpi=100)
+    plt.close(fig)
 
 
 def level_table(v):
@@ -484,7 +518,7 @@ def rd_summary(rows):
     return ("On the scan-like mesh, CATP's finest level (all levels streamed: %s, Hausdorff %.2g, RMS %.2g of the "
             "diagonal) against the smallest encoding of each peer that is at least as accurate: %s. The peers "
             "are single-resolution files; CATP pays for every coarser level, for clipping into tetrahedra "
-            "and for its fixed 463-step grid per tetrahedron, and buys view-dependent streaming with it (section 3)."
+            "and for quantizing every level on the finest level's grid, and buys view-dependent streaming with it (section 3)."
             % (fmt_bytes(fin["bytes"]), fin["haus"], fin["rms"], "; ".join(parts) or "none"))
 
 
@@ -730,8 +764,20 @@ def write_report(raw, work, docs):
             scan_cold[key] = dict(cold[0], wall_ms=float(
                 read(os.path.join(raw, "cold_%s_%s_%s_wall_ms.txt" % (ds, p, view)), "nan")),
                 size=scan_size if ds == "scan" else fine_size)
+        for view in ("first", "last"):
+            cold = read_jsonl(os.path.join(raw, "cold_scan_%s_%s_noskip.jsonl" % (p, view)))
+            require(len(cold) == 1, "cold_scan_%s_%s_noskip.jsonl: expected one frame" % (p, view))
+            scan_cold[p, view + ", no skip"] = dict(cold[0], size=scan_size)
         scan_imgerr[p] = read_jsonl(os.path.join(raw, "imgerr_scan_%s.jsonl" % p))
         require(len(scan_imgerr[p]) == len(scan_streams[p]), "imgerr_scan_%s.jsonl: one row per frame expected" % p)
+    fetch_views = {}
+    for j in read_jsonl(os.path.join(raw, "fetch_bench_scan.jsonl")):
+        m = re.match(r"path_(\w+)_(first|last)", j["view"])
+        require(m, "fetch_bench_scan.jsonl: unexpected view name %s" % j["view"])
+        fetch_views[m.group(1), m.group(2)] = j
+    for p in SCAN_PATHS:
+        for view in ("first", "last"):
+            require((p, view) in fetch_views, "fetch_bench_scan.jsonl: no %s %s view" % (p, view))
     conv_s = seconds(mach.get("convert_seconds", "?"))
     L = []
     w = L.append
@@ -866,7 +912,8 @@ def write_report(raw, work, docs):
       "CATP level L it is the *cumulative* bytes of levels 0..L (what a client fetches to show level L "
       "everywhere) x 8 / input vertices, so all rows share the denominator. Hausdorff = the larger of "
       "the two directed maxima; RMS = the larger of the two directed RMS; both relative to the diagonal. "
-      "CATP bytes always include 8+8-bit normals and RGB (constant for the colourless bunny).")
+      "CATP bytes include 8+8-bit normals and, for coloured inputs, RGB (8 or 6 bits per channel, the "
+      "dataset's vertex layout); the colourless bunny spends the colour bits on position.")
     w("")
     for key, title, v, rd in (("bunny", "Bunny", ver, rd_bunny), ("scan", "Scan-like %s triangles" % f"{rd_tris:,}",
                                                                        ver_scan, rd_scan)):
@@ -884,6 +931,31 @@ def write_report(raw, work, docs):
     if best:
         w(best)
         w("")
+
+    w("### 1.5 Where the bytes go, per level")
+    w("")
+    w("`rd_bench --cpq` re-encodes every fragment of the dataset (the encoder is deterministic) and sums "
+      "the codec's per-stream sizes per level, in bits per stored vertex (a level's fragments' vertices, "
+      "shared ones once per fragment): *overhead* is the fragment headers, tables and the nodes' framing; "
+      "*face vertices* are the share of stored vertices on a face, edge or corner of their tetrahedron "
+      "(quantized on the face's grid, shared with the neighbour).")
+    w("")
+    for title, rd in (("Bunny", rd_bunny), ("Scan-like %s triangles" % f"{rd_tris:,}", rd_scan)):
+        w("**%s**:" % title)
+        w("")
+        rows = []
+        for l in rd["levels"]:
+            v = max(1, l["vertices"])
+            rows.append([str(l["level"]), f"{l['fragments']:,}", f"{l['vertices']:,}",
+                         "%.0f" % (l["triangles"] / max(1, l["fragments"])), "%.1f" % (8.0 * l["bytes"] / v)] +
+                        ["%.1f" % (8.0 * l[p] / v) for p in BYTE_PARTS] + ["%.0f%%" % (100.0 * l["face_vertices"] / v)])
+        w(md_table(["level", "fragments", "vertices", "triangles per fragment", "bits/vertex", "overhead",
+                    "connectivity", "position", "normal", "colour", "face vertices"], rows))
+        w("")
+    plot_level_bytes([("Bunny", rd_bunny["levels"]), ("Scan-like %s tri" % f"{rd_tris:,}", rd_scan["levels"])],
+                     os.path.join(resdir, "level_bytes.png"))
+    w("![bits per stored vertex by part and level](results/level_bytes.png)")
+    w("")
 
     w("### 1.4 Decode speed against size")
     w("")
@@ -1082,6 +1154,32 @@ def write_report(raw, work, docs):
       "2000) and served next to it: finer nodes let the cut follow the view more closely."
       % (fmt_bytes(fine_size), fine_nodes, fmt_bytes(scan_size), scan_nodes))
     w("")
+    frows = []
+    for p in SCAN_PATHS:
+        for view in ("first", "last"):
+            c, n, fb = scan_cold[p, view], scan_cold[p, view + ", no skip"], fetch_views[p, view]
+            drawn = fb["total"]["cut"]["drawn"]
+            frows.append(["%s, %s view" % (p, view), fmt_bytes(n["bytes_fetched"]), fmt_bytes(c["bytes_fetched"]),
+                          fmt_bytes(drawn), "%.2f" % (c["bytes_fetched"] / drawn),
+                          "%.1f%%" % (100 * c["bytes_fetched"] / scan_size),
+                          "%.1f%%" % (100 * fb["finest_vertices_in_frustum"]),
+                          "%.2f" % ((c["bytes_fetched"] / scan_size) / max(1e-9, fb["finest_vertices_in_frustum"])),
+                          "%.3g" % c["certified_error_px"]])
+    w("**Fetched against drawn and against the view (cold start, converged, over HTTP):**")
+    w("")
+    w(md_table(["view", "fetched, every level", "fetched, skipping levels (default)", "drawn (the cut's fragments)",
+                "fetched / drawn", "fetched, of dataset", "finest level in the frustum", "fetched share / frustum share",
+                "certified error (px)"], frows))
+    w("")
+    w("*Fetched*: the client's bytes to converge from a cold start, prefix included, with `--skip 0` "
+      "(every level on the way is fetched, each drawn for a moment) and with the default `--skip 8` (a "
+      "node within 8 times the tolerance that the view refines at once is not fetched). *Drawn*: the "
+      "compressed bytes of the fragments the converged cut shows (`bench/client/fetch_bench` on the "
+      "same view). The engine projects each node's error from its tetrahedra that hold geometry, not "
+      "from a box grown by its descendants (which made close views refine diamonds for their "
+      "neighbours' sake). What remains above the drawn bytes: the preview levels, and the slots of "
+      "drawn diamonds that other, unrefined parents create (a node is fetched whole).")
+    w("")
     srows = []
     for p in SCAN_PATHS:
         rows = scan_streams[p]
@@ -1182,12 +1280,14 @@ def write_report(raw, work, docs):
     w("- Image error compares against a reference made by the same renderer (tolerance 0.1 px), not "
       "against a rendering of the original mesh.")
     zl, zf = scan_cold["zoom", "last"], scan_cold["zoom", "last, fine"]
-    w("- View-dependent savings are smaller than the views allow: the zoom's last view alone, from a cold "
-      "start, fetches %.0f%% of the dataset (%.0f%% with 500-triangle leaves) while %.0f%% of the input's "
-      "vertices lie in its view frustum (section 3.2). Node granularity explains part of it; the rest "
-      "(frustum-only culling without occlusion, node boxes that include all descendants', a refinement "
-      "fetching all of a node's children for a conforming cut) is not analysed here." %
-      (100 * zl["bytes_fetched"] / zl["size"], 100 * zf["bytes_fetched"] / zf["size"], 100 * in_frustum["zoom"][1]))
+    fz = fetch_views["zoom", "last"]
+    w("- Fetching is per node: the zoom's last view alone, from a cold start, fetches %.0f%% of the dataset "
+      "(%.0f%% with 500-triangle leaves) while %.0f%% of the input's vertices lie in its view frustum, "
+      "%.2f times the bytes it draws (section 3.2): a drawn diamond is fetched whole, also its slots that "
+      "unrefined parents create. Fetching per slot (or per creating parent) would need the slots' byte "
+      "ranges in the index; not built yet." %
+      (100 * zl["bytes_fetched"] / zl["size"], 100 * zf["bytes_fetched"] / zf["size"], 100 * in_frustum["zoom"][1],
+       zl["bytes_fetched"] / fz["total"]["cut"]["drawn"]))
     w("- Leaves sit at one level of the hierarchy for the whole model, chosen so that no leaf holds more "
       "than 8 times the target: where density varies a hundredfold the sparse parts are cut into small "
       "fragments many levels below their own density (a 10M-triangle `make_uneven_density` mesh at 1 GiB: "

@@ -72,6 +72,7 @@ need hard_cases bench/catp/hard_cases
 need rd_bench bench/catp/rd_bench
 need gen_mesh bench/catp/gen_mesh
 need memory_budget_bench bench/catp/memory_budget_bench
+need fetch_bench bench/client/fetch_bench
 
 # required NAME OUTFILE CMD...: runs a step the report needs, output to OUTFILE; on failure names
 # the step, shows the end of its output and stops the run (exit 1), so nothing half-measured is
@@ -222,16 +223,17 @@ for p in orbit zoom; do
         --stats "$RAW/stream_$p.jsonl" --out "$WORK/frames_$p"
 done
 # A fresh client renders one view of a scan path until it converges: its stats and the whole
-# command's wall time. cold_start DATASET PATH VIEW
+# command's wall time. cold_start DATASET PATH VIEW [SUFFIX EXTRA_OPTION...]
 cold_start() {
-    local dataset=$1 path=$2 view=$3 s e
-    log "render $dataset $path $view view over HTTP (cold start, converged)"
+    local dataset=$1 path=$2 view=$3 suffix=${4:-} s e
+    shift 4 2>/dev/null || shift $#
+    log "render $dataset $path $view view over HTTP (cold start, converged${suffix:+, $suffix})"
     s=$(date +%s%N)
-    required "cold start $dataset $path $view" "$RAW/cold_render_${dataset}_${path}_$view.txt" "$CATPAQ" render \
+    required "cold start $dataset $path $view $suffix" "$RAW/cold_render_${dataset}_${path}_$view$suffix.txt" "$CATPAQ" render \
         "${URL}api/datasets/$dataset" --camera-path "$WORK/scanpaths/path_${path}_$view.json" \
-        --tolerance 1.5 --timeout 300 --stats "$RAW/cold_${dataset}_${path}_$view.jsonl"
+        --tolerance 1.5 --timeout 300 --stats "$RAW/cold_${dataset}_${path}_$view$suffix.jsonl" "$@"
     e=$(date +%s%N)
-    echo "$(( (e - s) / 1000000 ))" > "$RAW/cold_${dataset}_${path}_${view}_wall_ms.txt"
+    echo "$(( (e - s) / 1000000 ))" > "$RAW/cold_${dataset}_${path}_${view}${suffix}_wall_ms.txt"
 }
 
 for p in $SCAN_PATHS; do
@@ -245,12 +247,21 @@ for p in $SCAN_PATHS; do
     cold_start scan "$p" first
     cold_start scan "$p" last
     cold_start scanfine "$p" last
+    # The same views fetching every level (no skipping): what skipping saves.
+    cold_start scan "$p" first _noskip --skip 0
+    cold_start scan "$p" last _noskip --skip 0
     required "image error scan $p" "$RAW/imgerr_scan_$p.txt" "$PYTHON" "$REPORT_PY" compare \
         --ref "$WORK/ref_scan_$p" --frames "$WORK/frames_scan_$p" --out "$RAW/imgerr_scan_$p.jsonl"
 done
 kill "$SERVER_PID" 2>/dev/null || true
 wait "$SERVER_PID" 2>/dev/null || true
 SERVER_PID=""
+# What each cold-start view draws, and the share of the finest level in its frustum.
+VIEWS=()
+for p in $SCAN_PATHS; do VIEWS+=("$WORK/scanpaths/path_${p}_first.json" "$WORK/scanpaths/path_${p}_last.json"); done
+log "fetch_bench scan"
+required "fetch_bench scan" "$RAW/fetch_bench_scan.txt" "$BUILD/bench/client/fetch_bench" "$WORK/root/scan.cpq" \
+    "${VIEWS[@]}" --json "$RAW/fetch_bench_scan.jsonl"
 
 # ---- (4) render throughput -----------------------------------------------------------------
 log "render_bench"
