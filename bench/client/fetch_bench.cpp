@@ -15,9 +15,10 @@
 //      refining P creates, plus the root's slots: sum of R(P) over the refined diamonds P;
 //  (d) the share of the finest level (leaf diamonds: triangles by centroid, vertices, bytes
 //      weighted by triangles) inside the view frustum (no occlusion);
-//  (e) what closure and grown boxes add. The engine judges a diamond by a box grown to hold all
-//      its descendants' (whose slots created by other parents lie outside it) and refines with
-//      every ancestor (closure under parents). Two counterfactual refined sets separate the two:
+//  (e) what closure and grown boxes add. The engine used to judge a diamond by a box grown to
+//      hold all its descendants' (whose slots created by other parents lie outside it); it now
+//      judges it by its view boxes (the tetrahedra holding geometry, client/hierarchy.h), so the
+//      "cut" and "needed" columns agree. It refines with every ancestor (closure under parents). Two counterfactual refined sets separate the two:
 //      "own": the refined diamonds whose own error, projected with the box of their own slots'
 //      tetrahedra, exceeds the tolerance (not closed: not a valid cut); "needed": that set closed
 //      under parents, which is what an engine judging own boxes converges to (checked: the
