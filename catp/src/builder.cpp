@@ -286,9 +286,6 @@ private:
                     double error, bool leaf);
     double quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const;
 
-    // Percent of an input triangle's work done in each phase (measured on scan-like meshes).
-    static constexpr uint64_t kNormalsShare = 10, kBinShare = 20, kLeavesShare = 30, kCoarsenShare = 50;
-    uint64_t bin_share_ = kBinShare;
 
     BuildInput& in_;
     std::string output_;
@@ -336,6 +333,7 @@ void CatpBuild::read_vertices() {
         colors.clear();
         size_t n = in_.read_vertices(kChunk, positions, &normals, &colors);
         if (n == 0) break;
+        progress_->add(n);
         for (size_t i = 0; i < n; ++i, ++v) {
             if (v >= count) fail("'%s': more vertices than declared", in_.name().c_str());
             VertexRecord& r = vertices_->at_for_write(v);
@@ -371,7 +369,7 @@ void CatpBuild::compute_normals() {
                 for (int i = 0; i < 3; ++i) s[i] += normal[i];
             }
         }
-        progress_->add(n * kNormalsShare / 100);
+        progress_->add(n);
     }
     for (uint64_t v = 0; v < count; ++v) {
         Vec3d s = sums.at(v);
@@ -503,7 +501,7 @@ void CatpBuild::bin_triangles(TriangleBins<Record>& bins) {
     };
     auto append = [&](Batch* batch) {
         for (auto [record, block] : batch->hits) bins.add(block, batch->records[record]);
-        progress_->add(batch->triangles * bin_share_ / 100);
+        progress_->add(batch->triangles);
         free_batches.push(batch);
     };
     tbb::parallel_pipeline(kLiveBatches,
@@ -618,7 +616,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
             }
             if (!fragment.indices.empty()) fragments_->put(key, std::move(fragment));
         });
-        progress_->add(count * kLeavesShare / 100);
+        progress_->add(count);
     }
     bytes_spilled_ += bins.bytes_spilled();
     return_free_memory(warm_heap_.get());
@@ -682,6 +680,7 @@ void CatpBuild::write_leaf_nodes() {
     std::sort(refs.begin(), refs.end(), [](const SpilledFragment& a, const SpilledFragment& b) { return a.key < b.key; });
     auto runs = group_runs(refs.size(), [&](size_t i) { return refs[i].key.diamond; });
     for (auto& run : runs) diamond_error_.emplace(refs[run.first].key.diamond, 0.0);
+    progress_->set_total(runs.size());
     tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
         DiamondId id{refs[runs[i].first].key.diamond};
         DiamondInfo info = diamond_info(id);
@@ -690,6 +689,7 @@ void CatpBuild::write_leaf_nodes() {
         for (size_t k = runs[i].first; k < runs[i].second; ++k)
             slots[refs[k].key.slot] = &fragments_->get(refs[k], loaded[refs[k].key.slot]);
         write_node(id, info, slots, quantization_step(info, slots), true);
+        progress_->add(1);
     });
 }
 
@@ -772,8 +772,7 @@ void CatpBuild::coarsen_level() {
         write_node(id, info, slots, produced_error[i] + quantization_step(info, slots), false);
         for (int s = 0; s < 8; ++s)
             if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, std::move(produced[s]));
-        // Gathered triangles sum to about twice the input over all levels.
-        progress_->add(gathered_triangles * kCoarsenShare / 200);
+        progress_->add(gathered_triangles);
     };
     // Diamonds too large for one thread's allowance (kMemoryPerThread) go one at a time, after
     // the others, each still using every thread inside (coarsen_diamond's parallel steps), and
@@ -833,11 +832,10 @@ CatpBuildReport CatpBuild::run() {
     report_.input_vertices = in_.vertex_count();
     warm_heap_ = make_heap_warmup(budget_, in_.vertex_count());
     bool needs_normals = !in_.has_normals();
-    // Progress counts input triangles, each phase adding its share of every triangle, so the
-    // rate shown is input triangles per second.
-    bin_share_ = needs_normals ? kBinShare - kNormalsShare : kBinShare;
-    progress_ = std::make_unique<Progress>("catp build", std::max<uint64_t>(1, 2 * in_.vertex_count()), "tri");
-    if (!settings_.progress) progress_->finish();
+    // One phase per pass, each counting its own units exactly (a phase's total is known when it
+    // begins), so no bar runs past its end.
+    progress_ = std::make_unique<Progress>("convert", "reading vertices", in_.vertex_count(), "vert");
+    if (!settings_.progress) progress_->silence();
 
     // Wall time per phase: each lap() ends one.
     double mark = start;
@@ -851,10 +849,12 @@ CatpBuildReport CatpBuild::run() {
     read_vertices();
     uint64_t estimate = in_.triangle_estimate();
     if (estimate == 0) fail("the mesh has no triangles");
-    progress_->set_total(estimate);
     report_.diagonal = bounds_.diagonal();
     place_ = place_model(bounds_);
-    if (needs_normals) compute_normals();
+    if (needs_normals) {
+        progress_->phase("computing normals", estimate, "tri");
+        compute_normals();
+    }
     for (Vec3d& p : sample_)
         for (int i = 0; i < 3; ++i) p[i] = (p[i] - place_.origin[i]) / place_.cell;
     int leaf_level = settings_.leaf_level >= 0 ? settings_.leaf_level
@@ -872,6 +872,7 @@ CatpBuildReport CatpBuild::run() {
 
     // ---- Triangles into blocks, then leaves clipped block by block.
     auto bin_and_clip = [&](auto& bins, bool records_carry_vertices) {
+        progress_->phase("binning triangles", estimate, "tri");
         bin_triangles(bins);
         lap(report_.seconds_bin);
         if (triangles_ == 0) fail("the mesh has no triangles");
@@ -881,6 +882,9 @@ CatpBuildReport CatpBuild::run() {
         }
         report_.input_triangles = triangles_;
         report_.blocks = bins.block_count();
+        uint64_t binned = 0;  // triangles crossing block borders count once per block
+        for (size_t b = 0; b < bins.block_count(); ++b) binned += bins.block_records(b);
+        progress_->phase("clipping leaves", binned, "tri");
         build_leaves(bins);
     };
     report_.compact_bins = choose_bins(estimate);
@@ -896,17 +900,24 @@ CatpBuildReport CatpBuild::run() {
     if (fragments_->fragments().empty())
         fail("none of the %llu triangles has an area: nothing to build", (unsigned long long)triangles_);
     lap(report_.seconds_clip);
+    progress_->phase("encoding leaf nodes", 0, "nodes");
     write_leaf_nodes();
     lap(report_.seconds_leaf_nodes);
 
     // ---- Coarser levels, bottom-up.
-    for (int level = levels_.leaf_level - 1; level >= 0; --level) coarsen_level();
+    for (int level = levels_.leaf_level - 1; level >= 0; --level) {
+        uint64_t triangles = 0;  // every fragment of the finer level is gathered by one diamond
+        for (const SpilledFragment& f : fragments_->fragments()) triangles += f.triangles;
+        progress_->phase(strprintf("coarsening level %d of %d", level, levels_.leaf_level), triangles, "tri");
+        coarsen_level();
+    }
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_.reset();
-    progress_->finish();
     lap(report_.seconds_coarsen);
 
+    progress_->phase("writing " + output_, 0, "bytes");
     finish_archive();
+    progress_->finish();
     lap(report_.seconds_write);
     for (auto& s : stats_) {
         if (s.diamonds) report_.nodes += s.diamonds;
