@@ -108,6 +108,24 @@ TEST(Cli, ConvertOfUnevenDensityStaysWithinItsMemoryBudget) {
     expect_convert_within_budget(make_uneven_density(1000000, 7), "uneven1m", 112);
 }
 
+// Given the wrong original (the same sphere 4 diagonals away), verify used to print the
+// distances and "verify: OK"; the stored bounds must hold, and it says by how much they do not.
+TEST(Cli, VerifyWithTheWrongOriginalFailsAndSaysByHowMuch) {
+    fs::path in = scratch() / "right.ply", wrong = scratch() / "wrong.ply", out = scratch() / "right.cpq";
+    Mesh sphere = make_sphere(3000, 2);
+    write_ply(in.string(), sphere);
+    double shift = 4 * sphere.bounds().diagonal();
+    for (Vec3d& p : sphere.positions) p[0] += shift;
+    write_ply(wrong.string(), sphere);
+    ASSERT_EQ(run("convert " + in.string() + " -o " + out.string() + " --leaf-triangles 300 --quiet").status, 0);
+    ToolRun good = run("verify " + out.string() + " --mesh " + in.string() + " --samples 2000");
+    EXPECT_EQ(good.status, 0) << good.output;
+    ToolRun bad = run("verify " + out.string() + " --mesh " + wrong.string() + " --samples 2000");
+    EXPECT_EQ(bad.status, 1) << bad.output;
+    EXPECT_NE(bad.output.find("exceeds the stored bound"), std::string::npos) << bad.output;
+    EXPECT_NE(bad.output.find("verify: FAILED"), std::string::npos) << bad.output;
+}
+
 TEST(Cli, MissingInputIsAClearError) {
     fs::path out = scratch() / "missing.cpq";
     expect_failure("convert " + (scratch() / "nope.ply").string() + " -o " + out.string(), "nope.ply");
