@@ -1,5 +1,6 @@
 // catpaq convert: a mesh in, a streamable multiresolution dataset out.
 #include <cstdio>
+#include <string>
 
 #include "apps/commands.h"
 #include "base/error.h"
@@ -24,6 +25,30 @@ static const char* kConvertUsage =
     "                           PLY input is streamed, scratch data beyond the budget goes to\n"
     "                           anonymous files next to the output\n"
     "  --quiet                  no progress bar or report\n";
+
+// Thin geometry the quantization grid cannot hold is drawn at no level: say how much, and what
+// it does to the error bounds (which include it) or to levels that draw nothing at all.
+static void warn_about_lost_geometry(const CatpBuildReport& r) {
+    if (r.lost_beyond_step) {
+        const CatpLevelStats& finest = r.levels.back();
+        std::fprintf(stderr,
+                     "catpaq convert: warning: thin geometry is lost: %zu pieces of input triangles (area %.3g) "
+                     "are thinner than the quantization step and are drawn at no level; the stored error bounds "
+                     "include their distance to what is drawn (up to %.6g at the finest level, whose largest bound is "
+                     "%.6g)\n",
+                     r.lost_triangles, r.lost_area, r.lost_error, finest.max_error);
+    }
+    std::string empty;
+    for (const CatpLevelStats& l : r.levels)
+        if (l.diamonds && l.empty_diamonds == l.diamonds) empty += (empty.empty() ? "" : ", ") + std::to_string(l.level);
+    if (!empty.empty())
+        std::fprintf(stderr,
+                     "catpaq convert: warning: level%s %s draw%s nothing at all (all of the surface there is thinner "
+                     "than the quantization step): no error bound holds for %s\n",
+                     empty.find(',') != std::string::npos ? "s" : "", empty.c_str(),
+                     empty.find(',') != std::string::npos ? "" : "s",
+                     empty.find(',') != std::string::npos ? "them" : "it");
+}
 
 int cmd_convert(int argc, char** argv) {
     // Accept -o as an alias of --output.
@@ -66,6 +91,7 @@ int cmd_convert(int argc, char** argv) {
     options.finish();
 
     CatpBuildReport r = build_catp_file(input, output, settings);
+    warn_about_lost_geometry(r);
     if (quiet) return 0;
     size_t vertices = 0, triangles = 0;
     for (const CatpLevelStats& l : r.levels) {

@@ -282,8 +282,8 @@ private:
     void coarsen_level();
     void finish_archive();
 
-    void write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
-                    double error, bool leaf);
+    double write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
+                      double unquantized_error, double children_stored, bool leaf);
     double quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const;
 
 
@@ -306,12 +306,17 @@ private:
     std::unique_ptr<ArchiveWriter> archive_;
     std::vector<CatpLevelStats> stats_;
     std::mutex stats_mutex_;
-    // The level being coarsened: its fragments, and each diamond's error of the unquantized
-    // geometry from the original (lattice units): 0 at the leaves, above them the largest
-    // child's plus the diamond's own measured simplification error. The stored bound adds the
-    // quantization step; both terms grow towards the root, so stored bounds are monotone.
+    // The level being coarsened: its fragments, and each diamond's errors (lattice units).
+    // `unquantized`: of its unquantized geometry from the original, 0 at the leaves, above them
+    // the largest child's plus the diamond's own measured simplification error. `stored`: the
+    // bound written, the unquantized error plus what quantization costs (the grid step, or the
+    // distance from the thin geometry it loses to what is drawn, whichever is larger), and at
+    // least every child's stored bound, so stored bounds are monotone.
+    struct DiamondError {
+        double unquantized = 0, stored = 0;
+    };
     std::unique_ptr<FragmentSpill> fragments_;
-    std::unordered_map<uint64_t, double> diamond_error_;
+    std::unordered_map<uint64_t, DiamondError> diamond_error_;
     uint64_t bytes_spilled_ = 0;
     const Rgb8 default_color_{180, 180, 180};
 };
@@ -630,29 +635,50 @@ double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<co
     return longest / kBaryGrid;
 }
 
-// Writes the node of a diamond whose fragments are final.
-void CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
-                           double error, bool leaf) {
+// Writes the node of a diamond whose fragments are final; returns its stored error bound
+// (lattice units): see DiamondError.
+double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
+                             double unquantized_error, double children_stored, bool leaf) {
     DiamondFragments node;
     size_t triangles = 0, vertices = 0;
+    std::vector<QuantizedSlot> quantized;
+    quantized.reserve(8);
     for (int s = 0; s < 8; ++s) {
         if (!slots[s] || slots[s]->indices.empty()) continue;
         Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, s));
-        quantize_fragment(*slots[s], t, node.slots[s]);
+        QuantizedSlot& q = quantized.emplace_back();
+        q.in = slots[s];
+        q.out = &node.slots[s];
+        q.corners = t;
+        quantize_fragment(*slots[s], t, node.slots[s], &q.trace);
         if (node.slots[s].indices.empty()) continue;
         node.slot_mask |= uint8_t(1 << s);
         triangles += node.slots[s].triangle_count();
         vertices += node.slots[s].vertices.size();
     }
+    // Thin geometry the grid cannot hold is drawn nowhere: the bound must cover its distance to
+    // what is drawn. When the node draws nothing, nothing local bounds that: the model's
+    // diagonal does (the nearest drawn surface is somewhere in the model).
+    const double step = quantization_step(info, slots);
+    QuantizationLoss loss = quantization_loss(quantized, step / 4, step, leaf);
+    const double lost = loss.nothing_drawn ? bounds_.diagonal() / place_.cell : loss.error;
+    const double stored = std::max(unquantized_error + std::max(step, lost), children_stored);
     std::vector<uint8_t> bytes = encode_diamond_node(node);
     ArchiveEntry entry;
     entry.key = id.bits;
     entry.level = uint16_t(info.level);
     entry.flags = uint16_t(node.slot_mask) | (leaf ? kCatpLeafFlag : 0);
     entry.count = uint32_t(triangles);
-    entry.error = float(error * place_.cell);
+    entry.error = float(stored * place_.cell);
     archive_->add_node(entry, bytes.data(), bytes.size());
     std::lock_guard lock(stats_mutex_);
+    if (leaf) {
+        const double area = place_.cell * place_.cell;
+        report_.lost_triangles += loss.triangles;
+        report_.lost_area += loss.area * area;
+        report_.lost_error = std::max(report_.lost_error, lost * place_.cell);
+        report_.lost_beyond_step |= lost > 2 * step;
+    }
     CatpLevelStats& s = stats_[info.level];
     s.diamonds++;
     s.fragments += size_t(__builtin_popcount(node.slot_mask));
@@ -660,6 +686,8 @@ void CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::arr
     s.vertices += vertices;
     s.bytes += bytes.size();
     s.max_error = std::max(s.max_error, double(entry.error));
+    s.empty_diamonds += loss.nothing_drawn;
+    return stored;
 }
 
 // Ranges [begin, end) of 0..count over which group_of(index) is constant (sorted input).
@@ -679,7 +707,7 @@ void CatpBuild::write_leaf_nodes() {
     std::vector<SpilledFragment>& refs = fragments_->fragments();
     std::sort(refs.begin(), refs.end(), [](const SpilledFragment& a, const SpilledFragment& b) { return a.key < b.key; });
     auto runs = group_runs(refs.size(), [&](size_t i) { return refs[i].key.diamond; });
-    for (auto& run : runs) diamond_error_.emplace(refs[run.first].key.diamond, 0.0);
+    for (auto& run : runs) diamond_error_.emplace(refs[run.first].key.diamond, DiamondError{});
     progress_->set_total(runs.size());
     tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
         DiamondId id{refs[runs[i].first].key.diamond};
@@ -688,7 +716,8 @@ void CatpBuild::write_leaf_nodes() {
         std::array<const WorkFragment*, 8> slots{};
         for (size_t k = runs[i].first; k < runs[i].second; ++k)
             slots[refs[k].key.slot] = &fragments_->get(refs[k], loaded[refs[k].key.slot]);
-        write_node(id, info, slots, quantization_step(info, slots), true);
+        // Each diamond's own entry, written by this thread only.
+        diamond_error_.find(id.bits)->second.stored = write_node(id, info, slots, 0.0, 0.0, true);
         progress_->add(1);
     });
 }
@@ -718,7 +747,7 @@ void CatpBuild::coarsen_level() {
     }
     auto runs = group_runs(refs.size(), [&](size_t i) { return parent_of[i]; });
     auto next = std::make_unique<FragmentSpill>(output_, shares_->coarse_fragments_in_memory);
-    std::vector<double> produced_error(runs.size(), 0.0);
+    std::vector<DiamondError> produced_error(runs.size());
     // Each thread's gathered and child fragments, cleared from diamond to diamond but kept for
     // the level: fresh arrays for every diamond made malloc search its bins of free chunks for
     // them (3.5% of the 10M scan's build, most of it cache misses on chunk headers). A thread
@@ -734,10 +763,12 @@ void CatpBuild::coarsen_level() {
         DiamondInfo info = diamond_info(id);
         // Every child with geometry counts, also those whose gathered slots came from other
         // parents: that keeps the stored errors monotone along every parent-child edge.
-        double child_error = 0;
+        DiamondError children;
         for (DiamondId child : diamond_children(id)) {
             auto it = diamond_error_.find(child.bits);
-            if (it != diamond_error_.end()) child_error = std::max(child_error, it->second);
+            if (it == diamond_error_.end()) continue;
+            children.unquantized = std::max(children.unquantized, it->second.unquantized);
+            children.stored = std::max(children.stored, it->second.stored);
         }
         Scratch& mine = scratches.local();
         Scratch own;
@@ -768,8 +799,9 @@ void CatpBuild::coarsen_level() {
         std::array<const WorkFragment*, 8> slots;
         for (int s = 0; s < 8; ++s) slots[s] = &produced[s];
         // Monotone: a diamond's error bounds its children's plus its own simplification.
-        produced_error[i] = child_error + simplify_error;
-        write_node(id, info, slots, produced_error[i] + quantization_step(info, slots), false);
+        DiamondError& error = produced_error[i];
+        error.unquantized = children.unquantized + simplify_error;
+        error.stored = write_node(id, info, slots, error.unquantized, children.stored, false);
         for (int s = 0; s < 8; ++s)
             if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, std::move(produced[s]));
         progress_->add(gathered_triangles);

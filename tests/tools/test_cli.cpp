@@ -126,6 +126,28 @@ TEST(Cli, VerifyWithTheWrongOriginalFailsAndSaysByHowMuch) {
     EXPECT_NE(bad.output.find("verify: FAILED"), std::string::npos) << bad.output;
 }
 
+// Two long triangles far thinner than the grid step vanish at every level: convert says so
+// (and the bounds include them, tests/catp/test_errors.cpp); a plain sphere gives no warning.
+TEST(Cli, ConvertWarnsWhenThinGeometryIsLost) {
+    fs::path plain = scratch() / "plain.ply", thin = scratch() / "thin.ply", out = scratch() / "thin.cpq";
+    Mesh sphere = make_sphere(4000, 3);
+    write_ply(plain.string(), sphere);
+    sphere.normals.clear();
+    sphere.colors.clear();
+    uint32_t base = uint32_t(sphere.positions.size());
+    sphere.positions.insert(sphere.positions.end(), {{-1, -1, -1}, {1, 1, 1}, {1, 1, 1.0001}});
+    sphere.indices.insert(sphere.indices.end(), {base, base + 1, base + 2});
+    write_ply(thin.string(), sphere);
+    ToolRun a = run("convert " + plain.string() + " -o " + out.string() + " --quiet");
+    ASSERT_EQ(a.status, 0) << a.output;
+    EXPECT_EQ(a.output.find("warning"), std::string::npos) << a.output;
+    ToolRun b = run("convert " + thin.string() + " -o " + out.string() + " --quiet");
+    ASSERT_EQ(b.status, 0) << b.output;
+    EXPECT_NE(b.output.find("warning: thin geometry is lost"), std::string::npos) << b.output;
+    ToolRun v = run("verify " + out.string() + " --mesh " + thin.string() + " --samples 5000");
+    EXPECT_EQ(v.status, 0) << v.output;
+}
+
 TEST(Cli, MissingInputIsAClearError) {
     fs::path out = scratch() / "missing.cpq";
     expect_failure("convert " + (scratch() / "nope.ply").string() + " -o " + out.string(), "nope.ply");
