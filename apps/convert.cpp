@@ -5,6 +5,7 @@
 #include "apps/commands.h"
 #include "base/error.h"
 #include "base/options.h"
+#include "base/output_path.h"
 #include "base/sysinfo.h"
 #include "catp/builder.h"
 #include "catp/lattice.h"
@@ -64,6 +65,8 @@ int cmd_convert(int argc, char** argv) {
     if (options.positional().size() != 1) fail("expected one input mesh (see --help)");
     std::string input = options.positional()[0];
     std::string output = options.require("output");
+    // Refused at once, before reading anything: a directory, a missing or read-only directory.
+    check_output_file(output, "-o");
     std::string format = options.get("format", "catp");
     if (format != "catp") fail("unknown --format '%s' (available: catp)", format.c_str());
     CatpBuildSettings settings;
@@ -90,6 +93,8 @@ int cmd_convert(int argc, char** argv) {
     settings.progress = !quiet;
     options.finish();
 
+    for (const std::string& stale : remove_stale_temporaries(output))
+        std::fprintf(stderr, "catpaq convert: removed '%s', left by an interrupted run\n", stale.c_str());
     CatpBuildReport r = build_catp_file(input, output, settings);
     warn_about_lost_geometry(r);
     if (quiet) return 0;

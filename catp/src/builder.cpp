@@ -21,6 +21,7 @@
 #include "base/error.h"
 #include "base/heap_warmup.h"
 #include "base/progress.h"
+#include "base/signal_cleanup.h"
 #include "base/paged_array.h"
 #include "base/sysinfo.h"
 #include "base/temp_file.h"
@@ -39,6 +40,25 @@
 namespace catpaq {
 
 namespace {
+
+// The name the archive writer gives its node spill (common_codec/src/archive.cpp).
+std::string archive_spill_name(const std::string& output) { return output + ".nodes.tmp." + std::to_string(getpid()); }
+
+// Runs a build; an error that names the archive's spill (disk full while spilling nodes) names
+// the user's output instead.
+template <class Build>
+CatpBuildReport naming_user_paths(const std::string& output, Build build) {
+    try {
+        return build();
+    } catch (const Error& e) {
+        std::string message = e.what(), spill = "'" + archive_spill_name(output) + "'";
+        size_t at = message.find(spill);
+        if (at == std::string::npos) throw;
+        message.replace(at, spill.size(), "the scratch file next to '" + output + "'");
+        throw Error(message);
+    }
+}
+
 
 // ----------------------------------------------------------------------------------------------
 // Placement of the model in the lattice.
@@ -897,7 +917,15 @@ CatpBuildReport CatpBuild::run() {
     report_.block_level = 3 * levels_.block_octave;
     stats_.resize(size_t(levels_.leaf_level) + 1);
     for (int l = 0; l <= levels_.leaf_level; ++l) stats_[size_t(l)].level = l;
+    // The archive writer spills nodes to a named file (OUTPUT.nodes.tmp.PID, see
+    // common_codec/src/archive.cpp): registered for removal on signals before it exists and
+    // unlinked as soon as it does (the writer keeps it open and finds nothing to remove later),
+    // so that no way of ending the run leaves it behind.
+    const std::string spill = archive_spill_name(output_);
+    remove_on_signal(spill);
     archive_ = std::make_unique<ArchiveWriter>(output_, ArchiveKind::Catp);
+    ::unlink(spill.c_str());
+    forget_on_signal(spill);
 
     to_lattice();
     lap(report_.seconds_read);
@@ -979,13 +1007,13 @@ uint64_t default_memory_budget() {
 CatpBuildReport build_catp(const Mesh& mesh, const std::string& output_path, const CatpBuildSettings& settings) {
     if (mesh.triangle_count() == 0) fail("the mesh has no triangles");
     auto input = mesh_build_input(mesh);
-    return CatpBuild(*input, output_path, settings).run();
+    return naming_user_paths(output_path, [&] { return CatpBuild(*input, output_path, settings).run(); });
 }
 
 CatpBuildReport build_catp_file(const std::string& input_path, const std::string& output_path,
                                 const CatpBuildSettings& settings) {
     auto input = file_build_input(input_path);
-    return CatpBuild(*input, output_path, settings).run();
+    return naming_user_paths(output_path, [&] { return CatpBuild(*input, output_path, settings).run(); });
 }
 
 }  // namespace catpaq

@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <fstream>
 #include <csignal>
+#include <cstring>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -146,6 +147,100 @@ TEST(Cli, ConvertWarnsWhenThinGeometryIsLost) {
     EXPECT_NE(b.output.find("warning: thin geometry is lost"), std::string::npos) << b.output;
     ToolRun v = run("verify " + out.string() + " --mesh " + thin.string() + " --samples 5000");
     EXPECT_EQ(v.status, 0) << v.output;
+}
+
+// Before, convert built the whole dataset and then failed renaming its temporary onto the
+// directory, naming the temporary. Now it refuses at once, naming what the user typed.
+TEST(Cli, ConvertRefusesAnExistingDirectoryAsOutputAtOnce) {
+    fs::path in = scratch() / "dir_input.ply", dir = scratch() / "existing_dir";
+    write_ply(in.string(), make_sphere(2000, 1));
+    fs::create_directories(dir);
+    ToolRun r = run("convert " + in.string() + " -o " + dir.string());
+    EXPECT_EQ(r.status, 1) << r.output;
+    EXPECT_NE(r.output.find("'" + dir.string() + "' is a directory"), std::string::npos) << r.output;
+    EXPECT_EQ(r.output.find(".tmp"), std::string::npos) << "names an internal temporary: " << r.output;
+    EXPECT_EQ(r.output.find("input triangles/s"), std::string::npos) << "converted before refusing: " << r.output;
+    EXPECT_TRUE(fs::is_empty(dir));
+}
+
+namespace {
+
+// Starts `catpaq convert` on `input` in a child process (output and errors to a log).
+pid_t start_convert(const fs::path& input, const fs::path& output, const fs::path& log) {
+    pid_t pid = fork();
+    if (pid == 0) {
+        FILE* out = freopen(log.c_str(), "w", stdout);
+        (void)out;
+        dup2(fileno(stdout), fileno(stderr));
+        std::string bin = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq";
+        execl(bin.c_str(), bin.c_str(), "convert", input.c_str(), "-o", output.c_str(), "--threads", "1", "--quiet",
+              (char*)nullptr);
+        _exit(127);
+    }
+    return pid;
+}
+
+// Every name in `dir` that starts with `output`'s name (the output itself or a temporary).
+std::vector<std::string> traces_of(const fs::path& output) {
+    std::vector<std::string> out;
+    for (auto& e : fs::directory_iterator(output.parent_path()))
+        if (e.path().filename().string().rfind(output.filename().string(), 0) == 0) out.push_back(e.path().string());
+    return out;
+}
+
+}  // namespace
+
+// Interrupted by SIGINT, SIGTERM or SIGKILL in the middle of a conversion, convert leaves
+// nothing next to its output (before: NAME.cpq.nodes.tmp.PID, after any of the three): the
+// output and the node spill have no name until the output is complete.
+TEST(Cli, ConvertInterruptedBySignalsLeavesNothingBehind) {
+    fs::path dir = scratch() / "signals";
+    fs::create_directories(dir);
+    fs::path in = dir / "big.ply";
+    write_ply(in.string(), make_scan_like(1000000, 3));  // about 2 s on one thread
+    for (int sig : {SIGINT, SIGTERM, SIGKILL}) {
+        SCOPED_TRACE(strsignal(sig));
+        fs::path out = dir / "interrupted.cpq";
+        pid_t pid = start_convert(in, out, dir / "log.txt");
+        // Let it get well into the build (the node spill exists once the input is read), and
+        // look for traces meanwhile: there must be none while it runs either.
+        bool running = true;
+        for (int i = 0; i < 15 && running; ++i) {
+            usleep(20000);
+            EXPECT_TRUE(traces_of(out).empty()) << "while running: " << traces_of(out)[0];
+            running = waitpid(pid, nullptr, WNOHANG) == 0;
+        }
+        ASSERT_TRUE(running) << "the conversion ended before the signal: use a larger mesh";
+        kill(pid, sig);
+        int status = 0;
+        waitpid(pid, &status, 0);
+        EXPECT_TRUE(WIFSIGNALED(status)) << read_file((dir / "log.txt").string());
+        EXPECT_TRUE(traces_of(out).empty()) << traces_of(out)[0];
+    }
+}
+
+// What an older version or a killed run left (NAME.cpq.tmp.PID, NAME.cpq.nodes.tmp.PID of a
+// process that no longer runs) is removed by the next conversion to that output.
+TEST(Cli, ConvertRemovesTemporariesThatAKilledRunLeft) {
+    fs::path dir = scratch() / "stale";
+    fs::create_directories(dir);
+    fs::path in = dir / "s.ply", out = dir / "s.cpq";
+    write_ply(in.string(), make_sphere(1000, 1));
+    pid_t gone = fork();
+    if (gone == 0) _exit(0);
+    waitpid(gone, nullptr, 0);
+    fs::path stale_nodes = dir / ("s.cpq.nodes.tmp." + std::to_string(gone)), stale = dir / ("s.cpq.tmp." + std::to_string(gone));
+    fs::path alive = dir / ("s.cpq.tmp." + std::to_string(getpid()));  // this process runs: kept
+    write_text(stale_nodes, "left over");
+    write_text(stale, "left over");
+    write_text(alive, "in use");
+    ToolRun r = run("convert " + in.string() + " -o " + out.string() + " --quiet");
+    EXPECT_EQ(r.status, 0) << r.output;
+    EXPECT_FALSE(fs::exists(stale_nodes));
+    EXPECT_FALSE(fs::exists(stale));
+    EXPECT_TRUE(fs::exists(alive));
+    EXPECT_NE(r.output.find("left by an interrupted run"), std::string::npos) << r.output;
+    fs::remove(alive);
 }
 
 TEST(Cli, MissingInputIsAClearError) {
