@@ -62,13 +62,13 @@ int cmd_convert(int argc, char** argv) {
         std::printf("%s", kConvertUsage);
         return 0;
     }
-    if (options.positional().size() != 1) fail("expected one input mesh (see --help)");
+    if (options.positional().size() != 1) usage_error("expected one input mesh");
     std::string input = options.positional()[0];
     std::string output = options.require("output");
     // Refused at once, before reading anything: a directory, a missing or read-only directory.
     check_output_file(output, "-o");
     std::string format = options.get("format", "catp");
-    if (format != "catp") fail("unknown --format '%s' (available: catp)", format.c_str());
+    if (format != "catp") usage_error("unknown --format '%s' (available: catp)", format.c_str());
     CatpBuildSettings settings;
     settings.leaf_triangles = size_t(options.integer("leaf-triangles", 2000, 50, 1000000));
     settings.leaf_level = int(options.integer("leaf-level", -1, -1, kMaxLevel - 3));
@@ -82,7 +82,7 @@ int cmd_convert(int argc, char** argv) {
         uint64_t process_budget = options.bytes("memory", 0);
         uint64_t needed = own + minimum_memory_budget(settings.threads);
         if (process_budget < needed)
-            fail("--memory: at least %llu MiB are needed (%llu MiB for the converter's data and threads, %llu MiB "
+            usage_error("--memory: at least %llu MiB are needed (%llu MiB for the converter's data and threads, %llu MiB "
                  "for the program itself)",
                  (unsigned long long)((needed + (1 << 20) - 1) >> 20),
                  (unsigned long long)(minimum_memory_budget(settings.threads) >> 20),

@@ -30,7 +30,7 @@ int cmd_verify(int argc, char** argv) {
         std::printf("%s", kVerifyUsage);
         return 0;
     }
-    if (options.positional().size() != 1) fail("expected one dataset (see --help)");
+    if (options.positional().size() != 1) usage_error("expected one dataset");
     std::string mesh_path = options.get("mesh", "");
     VerifySettings settings;
     settings.samples_per_level = size_t(options.integer("samples", 50000, 100, 100000000));
