@@ -8,6 +8,7 @@
 #include <vector>
 
 #include "catp/lattice.h"
+#include "catp/distance.h"
 #include "clip.h"
 #include "common_codec/barycentric.h"
 #include "common_codec/fragment_codec.h"
@@ -160,8 +161,7 @@ struct QuantizationLoss {
 QuantizationLoss quantization_loss(const std::vector<QuantizedSlot>& slots, double spacing, double settled,
                                    bool measure_area);
 
-// Squared distance from p to triangle (a, b, c), as the simplification error measures it.
-double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c);
+// point_triangle_distance2: catp/distance.h.
 
 // Distance between the gathered surface of a diamond and its simplification (triangles indexing
 // gathered.positions), both ways: the removed vertices to the simplified surface, and the

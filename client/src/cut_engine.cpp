@@ -147,7 +147,8 @@ ResidencyTable::ResidencyTable(const Hierarchy& hierarchy, double bytes_per_prim
     : hierarchy_(hierarchy),
       bytes_per_primitive_(bytes_per_primitive),
       resident_(hierarchy.size(), 0),
-      bytes_(hierarchy.size()) {}
+      bytes_(hierarchy.size()),
+      data_bounds_(hierarchy.size()) {}
 
 NodeBytes ResidencyTable::bytes(uint32_t node) const {
     if (resident_[node]) return bytes_[node];
@@ -157,10 +158,11 @@ NodeBytes ResidencyTable::bytes(uint32_t node) const {
     return {estimate, estimate};
 }
 
-void ResidencyTable::set_resident(uint32_t node, NodeBytes bytes) {
+void ResidencyTable::set_resident(uint32_t node, NodeBytes bytes, const Aabb& data) {
     if (!resident_[node]) resident_count_++;
     resident_[node] = 1;
     bytes_[node] = bytes;
+    data_bounds_[node] = data;
     log_.add(node);
 }
 
@@ -168,6 +170,7 @@ void ResidencyTable::set_evicted(uint32_t node) {
     if (resident_[node]) resident_count_--;
     resident_[node] = 0;
     bytes_[node] = {};
+    data_bounds_[node] = Aabb{};
     log_.add(node);
 }
 
@@ -280,17 +283,29 @@ inline double box_distance(const std::array<double, 6>& b, const std::array<doub
 
 }  // namespace
 
+double projected_error_px(double error, double distance, double k) {
+    if (!(error > 0)) return 0;
+    return error < distance ? k * std::asin(error / distance) : k * M_PI;
+}
+
 double CutEngine::proj(uint32_t n) {
     if (proj_frame_[n] == frame_number_) return proj_[n];
     proj_frame_[n] = frame_number_;
-    const std::array<double, 6>& box = box_[n];
+    std::array<double, 6> box = box_[n];
+    if (has_data(n))
+        if (const Aabb* data = residency_ ? residency_->data_bounds(n) : nullptr)
+            box = {data->min[0], data->min[1], data->min[2], data->max[0], data->max[1], data->max[2]};
     if (!(box[0] <= box[3] && box[1] <= box[4] && box[2] <= box[5])) {  // empty: nothing to see
         visible_[n] = 0;
         proj_[n] = keep_proj_[n] = 0;
         return 0;
     }
     double distance = box_distance(box, view_.eye);
-    double unculled = error_[n] * k_ / std::max(distance, view_.near);
+    if (has_data(n) && residency_) {
+        double wide = std::max({box[3] - box[0], box[4] - box[1], box[5] - box[2]});
+        if (distance < wide) distance = std::max(distance, residency_->data_distance(n, view_.eye));
+    }
+    double unculled = projected_error_px(error_[n], distance, k_);
     bool visible = box_visible(view_, box, 0);
     visible_[n] = visible;
     proj_[n] = visible ? unculled : 0.0;
@@ -314,7 +329,7 @@ double CutEngine::projected_error(uint32_t node) const {
     if (proj_frame_[node] == frame_number_) return proj_[node];
     const HierarchyNode& n = h_.node(node);
     if (!view_.may_see(n.bounds)) return 0;
-    return n.error * view_.k() / std::max(n.bounds.distance_to(view_.eye), view_.near);
+    return projected_error_px(n.error, n.bounds.distance_to(view_.eye), view_.k());
 }
 
 void CutEngine::recount(uint32_t n) {
@@ -563,12 +578,19 @@ void CutEngine::refine_phase() {
         bool ok = fits(before);
         if (!ok) ok = make_room(cand.e * view_.hysteresis, log, before);
         if (!ok || !missing.empty() || capped) {
+            if (!ok) {  // which budgets the refinement would have passed
+                frame_.stats.budgets_binding |= uint8_t((totals_.primitives > budgets_.max_primitives ? kPrimitiveBudget : 0) |
+                                                        (totals_.gpu > budgets_.max_gpu_bytes ? kGpuBudget : 0) |
+                                                        (totals_.cpu > budgets_.max_cpu_bytes ? kCpuBudget : 0));
+            }
             revert(log, 0);
             if (!ok) {
                 frame_.stats.budget_blocked++;
             } else if (!missing.empty()) {
                 frame_.stats.waiting++;
                 for (uint32_t c : missing) want(c, RequestReason::Refine, cand.e);
+            } else {
+                frame_.stats.capped++;
             }
             continue;
         }
@@ -678,8 +700,12 @@ const CutFrame& CutEngine::update(const ViewParams& view, const Residency& resid
     st.frontier_nodes = frontier_.items.size();
     st.refined_nodes = refined_count_;
     double certified = 0;
-    for (uint32_t n : active_.items)
-        if (has_data(n)) certified = std::max(certified, proj(n));
+    for (uint32_t n : active_.items) {
+        if (!has_data(n)) continue;
+        double e = proj(n);
+        certified = std::max(certified, e);
+        st.leaves_over_tolerance += leaf(n) && e > view_.tolerance_px;
+    }
     st.certified_error_px = certified;
     st.over_budget = exceeds();
     frame_.drawn = active_.items;

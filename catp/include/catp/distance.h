@@ -11,6 +11,12 @@ namespace catpaq {
 
 class Progress;
 
+// Squared distance from p to triangle (a, b, c) (closest point by Voronoi regions, Ericson 5.1.5;
+// no CGAL): what the converter's error measures use, and the client's distance from the eye to a
+// node's triangles.
+double point_triangle_distance2(const std::array<double, 3>& p, const std::array<double, 3>& a,
+                                const std::array<double, 3>& b, const std::array<double, 3>& c);
+
 class SurfaceDistance {
 public:
     // positions: xyz doubles; indices: 3 per triangle. Degenerate triangles are skipped.
