@@ -96,6 +96,8 @@ int cmd_convert(int argc, char** argv) {
     for (const std::string& stale : remove_stale_temporaries(output))
         std::fprintf(stderr, "catpaq convert: removed '%s', left by an interrupted run\n", stale.c_str());
     CatpBuildReport r = build_catp_file(input, output, settings);
+    for (const std::string& d : r.dropped_input)
+        std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", input.c_str(), d.c_str());
     warn_about_lost_geometry(r);
     if (quiet) return 0;
     size_t vertices = 0, triangles = 0;

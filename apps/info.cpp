@@ -75,7 +75,8 @@ static void dataset_info(const std::string& location) {
 }
 
 static void mesh_info(const std::string& path) {
-    Mesh mesh = read_mesh(path);
+    std::vector<std::string> dropped;
+    Mesh mesh = read_mesh(path, &dropped);
     Bounds b = mesh.bounds();
     std::printf("file:      %s\n", path.c_str());
     std::printf("vertices:  %zu\n", mesh.vertex_count());
@@ -86,6 +87,7 @@ static void mesh_info(const std::string& path) {
                 b.max[2]);
     std::printf("diagonal:  %.9g\n", b.diagonal());
     std::printf("border edges: %zu\n", count_border_edges(mesh.indices));
+    for (const std::string& d : dropped) std::printf("left out:  %s\n", d.c_str());
 }
 
 int cmd_info(int argc, char** argv) {

@@ -882,6 +882,7 @@ CatpBuildReport CatpBuild::run() {
     shares_ = std::make_unique<BudgetShares>(budget_ - (minimum - kMinimumDataMemory));
     report_.memory_budget = budget_;
     report_.input_vertices = in_.vertex_count();
+    report_.dropped_input = in_.dropped();
     warm_heap_ = make_heap_warmup(budget_, in_.vertex_count());
     bool needs_normals = !in_.has_normals();
     // One phase per pass, each counting its own units exactly (a phase's total is known when it

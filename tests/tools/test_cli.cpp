@@ -636,3 +636,24 @@ TEST(Cli, InfoDescribesADatasetLocalOrServed) {
     ASSERT_EQ(served.status, 0) << served.output;
     EXPECT_EQ(served.output.substr(served.output.find("format:")), local.output.substr(local.output.find("format:")));
 }
+
+// Input the dataset cannot hold is said, not silently dropped: OBJ texture coordinates and
+// materials, PLY face colours. (OBJ per-corner normals are kept, averaged per vertex: the
+// readers' tests check that.)
+TEST(Cli, ConvertWarnsAboutInputItLeavesOut) {
+    fs::path obj = scratch() / "textured.obj", ply = scratch() / "face_colours.ply", out = scratch() / "dropped.cpq";
+    write_text(obj, "mtllib looks.mtl\nv 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nvt 0 0\nvt 1 0\nvn 0 0 1\n"
+                    "usemtl stone\nf 1/1/1 2/2/1 3/1/1\nf 1/1/1 3/2/1 4/1/1\n");
+    ToolRun a = run("convert " + obj.string() + " -o " + out.string() + " --quiet");
+    ASSERT_EQ(a.status, 0) << a.output;
+    EXPECT_NE(a.output.find("warning: '" + obj.string() + "': left out: texture coordinates"), std::string::npos) << a.output;
+    EXPECT_NE(a.output.find("left out: materials"), std::string::npos) << a.output;
+    write_text(ply, "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\n"
+                    "element face 2\nproperty list uchar int vertex_indices\nproperty uchar red\nproperty uchar green\n"
+                    "property uchar blue\nend_header\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2 255 0 0\n3 0 2 3 0 255 0\n");
+    ToolRun b = run("convert " + ply.string() + " -o " + out.string() + " --quiet");
+    ASSERT_EQ(b.status, 0) << b.output;
+    EXPECT_NE(b.output.find("left out: face colours (red, green, blue) of 2 faces"), std::string::npos) << b.output;
+    ToolRun plain = run("convert " + std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply -o " + out.string() + " --quiet");
+    EXPECT_EQ(plain.output.find("warning"), std::string::npos) << plain.output;
+}

@@ -87,6 +87,9 @@ struct CatpBuildReport {
     // The stored bounds include their distance to what is drawn (lost_error, world units); where
     // that exceeds twice the quantization step (lost_beyond_step: more than the grid's own noise;
     // a 1M scan loses 31k slivers, all within 1.05 steps of what is drawn), convert warns.
+    // What the input file holds that a dataset cannot (texture coordinates, materials, face
+    // colours, ...): one sentence per kind, for convert to warn about.
+    std::vector<std::string> dropped_input;
     size_t lost_triangles = 0;
     double lost_area = 0;  // world units squared
     double lost_error = 0;
