@@ -657,3 +657,30 @@ TEST(Cli, ConvertWarnsAboutInputItLeavesOut) {
     ToolRun plain = run("convert " + std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply -o " + out.string() + " --quiet");
     EXPECT_EQ(plain.output.find("warning"), std::string::npos) << plain.output;
 }
+
+// On a terminal, convert and verify --mesh show named phases (verify showed nothing while it
+// measured, convert one bar past 100% with an early ETA); each phase ends with a line of its own.
+TEST(Cli, ConvertAndVerifyShowNamedPhasesOnATerminal) {
+    if (access("/usr/bin/script", X_OK) != 0) GTEST_SKIP() << "no script(1) to give the tool a terminal";
+    auto on_terminal = [](const std::string& args) {
+        std::string command = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq " + args;
+        FILE* pipe = popen(("/usr/bin/script -qec '" + command + "' /dev/null 2>&1").c_str(), "r");
+        std::string output;
+        char buffer[4096];
+        size_t n;
+        while (pipe && (n = fread(buffer, 1, sizeof buffer, pipe)) > 0) output.append(buffer, n);
+        if (pipe) pclose(pipe);
+        return output;
+    };
+    fs::path in = scratch() / "phases.ply", out = scratch() / "phases.cpq";
+    write_ply(in.string(), make_sphere(20000, 3));
+    std::string convert = on_terminal("convert " + in.string() + " -o " + out.string() + " --leaf-triangles 500");
+    for (const char* phase : {"convert: reading vertices:", "convert: binning triangles:", "convert: clipping leaves:",
+                              "convert: coarsening level 0 of", "convert: writing "})
+        EXPECT_NE(convert.find(phase), std::string::npos) << phase << " in:\n" << convert;
+    EXPECT_EQ(convert.find("ETA"), std::string::npos) << "an ETA in a run under a second:\n" << convert;
+    std::string verify = on_terminal("verify " + out.string() + " --mesh " + in.string() + " --samples 2000");
+    for (const char* phase : {"verify: checking nodes:", "verify: sampling the original", "verify: level 0 of "})
+        EXPECT_NE(verify.find(phase), std::string::npos) << phase << " in:\n" << verify;
+    EXPECT_NE(verify.find("verify: OK"), std::string::npos) << verify;
+}
