@@ -1,9 +1,11 @@
 // catpaq convert: a mesh in, a streamable multiresolution dataset out.
 #include <cstdio>
+#include <string>
 
 #include "apps/commands.h"
 #include "base/error.h"
 #include "base/options.h"
+#include "base/output_path.h"
 #include "base/sysinfo.h"
 #include "catp/builder.h"
 #include "catp/lattice.h"
@@ -33,6 +35,30 @@ static const char* kConvertUsage =
     "                           anonymous files next to the output\n"
     "  --quiet                  no progress bar or report\n";
 
+// Thin geometry the quantization grid cannot hold is drawn at no level: say how much, and what
+// it does to the error bounds (which include it) or to levels that draw nothing at all.
+static void warn_about_lost_geometry(const CatpBuildReport& r) {
+    if (r.lost_beyond_step) {
+        const CatpLevelStats& finest = r.levels.back();
+        std::fprintf(stderr,
+                     "catpaq convert: warning: thin geometry is lost: %zu pieces of input triangles (area %.3g) "
+                     "are thinner than the quantization step and are drawn at no level; the stored error bounds "
+                     "include their distance to what is drawn (up to %.6g at the finest level, whose largest bound is "
+                     "%.6g)\n",
+                     r.lost_triangles, r.lost_area, r.lost_error, finest.max_error);
+    }
+    std::string empty;
+    for (const CatpLevelStats& l : r.levels)
+        if (l.diamonds && l.empty_diamonds == l.diamonds) empty += (empty.empty() ? "" : ", ") + std::to_string(l.level);
+    if (!empty.empty())
+        std::fprintf(stderr,
+                     "catpaq convert: warning: level%s %s draw%s nothing at all (all of the surface there is thinner "
+                     "than the quantization step): no error bound holds for %s\n",
+                     empty.find(',') != std::string::npos ? "s" : "", empty.c_str(),
+                     empty.find(',') != std::string::npos ? "" : "s",
+                     empty.find(',') != std::string::npos ? "them" : "it");
+}
+
 int cmd_convert(int argc, char** argv) {
     // Accept -o as an alias of --output.
     std::vector<char*> args(argv, argv + argc);
@@ -44,11 +70,13 @@ int cmd_convert(int argc, char** argv) {
         std::printf("%s", kConvertUsage);
         return 0;
     }
-    if (options.positional().size() != 1) fail("expected one input mesh (see --help)");
+    if (options.positional().size() != 1) usage_error("expected one input mesh");
     std::string input = options.positional()[0];
     std::string output = options.require("output");
+    // Refused at once, before reading anything: a directory, a missing or read-only directory.
+    check_output_file(output, "-o");
     std::string format = options.get("format", "catp");
-    if (format != "catp") fail("unknown --format '%s' (available: catp)", format.c_str());
+    if (format != "catp") usage_error("unknown --format '%s' (available: catp)", format.c_str());
     CatpBuildSettings settings;
     settings.leaf_triangles = size_t(options.integer("leaf-triangles", 2000, 50, 1000000));
     settings.leaf_level = int(options.integer("leaf-level", -1, -1, kMaxLevel - 3));
@@ -73,7 +101,7 @@ int cmd_convert(int argc, char** argv) {
         uint64_t process_budget = options.bytes("memory", 0);
         uint64_t needed = own + minimum_memory_budget(settings.threads);
         if (process_budget < needed)
-            fail("--memory: at least %llu MiB are needed (%llu MiB for the converter's data and threads, %llu MiB "
+            usage_error("--memory: at least %llu MiB are needed (%llu MiB for the converter's data and threads, %llu MiB "
                  "for the program itself)",
                  (unsigned long long)((needed + (1 << 20) - 1) >> 20),
                  (unsigned long long)(minimum_memory_budget(settings.threads) >> 20),
@@ -84,8 +112,13 @@ int cmd_convert(int argc, char** argv) {
     settings.progress = !quiet;
     options.finish();
 
+    for (const std::string& stale : remove_stale_temporaries(output))
+        std::fprintf(stderr, "catpaq convert: removed '%s', left by an interrupted run\n", stale.c_str());
     CatpBuildReport r = build_catp_file(input, output, settings);
     for (const std::string& w : r.warnings) std::fprintf(stderr, "catpaq convert: warning: %s\n", w.c_str());
+    for (const std::string& d : r.dropped_input)
+        std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", input.c_str(), d.c_str());
+    warn_about_lost_geometry(r);
     if (quiet) return 0;
     size_t vertices = 0, triangles = 0;
     for (const CatpLevelStats& l : r.levels) {

@@ -1,15 +1,19 @@
 // catpaq render: headless rendering of a dataset (local path or URL) along a camera path, with
 // streaming exactly as an interactive client does it; PNG frames and per-frame statistics.
+#include <cerrno>
 #include <cmath>
+#include <cstring>
 #include <cstdio>
 #include <filesystem>
 #include <memory>
 #include <thread>
+#include <unistd.h>
 
 #include "apps/commands.h"
 #include "base/atomic_file.h"
 #include "base/error.h"
 #include "base/options.h"
+#include "base/output_path.h"
 #include "base/sysinfo.h"
 #include "client/camera.h"
 #include "client/gl_context.h"
@@ -24,10 +28,11 @@ static const char* kRenderUsage =
     "  DATASET is a local .cpq file, a server URL (http://HOST:PORT/api/datasets/NAME) or the URL\n"
     "  of a .cpq file on any static web server (fetched with Range requests).\n"
     "options:\n"
-    "  --camera-path FILE     JSON camera path (see docs/ARCHITECTURE.md); default: an orbit\n"
+    "  --camera-path FILE     JSON camera path (docs/formats/camera-path.md); default: an orbit\n"
     "  --orbit N              frames of the default orbit (default 8)\n"
     "  --up y|z               the model's up axis, for the default orbit (default z)\n"
     "  --size WxH             image size (default 640x480; overrides the path's)\n"
+    "  --msaa N               anti-aliasing samples per pixel (0, 2, 4, 8; default 0)\n"
     "  --tolerance PX         screen-space error tolerance in pixels (default 1.5)\n"
     "  --skip F               skip levels: nodes within F times the tolerance are not fetched\n"
     "                         when their descendants are drawn instead (default 8; 0: fetch\n"
@@ -39,23 +44,27 @@ static const char* kRenderUsage =
     "  --compressed-cache SIZE  compressed nodes kept to re-decode evicted ones (default 256M)\n"
     "  --no-converge          one streaming step per frame (progressive, like a live view)\n"
     "                         instead of waiting until nothing is pending before each frame\n"
-    "  --timeout SECONDS      longest wait for one frame to converge (default 120)\n"
-    "  --out DIR              write frames as DIR/frame_0000.png ...\n"
-    "  --stats FILE           write one JSON line of statistics per frame (elapsed_ms: since the\n"
-    "                         dataset was opened, including loading its prefix)\n"
+    "  --timeout SECONDS      longest wait for one frame to settle (default 120)\n"
+    "  --out DIR              write frames as DIR/frame_0000.png ... (created if needed)\n"
+    "  --stats FILE           one JSON line of statistics per frame, written as each frame ends\n"
+    "                         (docs/formats/stats.md; default: standard output)\n"
     "  --background R,G,B     background colour, 0..255 (default 255,255,255)\n"
-    "  --export-cut FILE.ply  write the last frame's cut as rendered (not welded)\n";
+    "  --export-cut FILE.ply  write the last frame's cut as rendered (not welded)\n"
+    "  --quiet                no line per frame on the terminal\n"
+    "Output paths are checked before the first frame. A node that cannot be fetched or decoded\n"
+    "(after retries) stops the run with its key and the reason. Exit status: 0 done, 1 failure,\n"
+    "2 usage error.\n";
 
 static void parse_size(const std::string& text, int& w, int& h) {
     if (std::sscanf(text.c_str(), "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 16384 || h > 16384)
-        fail("--size: '%s' is not WIDTHxHEIGHT between 16 and 16384", text.c_str());
+        usage_error("--size: '%s' is not WIDTHxHEIGHT between 16 and 16384", text.c_str());
 }
 
 static std::array<float, 4> parse_color(const std::string& text) {
     int r, g, b;
     if (std::sscanf(text.c_str(), "%d,%d,%d", &r, &g, &b) != 3 || r < 0 || g < 0 || b < 0 || r > 255 || g > 255 ||
         b > 255)
-        fail("--background: '%s' is not R,G,B with values 0..255", text.c_str());
+        usage_error("--background: '%s' is not R,G,B with values 0..255", text.c_str());
     return {r / 255.0f, g / 255.0f, b / 255.0f, 1.0f};
 }
 
@@ -89,21 +98,70 @@ static void export_cut(const StreamingSession& session, const Camera& camera, co
     write_ply(path, mesh);
 }
 
+// One frame's statistics as a JSON line (docs/formats/stats.md).
+static std::string stats_line(size_t frame, const SessionFrameStats& s, const RenderStats& r, double draw_ms,
+                              double frame_ms, int steps, double tolerance, double elapsed_ms) {
+    // While a node on screen has no data yet (a hole), nothing bounds the error: null.
+    char certified[32] = "null";
+    if (s.holes == 0) std::snprintf(certified, sizeof certified, "%.4f", s.certified_error_px);
+    std::string limits = "[";
+    for (const char* name : session_limit_names(s.limits)) limits += (limits.size() > 1 ? ",\"" : "\"") + std::string(name) + "\"";
+    limits += "]";
+    char line[1536];
+    std::snprintf(line, sizeof line,
+                  "{\"frame\":%zu,\"triangles\":%llu,\"fragments\":%zu,\"nodes_drawn\":%zu,\"nodes_refined\":%zu,"
+                  "\"bytes_fetched\":%llu,\"requests\":%llu,\"pending\":%zu,\"gpu_bytes\":%llu,\"cpu_bytes\":%llu,"
+                  "\"cut_ms\":%.3f,\"draw_ms\":%.3f,\"frame_ms\":%.3f,\"steps\":%d,\"certified_error_px\":%s,"
+                  "\"tolerance_px\":%.3f,\"settled\":%s,\"tolerance_met\":%s,\"limited_by\":%s,\"failed_nodes\":%zu,"
+                  "\"elapsed_ms\":%.3f}\n",
+                  frame, (unsigned long long)r.triangles, r.draws, s.drawn_nodes, s.refined_nodes,
+                  (unsigned long long)s.bytes_fetched, (unsigned long long)s.requests, s.pending,
+                  (unsigned long long)s.gpu_bytes, (unsigned long long)s.cpu_bytes, s.cut_ms, draw_ms, frame_ms, steps,
+                  certified, tolerance, s.settled ? "true" : "false", s.tolerance_met ? "true" : "false",
+                  limits.c_str(), s.failed_nodes, elapsed_ms);
+    return line;
+}
+
+// The line a person reads on a terminal: frame, triangles, error against the tolerance, time.
+static void print_frame_line(size_t frame, size_t frames, const SessionFrameStats& s, const RenderStats& r,
+                             double tolerance, double frame_ms) {
+    std::string error = s.holes ? "not bounded yet" : strprintf("%.2f px", s.certified_error_px);
+    std::string verdict = s.tolerance_met ? "within the tolerance" : "above the tolerance";
+    std::vector<const char*> limits = session_limit_names(s.limits);
+    if (!s.tolerance_met && !limits.empty()) {
+        verdict += " (";
+        for (size_t i = 0; i < limits.size(); ++i) verdict += (i ? ", " : "") + std::string(limits[i]);
+        verdict += ")";
+    }
+    std::fprintf(stderr, "render: frame %zu/%zu: %llu triangles, certified error %s, %s of %.2f px, %.0f ms\n",
+                 frame + 1, frames, (unsigned long long)r.triangles, error.c_str(), verdict.c_str(), tolerance, frame_ms);
+}
+
+// Names the first node that failed and why; the caller stops with exit status 1.
+static void report_failure(const StreamingSession& session) {
+    const NodeFailure& f = session.failures().front();
+    std::fprintf(stderr, "catpaq render: error: node %llu (level %u) cannot be loaded: %s\n", (unsigned long long)f.key,
+                 unsigned(f.level), f.error.c_str());
+    if (session.failures().size() > 1)
+        std::fprintf(stderr, "catpaq render: %zu more nodes failed\n", session.failures().size() - 1);
+}
+
 int cmd_render(int argc, char** argv) {
-    Options options(argc, argv, kRenderUsage, {"no-converge"});
+    Options options(argc, argv, kRenderUsage, {"no-converge", "quiet"});
     if (options.help()) {
         std::printf("%s", kRenderUsage);
         return 0;
     }
-    if (options.positional().size() != 1) fail("expected one dataset (see --help)");
+    if (options.positional().size() != 1) usage_error("expected one dataset");
     const std::string location = options.positional()[0];
     std::string path_file = options.get("camera-path", "");
     int orbit = int(options.integer("orbit", 8, 1, 100000));
     std::string up = options.get("up", "z");
-    if (up != "y" && up != "z") fail("--up: '%s' is not y or z", up.c_str());
+    if (up != "y" && up != "z") usage_error("--up: '%s' is not y or z", up.c_str());
     int width = 640, height = 480;
     bool size_given = options.has("size");
     if (size_given) parse_size(options.get("size", ""), width, height);
+    int msaa = int(options.integer("msaa", 0, 0, 64));
     SessionSettings settings;
     settings.tolerance_px = options.number("tolerance", 1.5, 0.05, 1000);
     settings.skip_factor = options.number("skip", 8, 0, 1e6);
@@ -120,20 +178,34 @@ int cmd_render(int argc, char** argv) {
     std::string export_path = options.get("export-cut", "");
     RenderSettings render;
     render.background = parse_color(options.get("background", "255,255,255"));
+    bool quiet = options.flag("quiet");
     options.finish();
+
+    // Every output is checked (and the frame directory made) before anything is loaded.
+    if (out_dir.size()) prepare_output_directory(out_dir, "--out");
+    if (stats_path.size()) check_output_file(stats_path, "--stats");
+    if (export_path.size()) check_output_file(export_path, "--export-cut");
+    CameraPath path;
+    if (!path_file.empty()) path = load_camera_path(path_file);
+    // Statistics are written as each frame ends (a run stopped half-way keeps what it measured).
+    std::unique_ptr<FILE, int (*)(FILE*)> stats_file(nullptr, std::fclose);
+    if (stats_path.size()) {
+        stats_file.reset(std::fopen(stats_path.c_str(), "w"));
+        if (!stats_file) fail("--stats '%s': %s", stats_path.c_str(), std::strerror(errno));
+    }
+    FILE* stats_out = stats_file ? stats_file.get() : stdout;
+    // A line per frame for a person, on a terminal, unless the JSON lines already go there.
+    const bool frame_lines = !quiet && isatty(fileno(stderr)) && !(stats_out == stdout && isatty(fileno(stdout)));
 
     HeadlessGlContext context;
     // elapsed_ms in the statistics counts from here: a cold start includes loading the prefix.
     double start = now_seconds();
     StreamingSession session(location, settings);
     const CatpMeta& meta = session.index().meta();
-    CameraPath path;
-    if (!path_file.empty()) {
-        path = load_camera_path(path_file);
-    } else if (up == "z") {
+    if (path_file.empty() && up == "z") {
         path = orbit_path({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
                           {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]}, orbit, width, height);
-    } else {
+    } else if (path_file.empty()) {
         // A y-up model: orbit the box with y and z exchanged, then exchange them back.
         path = orbit_path({meta.bounds_min[0], meta.bounds_min[2], meta.bounds_min[1]},
                           {meta.bounds_max[0], meta.bounds_max[2], meta.bounds_max[1]}, orbit, width, height);
@@ -143,8 +215,6 @@ int cmd_render(int argc, char** argv) {
             c.up = {0, 1, 0};
         }
     }
-    if (out_dir.size()) std::filesystem::create_directories(out_dir);
-    std::string stats_text;
     std::unique_ptr<Framebuffer> framebuffer;
     for (size_t i = 0; i < path.frames.size(); ++i) {
         Camera camera = path.frames[i];
@@ -152,14 +222,19 @@ int cmd_render(int argc, char** argv) {
             camera.width = width;
             camera.height = height;
         }
-        if (!framebuffer || camera.width != framebuffer->width() || camera.height != framebuffer->height())
-            framebuffer = std::make_unique<Framebuffer>(camera.width, camera.height);
+        if (!framebuffer || camera.width != framebuffer->width() || camera.height != framebuffer->height()) {
+            framebuffer = std::make_unique<Framebuffer>(camera.width, camera.height, msaa);
+            if (framebuffer->samples() < msaa)
+                std::fprintf(stderr, "render: --msaa %d: this GL offers at most %d samples, using those\n", msaa,
+                             framebuffer->samples());
+            msaa = framebuffer->samples();
+        }
         double frame_start = now_seconds();
         SessionFrameStats s = session.step(camera);
         int steps = 1;
-        while (converge && !session.converged()) {
+        while (converge && !session.settled() && session.failures().empty()) {
             if (now_seconds() - frame_start > timeout) {
-                std::fprintf(stderr, "render: frame %zu did not converge within %.0f s (%zu requests pending)\n", i,
+                std::fprintf(stderr, "render: frame %zu did not settle within %.0f s (%zu requests pending)\n", i,
                              timeout, s.pending);
                 break;
             }
@@ -177,25 +252,21 @@ int cmd_render(int argc, char** argv) {
             std::snprintf(name, sizeof name, "/frame_%04zu.png", i);
             write_png(out_dir + name, camera.width, camera.height, pixels);
         }
-        // While a node on screen has no data yet (a hole), nothing bounds the error: null.
-        char certified[32] = "null";
-        if (s.holes == 0) std::snprintf(certified, sizeof certified, "%.4f", s.certified_error_px);
-        char line[1024];
-        std::snprintf(line, sizeof line,
-                      "{\"frame\":%zu,\"triangles\":%llu,\"fragments\":%zu,\"nodes_drawn\":%zu,\"nodes_refined\":%zu,"
-                      "\"bytes_fetched\":%llu,\"requests\":%llu,\"pending\":%zu,\"gpu_bytes\":%llu,\"cpu_bytes\":%llu,"
-                      "\"cut_ms\":%.3f,\"draw_ms\":%.3f,\"frame_ms\":%.3f,\"steps\":%d,\"certified_error_px\":%s,"
-                      "\"tolerance_px\":%.3f,\"converged\":%s,\"elapsed_ms\":%.3f}\n",
-                      i, (unsigned long long)r.triangles, r.draws, s.drawn_nodes, s.refined_nodes,
-                      (unsigned long long)s.bytes_fetched, (unsigned long long)s.requests, s.pending,
-                      (unsigned long long)s.gpu_bytes, (unsigned long long)s.cpu_bytes, s.cut_ms, draw_ms,
-                      (now_seconds() - frame_start) * 1000.0, steps, certified, settings.tolerance_px,
-                      session.converged() ? "true" : "false", (now_seconds() - start) * 1000.0);
-        stats_text += line;
-        if (stats_path.empty()) std::fputs(line, stdout);
+        double frame_ms = (now_seconds() - frame_start) * 1000.0;
+        std::string line = stats_line(i, s, r, draw_ms, frame_ms, steps, settings.tolerance_px,
+                                      (now_seconds() - start) * 1000.0);
+        if (std::fputs(line.c_str(), stats_out) < 0 || std::fflush(stats_out) != 0)
+            fail("cannot write the statistics%s%s: %s", stats_path.size() ? " to " : "", stats_path.c_str(),
+                 std::strerror(errno));
+        if (frame_lines) print_frame_line(i, path.frames.size(), s, r, settings.tolerance_px, frame_ms);
+        if (!session.failures().empty()) {
+            report_failure(session);
+            return 1;
+        }
         if (i + 1 == path.frames.size() && export_path.size()) export_cut(session, camera, export_path);
     }
-    if (stats_path.size()) write_file_atomic(stats_path, stats_text.data(), stats_text.size());
+    if (stats_file && std::fclose(stats_file.release()) != 0)
+        fail("cannot write the statistics to %s: %s", stats_path.c_str(), std::strerror(errno));
     std::fprintf(stderr, "render: %zu frames in %.2f s\n", path.frames.size(), now_seconds() - start);
     return 0;
 }

@@ -3,6 +3,7 @@
 #include <cstdio>
 
 #include "apps/commands.h"
+#include "base/error.h"
 #include "base/options.h"
 #include "server/server.h"
 
@@ -34,12 +35,14 @@ int cmd_serve(int argc, char** argv) {
     settings.threads = int(options.integer("threads", 0, 0, 256));
     settings.max_connections = int(options.integer("max-connections", 512, 1, 1000000));
     settings.timeout_seconds = options.number("timeout", 10.0, 0.001, 86400.0);
-    settings.log_level = parse_log_level(options.get("log-level", "info"));
-    options.finish();
-    if (!options.positional().empty()) {
-        std::fprintf(stderr, "%s", options.usage().c_str());
-        return 2;
+    try {
+        settings.log_level = parse_log_level(options.get("log-level", "info"));
+    } catch (const Error& e) {
+        usage_error("--log-level: %s", e.what());
     }
+    options.finish();
+    if (!options.positional().empty())
+        usage_error("unexpected argument '%s': serve takes options only", options.positional()[0].c_str());
     return run_server(settings);
 }
 

@@ -6,6 +6,7 @@
 #include "apps/commands.h"
 #include "base/error.h"
 #include "base/options.h"
+#include "base/output_path.h"
 #include "client/viewer.h"
 
 namespace catpaq {
@@ -19,17 +20,22 @@ static const char* kViewUsage =
     "  --size WxH             window size (default 1280x800)\n"
     "  --tolerance PX         screen-space error tolerance in pixels (default 1.5)\n"
     "  --up y|z               the model's up axis for the initial camera (default z)\n"
-    "  --frames N             render N frames, then exit (for tests)\n"
+    "  --msaa N               anti-aliasing samples per pixel (0, 2, 4, 8; default 4)\n"
+    "  --frames N             draw N frames (every one, as fast as possible), then exit (for tests)\n"
+    "  --exit-after SECONDS   run as usual (drawing on demand), then exit (for tests)\n"
     "  --screenshot FILE.png  save the last frame (without the overlay); exits after --frames\n"
-    "                         frames, or 120 frames\n"
+    "                         frames or --exit-after seconds, else after 120 frames\n"
     "controls:\n"
     "  left drag: orbit   right or shift+left drag: pan   wheel: zoom\n"
-    "  double click: fly to the point under the cursor   P or F12: screenshot   H: overlay\n"
-    "  Escape: quit\n";
+    "  double click: fly to the point under the cursor   H: overlay   Escape: quit\n"
+    "  P or F12: screenshot, saved as catpaq_view_NNNN.png in the working directory (the first\n"
+    "  free number: earlier screenshots are never overwritten)\n"
+    "The window is redrawn only when something changes. Nodes that cannot be loaded are shown in\n"
+    "the overlay (and on stderr); the coarser data stays on screen.\n";
 
 static void parse_view_size(const std::string& text, int& w, int& h) {
     if (std::sscanf(text.c_str(), "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 16384 || h > 16384)
-        fail("--size: '%s' is not WIDTHxHEIGHT between 16 and 16384", text.c_str());
+        usage_error("--size: '%s' is not WIDTHxHEIGHT between 16 and 16384", text.c_str());
 }
 
 int cmd_view(int argc, char** argv) {
@@ -38,7 +44,7 @@ int cmd_view(int argc, char** argv) {
         std::printf("%s", kViewUsage);
         return 0;
     }
-    if (options.positional().size() != 1) fail("expected one dataset (see --help)");
+    if (options.positional().size() != 1) usage_error("expected one dataset");
     ViewerSettings settings;
     settings.location = options.positional()[0];
     if (options.has("size")) parse_view_size(options.get("size", ""), settings.width, settings.height);
@@ -46,11 +52,14 @@ int cmd_view(int argc, char** argv) {
     std::string up = options.get("up", "z");
     if (up == "y" || up == "Y") settings.up_axis = 1;
     else if (up == "z" || up == "Z") settings.up_axis = 2;
-    else fail("--up: '%s' is not y or z", up.c_str());
+    else usage_error("--up: '%s' is not y or z", up.c_str());
     settings.frames = int(options.integer("frames", 0, 1, 1 << 30));
+    settings.exit_after = options.number("exit-after", 0, 0.01, 1e9);
+    settings.msaa = int(options.integer("msaa", 4, 0, 64));
     settings.screenshot = options.get("screenshot", "");
     options.finish();
-    if (settings.screenshot.size() && settings.frames == 0) settings.frames = 120;
+    if (settings.screenshot.size()) check_output_file(settings.screenshot, "--screenshot");
+    if (settings.screenshot.size() && settings.frames == 0 && settings.exit_after == 0) settings.frames = 120;
     if (settings.frames > 0) settings.vsync = false;  // scripted runs go as fast as they can
 
     try {

@@ -1,9 +1,27 @@
 #!/usr/bin/env bash
-# Installs every Debian package the project needs. Idempotent: when everything is
-# installed it only checks (about a second) and touches no network.
+# Installs the Debian packages a command needs, and nothing else. Idempotent: when everything
+# is installed it only checks (about a second) and touches no network.
+#
+#   scripts/setup.sh            build and run catpaq (the demo): scripts/packages.txt
+#   scripts/setup.sh --tests    also the tests and the evaluation report: scripts/packages-test.txt
+#   scripts/setup.sh --bench    also the server benchmark: scripts/packages-bench.txt (implies --tests)
+#
+# It never touches the machine's services: nothing is stopped, disabled or killed. A package that
+# would start a service when installed (nginx-light, for the benchmark, which runs nginx under
+# its own configuration) is installed with service starts denied for that install only
+# (policy-rc.d), unless the machine already has a policy of its own.
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
-mapfile -t pkgs < <(grep -v '^\s*#' "$here/packages.txt" | grep -v '^\s*$')
+lists=("$here/packages.txt")
+for arg in "$@"; do
+  case "$arg" in
+    --tests) lists+=("$here/packages-test.txt") ;;
+    --bench) lists+=("$here/packages-test.txt" "$here/packages-bench.txt") ;;
+    -h|--help) sed -n '2,12p' "$0"; exit 0 ;;
+    *) echo "setup: unknown option $arg (see --help)" >&2; exit 2 ;;
+  esac
+done
+mapfile -t pkgs < <(cat "${lists[@]}" | grep -v '^\s*#' | grep -v '^\s*$' | sort -u)
 
 missing=()
 for p in "${pkgs[@]}"; do
@@ -23,9 +41,17 @@ if [ "$(id -u)" != 0 ]; then
 fi
 echo "setup: installing ${#missing[@]} packages: ${missing[*]}"
 export DEBIAN_FRONTEND=noninteractive
+policy=/usr/sbin/policy-rc.d
+deny_starts=0
+if [ ! -e "$policy" ]; then
+  # Exit status 101: "action forbidden" for every service start the installs ask for.
+  printf '#!/bin/sh\n# written by catpaq scripts/setup.sh for one install; removed after it\nexit 101\n' |
+    $sudo tee "$policy" >/dev/null
+  $sudo chmod 755 "$policy"
+  deny_starts=1
+  trap '$sudo rm -f "$policy"' EXIT
+fi
 $sudo apt-get update -qq
 $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
-# nginx-light starts a default site on port 80 when installed; we only use its binary.
-if command -v systemctl >/dev/null 2>&1; then $sudo systemctl disable --now nginx >/dev/null 2>&1 || true; fi
-$sudo pkill -x nginx >/dev/null 2>&1 || true
+if [ "$deny_starts" = 1 ]; then $sudo rm -f "$policy"; trap - EXIT; fi
 echo "setup: done"

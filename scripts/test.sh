@@ -2,7 +2,7 @@
 # Newcomer command 2: set up, build, and run the whole test suite (ctest).
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
-"$root/scripts/setup.sh"
+"$root/scripts/setup.sh" --tests
 "$root/scripts/build.sh"
 build="$(cd "${BUILD_DIR:-$root/build}" && pwd)"
 cd "$build"

@@ -41,6 +41,8 @@ ChildRun run_measured(const std::vector<std::string>& argv, const std::string& l
     r.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
     r.status = WIFEXITED(status) ? WEXITSTATUS(status) : 128 + (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
     r.peak_bytes = uint64_t(usage.ru_maxrss) * 1024;
+    r.cpu_seconds = double(usage.ru_utime.tv_sec + usage.ru_stime.tv_sec) +
+                    double(usage.ru_utime.tv_usec + usage.ru_stime.tv_usec) * 1e-6;
     {
         std::ifstream text(log_path);
         r.output.assign(std::istreambuf_iterator<char>(text), std::istreambuf_iterator<char>());

@@ -31,4 +31,12 @@ void fail(const char* format, ...) {
     throw Error(out);
 }
 
+void usage_error(const char* format, ...) {
+    va_list args;
+    va_start(args, format);
+    std::string out = vformat(format, args);
+    va_end(args);
+    throw UsageError(out);
+}
+
 }  // namespace catpaq

@@ -9,8 +9,40 @@
 
 namespace catpaq {
 
+// Levenshtein distance.
+static size_t edit_distance(const std::string& a, const std::string& b) {
+    std::vector<size_t> row(b.size() + 1);
+    for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+    for (size_t i = 1; i <= a.size(); ++i) {
+        size_t diagonal = row[0];
+        row[0] = i;
+        for (size_t j = 1; j <= b.size(); ++j) {
+            size_t up = row[j];
+            row[j] = std::min({row[j] + 1, row[j - 1] + 1, diagonal + (a[i - 1] == b[j - 1] ? 0 : 1)});
+            diagonal = up;
+        }
+    }
+    return row[b.size()];
+}
+
+std::string closest_match(const std::string& word, const std::vector<std::string>& candidates) {
+    std::string best;
+    size_t best_distance = std::min<size_t>(3, std::max<size_t>(1, word.size() / 3)) + 1;
+    for (const std::string& c : candidates) {
+        size_t d = edit_distance(word, c);
+        // A prefix of a longer name (--tol for --tolerance) is a likely abbreviation too.
+        if (word.size() >= 3 && c.compare(0, word.size(), word) == 0) d = std::min<size_t>(d, 1);
+        if (d < best_distance) {
+            best_distance = d;
+            best = c;
+        }
+    }
+    return best;
+}
+
 Options::Options(int argc, char** argv, std::string usage, std::vector<std::string> flags)
     : usage_(std::move(usage)) {
+    known_.insert(flags.begin(), flags.end());
     for (int i = 1; i < argc; ++i) {
         std::string arg = argv[i];
         if (arg == "--help" || arg == "-h") {
@@ -26,7 +58,7 @@ Options::Options(int argc, char** argv, std::string usage, std::vector<std::stri
             } else if (std::find(flags.begin(), flags.end(), name) != flags.end()) {
                 value = "1";
             } else {
-                if (i + 1 >= argc) fail("option --%s needs a value", name.c_str());
+                if (i + 1 >= argc) usage_error("option --%s needs a value", name.c_str());
                 value = argv[++i];
             }
             values_[name] = value;
@@ -38,6 +70,7 @@ Options::Options(int argc, char** argv, std::string usage, std::vector<std::stri
 }
 
 bool Options::has(const std::string& name) {
+    known_.insert(name);
     auto it = values_.find(name);
     if (it == values_.end()) return false;
     used_[name] = true;
@@ -49,7 +82,7 @@ bool Options::flag(const std::string& name) {
     const std::string& v = values_[name];
     if (v == "1" || v == "true" || v == "yes" || v == "on") return true;
     if (v == "0" || v == "false" || v == "no" || v == "off") return false;
-    fail("option --%s takes no value (or true/false), got '%s'", name.c_str(), v.c_str());
+    usage_error("option --%s takes no value (or true/false), got '%s'", name.c_str(), v.c_str());
 }
 
 std::string Options::get(const std::string& name, const std::string& fallback) {
@@ -57,7 +90,7 @@ std::string Options::get(const std::string& name, const std::string& fallback) {
 }
 
 std::string Options::require(const std::string& name) {
-    if (!has(name)) fail("option --%s is required", name.c_str());
+    if (!has(name)) usage_error("option --%s is required", name.c_str());
     return values_[name];
 }
 
@@ -68,8 +101,8 @@ double Options::number(const std::string& name, double fallback, double min, dou
     errno = 0;
     double v = std::strtod(text.c_str(), &end);
     if (text.empty() || *end != 0 || errno != 0 || !std::isfinite(v))
-        fail("option --%s: '%s' is not a number", name.c_str(), text.c_str());
-    if (v < min || v > max) fail("option --%s: %s is outside [%g, %g]", name.c_str(), text.c_str(), min, max);
+        usage_error("option --%s: '%s' is not a number", name.c_str(), text.c_str());
+    if (v < min || v > max) usage_error("option --%s: %s is outside [%g, %g]", name.c_str(), text.c_str(), min, max);
     return v;
 }
 
@@ -80,9 +113,10 @@ int64_t Options::integer(const std::string& name, int64_t fallback, int64_t min,
     errno = 0;
     long long v = std::strtoll(text.c_str(), &end, 10);
     if (text.empty() || *end != 0 || errno != 0)
-        fail("option --%s: '%s' is not an integer", name.c_str(), text.c_str());
+        usage_error("option --%s: '%s' is not an integer", name.c_str(), text.c_str());
     if (v < min || v > max)
-        fail("option --%s: %s is outside [%lld, %lld]", name.c_str(), text.c_str(), (long long)min, (long long)max);
+        usage_error("option --%s: %s is outside [%lld, %lld]", name.c_str(), text.c_str(), (long long)min,
+                    (long long)max);
     return v;
 }
 
@@ -102,14 +136,19 @@ uint64_t Options::bytes(const std::string& name, uint64_t fallback) {
     errno = 0;
     double v = std::strtod(text.c_str(), &end);
     if (text.empty() || *end != 0 || errno != 0 || !(v > 0) || !std::isfinite(v))
-        fail("option --%s: '%s' is not a size (like 512M or 2G)", name.c_str(), values_[name].c_str());
+        usage_error("option --%s: '%s' is not a size (like 512M or 2G)", name.c_str(), values_[name].c_str());
     return uint64_t(v * double(scale));
 }
 
 void Options::finish() {
-    for (auto& [name, used] : used_)
-        if (!used) fail("unknown option --%s (see --help)", name.c_str());
-    (void)0;
+    std::vector<std::string> known(known_.begin(), known_.end());
+    known.push_back("help");
+    for (auto& [name, used] : used_) {
+        if (used) continue;
+        std::string guess = closest_match(name, known);
+        if (guess.empty()) usage_error("unknown option --%s", name.c_str());
+        usage_error("unknown option --%s; did you mean --%s?", name.c_str(), guess.c_str());
+    }
 }
 
 }  // namespace catpaq

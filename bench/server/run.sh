@@ -27,7 +27,7 @@ make_dataset="$build/bench/server/server_bench_dataset"
 httplib_server="$build/bench/server/server_bench_httplib"
 
 for tool in wrk curl python3 "$NGINX" "$catpaq" "$make_dataset"; do
-  command -v "$tool" >/dev/null 2>&1 || { echo "run.sh: missing $tool (build: cmake --build $build --target catpaq server_bench_dataset server_bench_httplib)" >&2; exit 1; }
+  command -v "$tool" >/dev/null 2>&1 || { echo "run.sh: missing $tool (packages: scripts/setup.sh --bench; build: cmake --build $build --target catpaq server_bench_dataset server_bench_httplib)" >&2; exit 1; }
 done
 
 tmp=$(mktemp -d /tmp/catpaq-server-bench.XXXXXX)

@@ -12,8 +12,10 @@ namespace {
 class MeshInput final : public BuildInput {
 public:
     MeshInput(const Mesh& mesh, std::string name) : mesh_(mesh), name_(std::move(name)) {}
-    // Owns a mesh read from a file in a non-streamable format.
-    MeshInput(Mesh&& owned, std::string name) : owned_(std::move(owned)), mesh_(owned_), name_(std::move(name)) {}
+    // Owns a mesh read from a file in a non-streamable format, and what its reader left out.
+    MeshInput(Mesh&& owned, std::string name, std::vector<std::string> dropped)
+        : owned_(std::move(owned)), mesh_(owned_), name_(std::move(name)), dropped_(std::move(dropped)) {}
+    std::vector<std::string> dropped() const override { return dropped_; }
 
     std::string name() const override { return name_; }
     uint64_t vertex_count() const override { return mesh_.vertex_count(); }
@@ -49,6 +51,7 @@ private:
     Mesh owned_;
     const Mesh& mesh_;
     std::string name_;
+    std::vector<std::string> dropped_;
     size_t next_vertex_ = 0, next_triangle_ = 0;
 };
 
@@ -98,6 +101,7 @@ public:
         return (indices.size() - before) / 3;
     }
     void finish() override { stream_->finish(); }
+    std::vector<std::string> dropped() const override { return stream_->dropped(); }
 
 private:
     std::string path_;
@@ -124,7 +128,9 @@ std::unique_ptr<BuildInput> mesh_build_input(const Mesh& mesh, std::string name)
 
 std::unique_ptr<BuildInput> file_build_input(const std::string& path) {
     if (is_ply(path)) return std::make_unique<PlyInput>(path);
-    return std::make_unique<MeshInput>(read_mesh(path), path);
+    std::vector<std::string> dropped;
+    Mesh mesh = read_mesh(path, &dropped);
+    return std::make_unique<MeshInput>(std::move(mesh), path, std::move(dropped));
 }
 
 }  // namespace catpaq

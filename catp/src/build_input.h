@@ -33,6 +33,9 @@ public:
     virtual size_t read_triangles(size_t max, std::vector<uint32_t>& indices) = 0;
     // After the last pass: checks that the file holds nothing beyond what its header declares.
     virtual void finish() = 0;
+    // What the file holds that the converter cannot keep (read_mesh's `dropped`), one sentence
+    // per kind.
+    virtual std::vector<std::string> dropped() const { return {}; }
 };
 
 // Serves a mesh in memory (which must pass validate_mesh); the mesh must outlive the input.

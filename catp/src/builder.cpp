@@ -21,6 +21,7 @@
 #include "base/error.h"
 #include "base/heap_warmup.h"
 #include "base/progress.h"
+#include "base/signal_cleanup.h"
 #include "base/paged_array.h"
 #include "base/sysinfo.h"
 #include "base/temp_file.h"
@@ -39,6 +40,25 @@
 namespace catpaq {
 
 namespace {
+
+// The name the archive writer gives its node spill (common_codec/src/archive.cpp).
+std::string archive_spill_name(const std::string& output) { return output + ".nodes.tmp." + std::to_string(getpid()); }
+
+// Runs a build; an error that names the archive's spill (disk full while spilling nodes) names
+// the user's output instead.
+template <class Build>
+CatpBuildReport naming_user_paths(const std::string& output, Build build) {
+    try {
+        return build();
+    } catch (const Error& e) {
+        std::string message = e.what(), spill = "'" + archive_spill_name(output) + "'";
+        size_t at = message.find(spill);
+        if (at == std::string::npos) throw;
+        message.replace(at, spill.size(), "the scratch file next to '" + output + "'");
+        throw Error(message);
+    }
+}
+
 
 // ----------------------------------------------------------------------------------------------
 // Placement of the model in the lattice.
@@ -347,13 +367,10 @@ private:
     void choose_layout_and_leaves();
     void finish_archive();
 
-    void write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
-                    double error, bool leaf);
+    double write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
+                      double unquantized_error, double children_stored, bool leaf);
     double quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const;
 
-    // Percent of an input triangle's work done in each phase (measured on scan-like meshes).
-    static constexpr uint64_t kNormalsShare = 10, kBinShare = 20, kLeavesShare = 30, kCoarsenShare = 50;
-    uint64_t bin_share_ = kBinShare;
 
     BuildInput& in_;
     std::string output_;
@@ -378,12 +395,17 @@ private:
     std::unique_ptr<ArchiveWriter> archive_;
     std::vector<CatpLevelStats> stats_;
     std::mutex stats_mutex_;
-    // The level being coarsened: its fragments, and each diamond's error of the unquantized
-    // geometry from the original (lattice units): 0 at the leaves, above them the largest
-    // child's plus the diamond's own measured simplification error. The stored bound adds the
-    // quantization step; both terms grow towards the root, so stored bounds are monotone.
+    // The level being coarsened: its fragments, and each diamond's errors (lattice units).
+    // `unquantized`: of its unquantized geometry from the original, 0 at the leaves, above them
+    // the largest child's plus the diamond's own measured simplification error. `stored`: the
+    // bound written, the unquantized error plus what quantization costs (the grid step, or the
+    // distance from the thin geometry it loses to what is drawn, whichever is larger), and at
+    // least every child's stored bound, so stored bounds are monotone.
+    struct DiamondError {
+        double unquantized = 0, stored = 0;
+    };
     std::unique_ptr<FragmentSpill> fragments_;
-    std::unordered_map<uint64_t, double> diamond_error_;
+    std::unordered_map<uint64_t, DiamondError> diamond_error_;
     uint64_t bytes_spilled_ = 0;
     const Rgb8 default_color_{180, 180, 180};
 };
@@ -405,6 +427,7 @@ void CatpBuild::read_vertices() {
         colors.clear();
         size_t n = in_.read_vertices(kChunk, positions, &normals, &colors);
         if (n == 0) break;
+        progress_->add(n);
         for (size_t i = 0; i < n; ++i, ++v) {
             if (v >= count) fail("'%s': more vertices than declared", in_.name().c_str());
             VertexRecord& r = vertices_->at_for_write(v);
@@ -440,7 +463,7 @@ void CatpBuild::compute_normals() {
                 for (int i = 0; i < 3; ++i) s[i] += normal[i];
             }
         }
-        progress_->add(n * kNormalsShare / 100);
+        progress_->add(n);
     }
     for (uint64_t v = 0; v < count; ++v) {
         Vec3d s = sums.at(v);
@@ -576,7 +599,7 @@ void CatpBuild::bin_triangles(TriangleBins<Record>& bins) {
     auto append = [&](Batch* batch) {
         edge_lengths_.add(batch->edge_lengths);
         for (auto [record, block] : batch->hits) bins.add(block, batch->records[record]);
-        progress_->add(batch->triangles * bin_share_ / 100);
+        progress_->add(batch->triangles);
         free_batches.push(batch);
     };
     tbb::parallel_pipeline(kLiveBatches,
@@ -691,7 +714,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
             }
             if (!fragment.indices.empty()) fragments_->put(key, std::move(fragment));
         });
-        progress_->add(count * kLeavesShare / 100);
+        progress_->add(count);
     }
     bytes_spilled_ += bins.bytes_spilled();
     return_free_memory(warm_heap_.get());
@@ -705,29 +728,56 @@ double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<co
     return longest / layout_.grid;
 }
 
-// Writes the node of a diamond whose fragments are final.
-void CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
-                           double error, bool leaf) {
+// Writes the node of a diamond whose fragments are final; returns its stored error bound
+// (lattice units): see DiamondError.
+double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
+                             double unquantized_error, double children_stored, bool leaf) {
     DiamondFragments node;
     size_t triangles = 0, vertices = 0;
+    std::vector<QuantizedSlot> quantized;
+    quantized.reserve(8);
     for (int s = 0; s < 8; ++s) {
         if (!slots[s] || slots[s]->indices.empty()) continue;
         Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, s));
-        quantize_fragment(*slots[s], t, layout_, node.slots[s]);
+        QuantizedSlot& q = quantized.emplace_back();
+        q.in = slots[s];
+        q.out = &node.slots[s];
+        q.corners = t;
+        quantize_fragment(*slots[s], t, layout_, node.slots[s], &q.trace);
         if (node.slots[s].indices.empty()) continue;
         node.slot_mask |= uint8_t(1 << s);
         triangles += node.slots[s].triangle_count();
         vertices += node.slots[s].vertices.size();
     }
+    // Thin geometry the grid cannot hold is drawn nowhere: the bound must cover its distance to
+    // what is drawn. When the node draws nothing, nothing local bounds that: the model's
+    // diagonal does (the nearest drawn surface is somewhere in the model).
+    const double step = quantization_step(info, slots);
+    // At the leaves, pieces along a face up to four mean input edges long, and a quarter of the
+    // tetrahedron, are clipping slivers whose triangle goes on, drawn, in the neighbour: not
+    // needles (which span the tetrahedron, and may be the input's typical triangle: the Slivers
+    // hard case). Coarser levels excuse nothing: there every neighbour may lose the same thin
+    // geometry (Slivers' coarse levels draw nothing at all).
+    const double excuse = leaf ? std::min(4 * mean_edge_, step * layout_.grid / 4) : 0.0;
+    QuantizationLoss loss = quantization_loss(quantized, step / 4, step, excuse, leaf);
+    const double lost = loss.nothing_drawn ? bounds_.diagonal() / place_.cell : loss.error;
+    const double stored = std::max(unquantized_error + std::max(step, lost), children_stored);
     std::vector<uint8_t> bytes = encode_diamond_node(node);
     ArchiveEntry entry;
     entry.key = id.bits;
     entry.level = uint16_t(info.level);
     entry.flags = uint16_t(node.slot_mask) | (leaf ? kCatpLeafFlag : 0);
     entry.count = uint32_t(triangles);
-    entry.error = float(error * place_.cell);
+    entry.error = float(stored * place_.cell);
     archive_->add_node(entry, bytes.data(), bytes.size());
     std::lock_guard lock(stats_mutex_);
+    if (leaf) {
+        const double area = place_.cell * place_.cell;
+        report_.lost_triangles += loss.triangles;
+        report_.lost_area += loss.area * area;
+        report_.lost_error = std::max(report_.lost_error, lost * place_.cell);
+        report_.lost_beyond_step |= lost > 2 * step;
+    }
     CatpLevelStats& s = stats_[info.level];
     s.diamonds++;
     s.fragments += size_t(__builtin_popcount(node.slot_mask));
@@ -735,6 +785,8 @@ void CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::arr
     s.vertices += vertices;
     s.bytes += bytes.size();
     s.max_error = std::max(s.max_error, double(entry.error));
+    s.empty_diamonds += loss.nothing_drawn;
+    return stored;
 }
 
 // Ranges [begin, end) of 0..count over which group_of(index) is constant (sorted input).
@@ -754,7 +806,8 @@ void CatpBuild::write_leaf_nodes() {
     std::vector<SpilledFragment>& refs = fragments_->fragments();
     std::sort(refs.begin(), refs.end(), [](const SpilledFragment& a, const SpilledFragment& b) { return a.key < b.key; });
     auto runs = group_runs(refs.size(), [&](size_t i) { return refs[i].key.diamond; });
-    for (auto& run : runs) diamond_error_.emplace(refs[run.first].key.diamond, 0.0);
+    for (auto& run : runs) diamond_error_.emplace(refs[run.first].key.diamond, DiamondError{});
+    progress_->set_total(runs.size());
     tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
         DiamondId id{refs[runs[i].first].key.diamond};
         DiamondInfo info = diamond_info(id);
@@ -762,7 +815,9 @@ void CatpBuild::write_leaf_nodes() {
         std::array<const WorkFragment*, 8> slots{};
         for (size_t k = runs[i].first; k < runs[i].second; ++k)
             slots[refs[k].key.slot] = &fragments_->get(refs[k], loaded[refs[k].key.slot]);
-        write_node(id, info, slots, quantization_step(info, slots), true);
+        // Each diamond's own entry, written by this thread only.
+        diamond_error_.find(id.bits)->second.stored = write_node(id, info, slots, 0.0, 0.0, true);
+        progress_->add(1);
     });
 }
 
@@ -791,7 +846,7 @@ void CatpBuild::coarsen_level() {
     }
     auto runs = group_runs(refs.size(), [&](size_t i) { return parent_of[i]; });
     auto next = std::make_unique<FragmentSpill>(output_, shares_->coarse_fragments_in_memory);
-    std::vector<double> produced_error(runs.size(), 0.0);
+    std::vector<DiamondError> produced_error(runs.size());
     // Each thread's gathered and child fragments, cleared from diamond to diamond but kept for
     // the level: fresh arrays for every diamond made malloc search its bins of free chunks for
     // them (3.5% of the 10M scan's build, most of it cache misses on chunk headers). A thread
@@ -807,10 +862,12 @@ void CatpBuild::coarsen_level() {
         DiamondInfo info = diamond_info(id);
         // Every child with geometry counts, also those whose gathered slots came from other
         // parents: that keeps the stored errors monotone along every parent-child edge.
-        double child_error = 0;
+        DiamondError children;
         for (DiamondId child : diamond_children(id)) {
             auto it = diamond_error_.find(child.bits);
-            if (it != diamond_error_.end()) child_error = std::max(child_error, it->second);
+            if (it == diamond_error_.end()) continue;
+            children.unquantized = std::max(children.unquantized, it->second.unquantized);
+            children.stored = std::max(children.stored, it->second.stored);
         }
         Scratch& mine = scratches.local();
         Scratch own;
@@ -841,12 +898,12 @@ void CatpBuild::coarsen_level() {
         std::array<const WorkFragment*, 8> slots;
         for (int s = 0; s < 8; ++s) slots[s] = &produced[s];
         // Monotone: a diamond's error bounds its children's plus its own simplification.
-        produced_error[i] = child_error + simplify_error;
-        write_node(id, info, slots, produced_error[i] + quantization_step(info, slots), false);
+        DiamondError& error = produced_error[i];
+        error.unquantized = children.unquantized + simplify_error;
+        error.stored = write_node(id, info, slots, error.unquantized, children.stored, false);
         for (int s = 0; s < 8; ++s)
             if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, std::move(produced[s]));
-        // Gathered triangles sum to about twice the input over all levels.
-        progress_->add(gathered_triangles * kCoarsenShare / 200);
+        progress_->add(gathered_triangles);
     };
     // Diamonds too large for one thread's allowance (kMemoryPerThread) go one at a time, after
     // the others, each still using every thread inside (coarsen_diamond's parallel steps), and
@@ -948,13 +1005,13 @@ CatpBuildReport CatpBuild::run() {
     shares_ = std::make_unique<BudgetShares>(budget_ - (minimum - kMinimumDataMemory));
     report_.memory_budget = budget_;
     report_.input_vertices = in_.vertex_count();
+    report_.dropped_input = in_.dropped();
     warm_heap_ = make_heap_warmup(budget_, in_.vertex_count());
     bool needs_normals = !in_.has_normals();
-    // Progress counts input triangles, each phase adding its share of every triangle, so the
-    // rate shown is input triangles per second.
-    bin_share_ = needs_normals ? kBinShare - kNormalsShare : kBinShare;
-    progress_ = std::make_unique<Progress>("catp build", std::max<uint64_t>(1, 2 * in_.vertex_count()), "tri");
-    if (!settings_.progress) progress_->finish();
+    // One phase per pass, each counting its own units exactly (a phase's total is known when it
+    // begins), so no bar runs past its end.
+    progress_ = std::make_unique<Progress>("convert", "reading vertices", in_.vertex_count(), "vert");
+    if (!settings_.progress) progress_->silence();
 
     // Wall time per phase: each lap() ends one.
     double mark = start;
@@ -968,10 +1025,12 @@ CatpBuildReport CatpBuild::run() {
     read_vertices();
     uint64_t estimate = in_.triangle_estimate();
     if (estimate == 0) fail("the mesh has no triangles");
-    progress_->set_total(estimate);
     report_.diagonal = bounds_.diagonal();
     place_ = place_model(bounds_);
-    if (needs_normals) compute_normals();
+    if (needs_normals) {
+        progress_->phase("computing normals", estimate, "tri");
+        compute_normals();
+    }
     for (Vec3d& p : sample_)
         for (int i = 0; i < 3; ++i) p[i] = (p[i] - place_.origin[i]) / place_.cell;
     int leaf_level = settings_.leaf_level >= 0 ? settings_.leaf_level
@@ -979,13 +1038,22 @@ CatpBuildReport CatpBuild::run() {
     if (leaf_level > kMaxLevel - 3) fail("leaf level %d is deeper than the lattice allows (%d)", leaf_level, kMaxLevel - 3);
     levels_ = choose_block_octave(sample_, estimate, leaf_level, shares_->block_triangles);
     report_.block_level = 3 * levels_.block_octave;
+    // The archive writer spills nodes to a named file (OUTPUT.nodes.tmp.PID, see
+    // common_codec/src/archive.cpp): registered for removal on signals before it exists and
+    // unlinked as soon as it does (the writer keeps it open and finds nothing to remove later),
+    // so that no way of ending the run leaves it behind.
+    const std::string spill = archive_spill_name(output_);
+    remove_on_signal(spill);
     archive_ = std::make_unique<ArchiveWriter>(output_, ArchiveKind::Catp);
+    ::unlink(spill.c_str());
+    forget_on_signal(spill);
 
     to_lattice();
     lap(report_.seconds_read);
 
     // ---- Triangles into blocks, then leaves clipped block by block.
     auto bin_and_clip = [&](auto& bins, bool records_carry_vertices) {
+        progress_->phase("binning triangles", estimate, "tri");
         bin_triangles(bins);
         lap(report_.seconds_bin);
         if (triangles_ == 0) fail("the mesh has no triangles");
@@ -996,6 +1064,9 @@ CatpBuildReport CatpBuild::run() {
         }
         report_.input_triangles = triangles_;
         report_.blocks = bins.block_count();
+        uint64_t binned = 0;  // triangles crossing block borders count once per block
+        for (size_t b = 0; b < bins.block_count(); ++b) binned += bins.block_records(b);
+        progress_->phase("clipping leaves", binned, "tri");
         build_leaves(bins);
     };
     report_.compact_bins = choose_bins(estimate);
@@ -1011,17 +1082,24 @@ CatpBuildReport CatpBuild::run() {
     if (fragments_->fragments().empty())
         fail("none of the %llu triangles has an area: nothing to build", (unsigned long long)triangles_);
     lap(report_.seconds_clip);
+    progress_->phase("encoding leaf nodes", 0, "nodes");
     write_leaf_nodes();
     lap(report_.seconds_leaf_nodes);
 
     // ---- Coarser levels, bottom-up.
-    for (int level = levels_.leaf_level - 1; level >= 0; --level) coarsen_level();
+    for (int level = levels_.leaf_level - 1; level >= 0; --level) {
+        uint64_t triangles = 0;  // every fragment of the finer level is gathered by one diamond
+        for (const SpilledFragment& f : fragments_->fragments()) triangles += f.triangles;
+        progress_->phase(strprintf("coarsening level %d of %d", level, levels_.leaf_level), triangles, "tri");
+        coarsen_level();
+    }
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_.reset();
-    progress_->finish();
     lap(report_.seconds_coarsen);
 
+    progress_->phase("writing " + output_, 0, "bytes");
     finish_archive();
+    progress_->finish();
     lap(report_.seconds_write);
     for (auto& s : stats_) {
         if (s.diamonds) report_.nodes += s.diamonds;
@@ -1075,13 +1153,13 @@ uint64_t default_memory_budget() {
 CatpBuildReport build_catp(const Mesh& mesh, const std::string& output_path, const CatpBuildSettings& settings) {
     if (mesh.triangle_count() == 0) fail("the mesh has no triangles");
     auto input = mesh_build_input(mesh);
-    return CatpBuild(*input, output_path, settings).run();
+    return naming_user_paths(output_path, [&] { return CatpBuild(*input, output_path, settings).run(); });
 }
 
 CatpBuildReport build_catp_file(const std::string& input_path, const std::string& output_path,
                                 const CatpBuildSettings& settings) {
     auto input = file_build_input(input_path);
-    return CatpBuild(*input, output_path, settings).run();
+    return naming_user_paths(output_path, [&] { return CatpBuild(*input, output_path, settings).run(); });
 }
 
 }  // namespace catpaq

@@ -8,7 +8,9 @@
 #include <vector>
 
 #include "catp/lattice.h"
+#include "catp/distance.h"
 #include "clip.h"
+#include "common_codec/barycentric.h"
 #include "common_codec/fragment_codec.h"
 #include "mesh/mesh.h"
 
@@ -118,13 +120,50 @@ private:
 // corner f), each keeping the side of the opposite corner.
 std::vector<ClipPlane> tetrahedron_clip_planes(const Tetrahedron& t, unsigned face_mask);
 
+// Where quantize_fragment put what: for error bookkeeping only (the output is the same with or
+// without it).
+struct QuantizeTrace {
+    std::vector<uint32_t> vertex_of;        // the output vertex of each input vertex
+    std::vector<uint32_t> triangle_source;  // the input triangle of each output triangle
+    std::vector<uint32_t> flat;             // output triangles whose corners are collinear (no area)
+    std::vector<BaryWeights> weights;       // of each input vertex, quantized
+};
+
 // Quantizes a fragment in the tetrahedron with canonical corners `corners` (face rule by exact
 // predicates) into 64-bit vertices. Triangles that collapse (two corners with the same position)
-// are dropped.
-void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, const VertexLayout& layout, FragmentMesh& out);
+// are dropped. `trace`, if given, records where input vertices and triangles went.
+void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, const VertexLayout& layout, FragmentMesh& out,
+                       QuantizeTrace* trace = nullptr);
 
-// Squared distance from p to triangle (a, b, c), as the simplification error measures it.
-double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c);
+// One slot of a node as quantized, for quantization_loss.
+struct QuantizedSlot {
+    const WorkFragment* in = nullptr;   // unquantized, lattice units
+    const FragmentMesh* out = nullptr;  // what quantize_fragment made of it
+    Tetrahedron corners{};              // the canonical corners it was quantized in
+    QuantizeTrace trace;
+};
+
+// What quantization loses from a node: the input triangles that collapse, or keep no area once
+// their corners are quantized (three collinear points), are drawn nowhere. Thin geometry (a
+// needle, a sliver thinner than the grid step) can vanish whole this way.
+struct QuantizationLoss {
+    size_t triangles = 0;  // input triangles lost
+    double area = 0;       // their area (lattice units squared)
+    // Bound (lattice units) of the distance from the lost triangles to the node's drawn
+    // triangles: measured at points along their edges no farther apart than `spacing` (plus
+    // what may lie between them); `settled` when it is at most that (the caller's bound, the
+    // grid step, covers it). When nothing
+    // of the node is drawn, nothing local bounds it: `nothing_drawn` is set and error is 0.
+    double error = 0;
+    bool nothing_drawn = false;
+};
+// excuse_length: pieces up to this long (lattice units) that lie along a face of their
+// tetrahedron count as covered by the neighbour across it (see the definition). measure_area:
+// fill `area` (else 0).
+QuantizationLoss quantization_loss(const std::vector<QuantizedSlot>& slots, double spacing, double settled,
+                                   double excuse_length, bool measure_area);
+
+// point_triangle_distance2: catp/distance.h.
 
 // Distance between the gathered surface of a diamond and its simplification (triangles indexing
 // gathered.positions), both ways: the removed vertices to the simplified surface, and the

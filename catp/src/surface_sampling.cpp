@@ -3,7 +3,10 @@
 #include <cmath>
 #include <random>
 
+#include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
+
+#include "base/progress.h"
 
 #include "catp/distance.h"
 
@@ -58,9 +61,13 @@ std::vector<std::array<double, 3>> sample_surface(const std::vector<std::array<d
     return out;
 }
 
-DistanceStats measure_distances(const SurfaceDistance& to, const std::vector<std::array<double, 3>>& points) {
+DistanceStats measure_distances(const SurfaceDistance& to, const std::vector<std::array<double, 3>>& points,
+                                Progress* progress) {
     std::vector<double> d(points.size());
-    tbb::parallel_for(size_t(0), points.size(), [&](size_t i) { d[i] = to.distance(points[i]); });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) d[i] = to.distance(points[i]);
+        if (progress) progress->add(r.size());
+    });
     double mx = 0, sum = 0;
     for (double v : d) {
         mx = std::max(mx, v);

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <iterator>
 #include <map>
 #include <set>
@@ -11,6 +12,7 @@
 #include <tbb/parallel_for.h>
 
 #include "base/error.h"
+#include "base/progress.h"
 #include "catp/cut.h"
 #include "catp/dataset.h"
 #include "catp/distance.h"
@@ -24,8 +26,7 @@ using FaceKey = std::array<LatticePoint, 3>;
 using Edge = std::pair<IntPoint, IntPoint>;
 
 // One tetrahedron's view of a face: edges where its surface leaves the face, and borders of
-// its patches lying in the face. Crack-free means the symmetric differences of the two sides'
-// open borders and of their patch borders are equal (without patches: identical open borders).
+// its patches lying in the face.
 struct FaceSide {
     std::set<Edge> open, patch;
     std::set<Edge> nonmanifold;  // used by several triangles of this side: not compared
@@ -34,6 +35,52 @@ struct FaceSide {
 std::set<Edge> symmetric_difference(const std::set<Edge>& a, const std::set<Edge>& b) {
     std::set<Edge> out;
     std::set_symmetric_difference(a.begin(), a.end(), b.begin(), b.end(), std::inserter(out, out.begin()));
+    return out;
+}
+
+// What the two sides of a shared face show along it. Where the surface crosses the face, each
+// edge on it is used once on either side (an open edge on both, or an open edge on one and a
+// patch border on the other); the edges used an odd number of times are where the surface,
+// joined across the face, has a border in the face. Such a border is a crack when both sides
+// leave one, connected to each other: the two sides end at different edges (a T-junction, or
+// two polylines between the same points). A border that only one side leaves is where the
+// *input* ends exactly in the face's plane (an open or non-manifold mesh: a grid's edge, a fin,
+// a flap), or geometry missing on the other side; the face alone cannot tell which, so these
+// are counted (FaceCheck::one_sided) and, with the original mesh, checked against its border.
+struct FaceCheck {
+    size_t crack_edges = 0;  // odd edges in a component that both sides leave borders in
+    size_t one_sided = 0;    // odd edges in components of one side only
+};
+
+FaceCheck check_face(const std::array<FaceSide, 2>& sides) {
+    std::set<Edge> odd = symmetric_difference(symmetric_difference(sides[0].open, sides[1].open),
+                                              symmetric_difference(sides[0].patch, sides[1].patch));
+    FaceCheck out;
+    if (odd.empty()) return out;
+    // Components of the odd edges (union-find on their end points), and which side left each
+    // edge only it has (an edge both sides have, as a three-sheet edge, belongs to neither).
+    std::map<IntPoint, IntPoint> parent;
+    std::function<IntPoint(const IntPoint&)> root = [&](const IntPoint& p) {
+        auto it = parent.find(p);
+        if (it == parent.end() || it->second == p) return p;
+        return it->second = root(it->second);
+    };
+    for (const Edge& e : odd) {
+        IntPoint a = root(e.first), b = root(e.second);
+        parent.emplace(a, a);
+        parent.emplace(b, b);
+        if (a != b) parent[a] = b;
+    }
+    auto has = [](const FaceSide& s, const Edge& e) { return s.open.count(e) || s.patch.count(e); };
+    std::map<IntPoint, std::array<size_t, 3>> components;  // root: edges only side 0 has, only side 1, all
+    for (const Edge& e : odd) {
+        std::array<size_t, 3>& c = components[root(e.first)];
+        bool on0 = has(sides[0], e), on1 = has(sides[1], e);
+        c[0] += on0 && !on1;
+        c[1] += on1 && !on0;
+        c[2]++;
+    }
+    for (auto& [r, c] : components) (c[0] && c[1] ? out.crack_edges : out.one_sided) += c[2];
     return out;
 }
 
@@ -167,21 +214,14 @@ public:
                     side.open.erase(e);
                     side.patch.erase(e);
                 }
-            if (symmetric_difference(sides[0].open, sides[1].open) != symmetric_difference(sides[0].patch, sides[1].patch)) {
+            FaceCheck c = check_face({sides[0], sides[1]});
+            report_.face_border_edges += c.one_sided;
+            if (c.crack_edges) {
                 report_.face_mismatches++;
-                if (getenv("CATPAQ_DEBUG_FACES")) {
-                    auto dump = [](const char* what, const std::set<Edge>& edges) {
-                        fprintf(stderr, "%s:\n", what);
-                        for (auto& e : edges)
-                            fprintf(stderr, "  (%ld %ld %ld)-(%ld %ld %ld)\n", (long)e.first[0], (long)e.first[1],
-                                    (long)e.first[2], (long)e.second[0], (long)e.second[1], (long)e.second[2]);
-                    };
-                    dump("open0 - open1", symmetric_difference(sides[0].open, sides[1].open));
-                    dump("patch0 ^ patch1", symmetric_difference(sides[0].patch, sides[1].patch));
-                }
-                problem(strprintf("face (%d,%d,%d)-(%d,%d,%d)-(%d,%d,%d): the two sides' borders differ (%zu vs %zu edges)",
+                problem(strprintf("face (%d,%d,%d)-(%d,%d,%d)-(%d,%d,%d): the two sides' borders differ (%zu edges "
+                                  "where both sides end differently: a crack)",
                                   key[0][0], key[0][1], key[0][2], key[1][0], key[1][1], key[1][2], key[2][0], key[2][1],
-                                  key[2][2], sides[0].open.size(), sides[1].open.size()));
+                                  key[2][2], c.crack_edges));
             }
         }
         return out;
@@ -192,6 +232,58 @@ private:
     VerifyReport& report_;
     std::unordered_map<uint64_t, std::unique_ptr<DiamondFragments>> cache_;
 };
+
+// The border edges (used by one triangle) of a mesh, as segments.
+std::vector<std::pair<std::array<double, 3>, std::array<double, 3>>> mesh_border(const Mesh& mesh) {
+    std::map<std::pair<uint32_t, uint32_t>, int> uses;
+    for (size_t t = 0; t + 2 < mesh.indices.size(); t += 3)
+        for (int k = 0; k < 3; ++k) {
+            uint32_t a = mesh.indices[t + k], b = mesh.indices[t + (k + 1) % 3];
+            if (a != b) uses[{std::min(a, b), std::max(a, b)}]++;
+        }
+    std::vector<std::pair<std::array<double, 3>, std::array<double, 3>>> out;
+    for (auto& [e, n] : uses)
+        if (n == 1) out.push_back({mesh.positions[e.first], mesh.positions[e.second]});
+    return out;
+}
+
+// Border edges of a decoded cut (welded by exact position) whose midpoint lies farther than
+// `tolerance` from the original's border: a crack, or geometry missing, opens borders where
+// the original has none. (The face check alone cannot tell those from an input border lying
+// in a face; this can, since it knows where the input's borders are.)
+size_t check_borders(const DecodedCut& cut, const SegmentDistance& original_border, double tolerance) {
+    std::map<std::pair<uint32_t, uint32_t>, int> uses;
+    for (size_t t = 0; t + 2 < cut.indices.size(); t += 3)
+        for (int k = 0; k < 3; ++k) {
+            uint32_t a = cut.indices[t + k], b = cut.indices[t + (k + 1) % 3];
+            uses[{std::min(a, b), std::max(a, b)}]++;
+        }
+    size_t off = 0;
+    for (auto& [e, n] : uses) {
+        if (n != 1) continue;
+        const auto &a = cut.positions[e.first], &b = cut.positions[e.second];
+        std::array<double, 3> mid{(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2};
+        off += !(original_border.distance(mid) <= tolerance);
+    }
+    return off;
+}
+
+// The stored bound must hold: a level whose measured distance, either way, exceeds its stored
+// error fails, with the excess.
+void check_bound(VerifyLevel& lv, VerifyReport& report, Checker& checker) {
+    // The stored error is a float: its rounding is not a violation.
+    double bound = lv.stored_error * (1 + 1e-6);
+    auto over = [&](const char* direction, double measured) {
+        if (!(measured > bound)) return;
+        lv.bound_exceeded = true;
+        checker.problem(strprintf("level %d: %s distance %.6g exceeds the stored bound %.6g by %.6g (%.3gx the bound)",
+                                  lv.level, direction, measured, lv.stored_error, measured - lv.stored_error,
+                                  lv.stored_error > 0 ? measured / lv.stored_error : INFINITY));
+    };
+    over("level->original", lv.distance_to_original_max);
+    over("original->level", lv.distance_from_original_max);
+    report.bound_violations += lv.bound_exceeded;
+}
 
 }  // namespace
 
@@ -208,6 +300,8 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
     for (int i = 0; i < 3; ++i) d2 += (meta.bounds_max[i] - meta.bounds_min[i]) * (meta.bounds_max[i] - meta.bounds_min[i]);
     report.diagonal = std::sqrt(d2);
     Checker checker(file, report);
+    Progress progress("verify", "checking nodes", index.entries().size(), "nodes");
+    if (!settings.progress) progress.silence();
 
     int max_level = 0;
     for (const ArchiveEntry& e : index.entries()) max_level = std::max(max_level, int(e.level));
@@ -264,31 +358,48 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
         }
         lv.triangles += triangles;
         report.triangles += triangles;
+        progress.add(1);
     }
 
-    // Uniform cuts, coarse to fine: face consistency and (with the original) distances.
+    // Uniform cuts, coarse to fine: face consistency and (with the original) distances, the
+    // stored bounds against them, and the cut's borders against the original's.
     std::unique_ptr<SurfaceDistance> to_original;
+    std::unique_ptr<SegmentDistance> original_border;
     std::vector<std::array<double, 3>> original_samples;
     if (original) {
+        progress.phase("sampling the original", 0, "samples");
         std::vector<std::array<double, 3>> p(original->positions.begin(), original->positions.end());
         to_original.reset(new SurfaceDistance(p, original->indices));
         original_samples = sample_surface(p, original->indices, settings.samples_per_level);
+        original_border.reset(new SegmentDistance(mesh_border(*original)));
     }
+    double largest_stored = 0;
     for (int level = 0; level <= max_level; ++level) {
+        VerifyLevel& lv = report.levels[level];
+        largest_stored = std::max(largest_stored, lv.stored_error);
+        progress.phase(strprintf("level %d of %d", level, max_level), original ? 2 * settings.samples_per_level : 0,
+                       "samples");
         RefinedSet refined;
         for (const ArchiveEntry& e : index.entries())
             if (e.level < level && !(e.flags & kCatpLeafFlag)) refined.refine(DiamondId{e.key});
         DecodedCut cut = checker.decode_cut(refined);
-        VerifyLevel& lv = report.levels[level];
         lv.cut_vertices = cut.positions.size();
         if (!original || cut.indices.empty()) continue;
-        DistanceStats to = measure_distances(*to_original, sample_surface(cut.positions, cut.indices, settings.samples_per_level));
+        lv.border_edges_off_original = check_borders(cut, *original_border, lv.stored_error + lv.quantization_step);
+        if (lv.border_edges_off_original)
+            checker.problem(strprintf("level %d: %zu border edges of the cut are not on the original's border (cracks "
+                                      "or missing geometry)",
+                                      level, lv.border_edges_off_original));
+        report.border_cracks += lv.border_edges_off_original;
+        DistanceStats to = measure_distances(
+            *to_original, sample_surface(cut.positions, cut.indices, settings.samples_per_level), &progress);
         lv.distance_to_original_max = to.max;
         lv.distance_to_original_rms = to.rms;
         SurfaceDistance to_level(cut.positions, cut.indices);
-        DistanceStats from = measure_distances(to_level, original_samples);
+        DistanceStats from = measure_distances(to_level, original_samples, &progress);
         lv.distance_from_original_max = from.max;
         lv.distance_from_original_rms = from.rms;
+        check_bound(lv, report, checker);
     }
     // The finest level against the precision the converter guaranteed (version-1 datasets
     // recorded none).
@@ -303,13 +414,21 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
     }
     // A random mixed cut too.
     {
+        progress.phase("a mixed cut", 0, "");
         std::mt19937_64 rng(5);
         RefinedSet refined;
         std::uniform_real_distribution<double> u(0, 1);
         for (const ArchiveEntry& e : index.entries())
             if (!(e.flags & kCatpLeafFlag) && u(rng) < 0.5) refined.refine(DiamondId{e.key});
-        checker.decode_cut(refined);
+        DecodedCut cut = checker.decode_cut(refined);
+        if (original && !cut.indices.empty()) {
+            size_t off = check_borders(cut, *original_border, largest_stored);
+            if (off)
+                checker.problem(strprintf("mixed cut: %zu border edges are not on the original's border", off));
+            report.border_cracks += off;
+        }
     }
+    report.border_checked = original != nullptr;
     return report;
 }
 

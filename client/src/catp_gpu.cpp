@@ -250,7 +250,12 @@ size_t FragmentStore::evict_to_budget() {
         lru_.erase(e.lru);
         entries_.erase(key);
         ++evicted;
-        if (on_evict_) on_evict_(key.diamond, key.slot);
+        if (on_evict_) {
+            on_evict_(key.diamond, key.slot);
+            // The callback may release other entries (the session drops a node's other slots
+            // with it), the one `it` points to among them: start again from the oldest.
+            it = lru_.begin();
+        }
     }
     return evicted;
 }

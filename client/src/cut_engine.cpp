@@ -147,7 +147,9 @@ ResidencyTable::ResidencyTable(const Hierarchy& hierarchy, double bytes_per_prim
     : hierarchy_(hierarchy),
       bytes_per_primitive_(bytes_per_primitive),
       resident_(hierarchy.size(), 0),
-      bytes_(hierarchy.size()) {}
+      bytes_(hierarchy.size()),
+      data_bounds_(hierarchy.size()),
+      failed_(hierarchy.size(), 0) {}
 
 NodeBytes ResidencyTable::bytes(uint32_t node) const {
     if (resident_[node]) return bytes_[node];
@@ -157,10 +159,11 @@ NodeBytes ResidencyTable::bytes(uint32_t node) const {
     return {estimate, estimate};
 }
 
-void ResidencyTable::set_resident(uint32_t node, NodeBytes bytes) {
+void ResidencyTable::set_resident(uint32_t node, NodeBytes bytes, const Aabb& data) {
     if (!resident_[node]) resident_count_++;
     resident_[node] = 1;
     bytes_[node] = bytes;
+    data_bounds_[node] = data;
     log_.add(node);
 }
 
@@ -168,6 +171,7 @@ void ResidencyTable::set_evicted(uint32_t node) {
     if (resident_[node]) resident_count_--;
     resident_[node] = 0;
     bytes_[node] = {};
+    data_bounds_[node] = Aabb{};
     log_.add(node);
 }
 
@@ -196,6 +200,7 @@ CutEngine::CutEngine(const Hierarchy& hierarchy, const DrawCounter& counter, Cut
     par_off_.resize(n + 1);
     ch_off_.resize(n + 1);
     box_off_.resize(n + 1);
+    box_width_.resize(n);
     error_.resize(n);
     flags_.resize(n);
     level_.resize(n);
@@ -206,8 +211,13 @@ CutEngine::CutEngine(const Hierarchy& hierarchy, const DrawCounter& counter, Cut
         ch_off_[i] = uint32_t(ch_.size());
         ch_.insert(ch_.end(), node.children.begin(), node.children.end());
         box_off_[i] = uint32_t(box_.size());
+        Aabb all;
         for (const Aabb& b : h_.has_view_boxes() ? node.view_boxes : std::vector<Aabb>{node.bounds})
-            if (!b.empty()) box_.push_back({b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]});
+            if (!b.empty()) {
+                box_.push_back({b.min[0], b.min[1], b.min[2], b.max[0], b.max[1], b.max[2]});
+                all.extend(b);
+            }
+        box_width_[i] = all.empty() ? 0.0 : std::max({all.max[0] - all.min[0], all.max[1] - all.min[1], all.max[2] - all.min[2]});
         error_[i] = node.error;
         flags_[i] = uint8_t((node.has_data ? 1 : 0) | (node.leaf ? 2 : 0));
         level_[i] = node.level;
@@ -282,6 +292,11 @@ inline double box_distance(const std::array<double, 6>& b, const std::array<doub
 
 }  // namespace
 
+double projected_error_px(double error, double distance, double k) {
+    if (!(error > 0)) return 0;
+    return error < distance ? k * std::asin(error / distance) : k * M_PI;
+}
+
 double CutEngine::proj(uint32_t n) {
     if (proj_frame_[n] == frame_number_) return proj_[n];
     proj_frame_[n] = frame_number_;
@@ -301,9 +316,29 @@ double CutEngine::proj(uint32_t n) {
             nearest_kept = distance;
         }
     }
+    double wide = box_width_[n];
+    // Where the residency knows the box of the node's decoded data, it is another lower bound of
+    // the distance to the geometry (and of what can be seen).
+    if (nearest_kept < kFar && has_data(n) && residency_)
+        if (const Aabb* data = residency_->data_bounds(n)) {
+            const std::array<double, 6> box = {data->min[0], data->min[1], data->min[2], data->max[0], data->max[1], data->max[2]};
+            const double distance = box_distance(box, view_.eye);
+            if (!box_visible(view_, box, 0)) nearest = kFar;
+            if (!(view_.frustum_margin > 0 ? box_visible(view_, box, view_.frustum_margin * distance) : box_visible(view_, box, 0)))
+                nearest_kept = kFar;
+            nearest = nearest < kFar ? std::max(nearest, distance) : kFar;
+            nearest_kept = nearest_kept < kFar ? std::max(nearest_kept, distance) : kFar;
+            wide = std::max({box[3] - box[0], box[4] - box[1], box[5] - box[2]});
+        }
+    // Up close the box says little (the eye may be inside it, far from any triangle).
+    if (has_data(n) && residency_ && nearest_kept < wide) {
+        const double triangles = residency_->data_distance(n, view_.eye);
+        if (nearest < kFar) nearest = std::max(nearest, triangles);
+        nearest_kept = std::max(nearest_kept, triangles);
+    }
     visible_[n] = nearest < kFar;
-    proj_[n] = nearest < kFar ? error_[n] * k_ / std::max(nearest, view_.near) : 0.0;
-    keep_proj_[n] = nearest_kept < kFar ? error_[n] * k_ / std::max(nearest_kept, view_.near) : 0.0;
+    proj_[n] = nearest < kFar ? projected_error_px(error_[n], nearest, k_) : 0.0;
+    keep_proj_[n] = nearest_kept < kFar ? projected_error_px(error_[n], nearest_kept, k_) : 0.0;
     return proj_[n];
 }
 
@@ -323,7 +358,7 @@ double CutEngine::projected_error(uint32_t node) const {
     double nearest = std::numeric_limits<double>::infinity();
     for (uint32_t b = box_off_[node]; b < box_off_[node + 1]; ++b)
         if (box_visible(view_, box_[b], 0)) nearest = std::min(nearest, box_distance(box_[b], view_.eye));
-    return std::isfinite(nearest) ? error_[node] * view_.k() / std::max(nearest, view_.near) : 0.0;
+    return std::isfinite(nearest) ? projected_error_px(error_[node], nearest, view_.k()) : 0.0;
 }
 
 void CutEngine::recount(uint32_t n) {
@@ -565,21 +600,30 @@ void CutEngine::refine_phase() {
         heap.pop_back();
         uint32_t n = cand.n;
         if (!is_active(n)) continue;
-        closure(n, closure_set);
-        missing.clear();
-        // The set grows while it is scanned: skipped children join it with their closures.
-        for (size_t i = 0; i < closure_set.size(); ++i)
-            for (uint32_t c : children(closure_set[i])) {
-                if (mark_[c] == stamp_ || !has_data(c) || residency_->resident(c)) continue;
-                const double e = leaf(c) ? 0.0 : proj(c);
-                if (e > tol && e <= skip_limit)
-                    add_closure(c, closure_set);
-                else
-                    missing.push_back(c);
-            }
-        // A missing child that joined the set later (a parent of a skipped node) is refined, not drawn.
-        missing.erase(std::remove_if(missing.begin(), missing.end(), [&](uint32_t c) { return mark_[c] == stamp_; }),
-                      missing.end());
+        // The nodes to refine: n and its closure, and with skipping, missing children close to
+        // the tolerance (refined at once instead of fetched) with theirs; `missing` gets the
+        // children that would be drawn without data. A failed node among them means the skip
+        // would wait forever: then n takes one level, as without skipping.
+        auto plan = [&](double limit) {
+            closure(n, closure_set);
+            missing.clear();
+            // The set grows while it is scanned: skipped children join it with their closures.
+            for (size_t i = 0; i < closure_set.size(); ++i)
+                for (uint32_t c : children(closure_set[i])) {
+                    if (mark_[c] == stamp_ || !has_data(c) || residency_->resident(c)) continue;
+                    const double e = leaf(c) ? 0.0 : proj(c);
+                    if (e > tol && e <= limit)
+                        add_closure(c, closure_set);
+                    else
+                        missing.push_back(c);
+                }
+            // A missing child that joined the set later (a parent of a skipped node) is refined, not drawn.
+            missing.erase(std::remove_if(missing.begin(), missing.end(), [&](uint32_t c) { return mark_[c] == stamp_; }),
+                          missing.end());
+        };
+        plan(skip_limit);
+        if (skip_limit > tol && std::any_of(missing.begin(), missing.end(), [&](uint32_t c) { return residency_->failed(c); }))
+            plan(tol);
         bool capped = uint64_t(frame_.stats.refinements) + closure_set.size() > budgets_.max_refinements;
         Totals before = totals_;
         log.clear();
@@ -587,12 +631,19 @@ void CutEngine::refine_phase() {
         bool ok = fits(before);
         if (!ok) ok = make_room(cand.e * view_.hysteresis, log, before);
         if (!ok || !missing.empty() || capped) {
+            if (!ok) {  // which budgets the refinement would have passed
+                frame_.stats.budgets_binding |= uint8_t((totals_.primitives > budgets_.max_primitives ? kPrimitiveBudget : 0) |
+                                                        (totals_.gpu > budgets_.max_gpu_bytes ? kGpuBudget : 0) |
+                                                        (totals_.cpu > budgets_.max_cpu_bytes ? kCpuBudget : 0));
+            }
             revert(log, 0);
             if (!ok) {
                 frame_.stats.budget_blocked++;
             } else if (!missing.empty()) {
                 frame_.stats.waiting++;
                 for (uint32_t c : missing) want(c, RequestReason::Refine, cand.e);
+            } else {
+                frame_.stats.capped++;
             }
             continue;
         }
@@ -702,8 +753,12 @@ const CutFrame& CutEngine::update(const ViewParams& view, const Residency& resid
     st.frontier_nodes = frontier_.items.size();
     st.refined_nodes = refined_count_;
     double certified = 0;
-    for (uint32_t n : active_.items)
-        if (has_data(n)) certified = std::max(certified, proj(n));
+    for (uint32_t n : active_.items) {
+        if (!has_data(n)) continue;
+        double e = proj(n);
+        certified = std::max(certified, e);
+        st.leaves_over_tolerance += leaf(n) && e > view_.tolerance_px;
+    }
     st.certified_error_px = certified;
     st.over_budget = exceeds();
     frame_.drawn = active_.items;

@@ -156,6 +156,10 @@ std::vector<uint8_t> fetch_prefix(NodeSource& source, int attempts) {
             if (!problem.empty()) fail("%s", problem.c_str());
             uint64_t prefix = header.index_offset + header.index_size;
             if (prefix > header.file_size) fail("the index lies past the end of the file");
+            // A local file's size is known: a truncated dataset is refused here, not node by node.
+            if (auto* local = dynamic_cast<LocalFileSource*>(&source); local && local->file_size() != header.file_size)
+                fail("the file is %llu bytes but its header says %llu (truncated or appended to)",
+                     (unsigned long long)local->file_size(), (unsigned long long)header.file_size);
             if (bytes.size() < prefix) {
                 std::vector<uint8_t> rest = source.fetch_range(bytes.size(), prefix - bytes.size());
                 bytes.insert(bytes.end(), rest.begin(), rest.end());

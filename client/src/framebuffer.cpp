@@ -80,6 +80,13 @@ void Framebuffer::bind() {
     glViewport(0, 0, width_, height_);
 }
 
+void Framebuffer::blit_to_window() {
+    glBindFramebuffer(GL_READ_FRAMEBUFFER, fbo_);
+    glBindFramebuffer(GL_DRAW_FRAMEBUFFER, 0);
+    glBlitFramebuffer(0, 0, width_, height_, 0, 0, width_, height_, GL_COLOR_BUFFER_BIT, GL_NEAREST);
+    glBindFramebuffer(GL_FRAMEBUFFER, 0);
+}
+
 std::vector<uint8_t> Framebuffer::read_pixels() {
     GLuint source = fbo_;
     if (samples_ > 0) {

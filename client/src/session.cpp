@@ -1,9 +1,13 @@
 #include "client/session.h"
 
 #include <algorithm>
+#include <cmath>
 
 #include "base/error.h"
 #include "base/sysinfo.h"
+#include "catp/dataset.h"
+#include "catp/distance.h"
+#include "common_codec/barycentric.h"
 
 namespace catpaq {
 
@@ -16,6 +20,7 @@ StreamingSession::StreamingSession(const std::string& location, const SessionSet
     hierarchy_ = build_catp_hierarchy(*index_);
     counter_ = std::make_unique<PartDrawCounter>(hierarchy_);
     residency_ = std::make_unique<ResidencyTable>(hierarchy_);
+    residency_->set_distance_function([this](uint32_t node, const std::array<double, 3>& eye) { return data_distance(node, eye); });
     engine_ = std::make_unique<CutEngine>(hierarchy_, *counter_, settings.budgets);
     FetcherSettings fetcher_settings = settings.fetcher;
     fetcher_settings.layout = index_->meta().layout;
@@ -37,15 +42,100 @@ void StreamingSession::evict(uint32_t node) {
     if (!residency_->resident(node)) return;
     residency_->set_evicted(node);
     decoded_.erase(node);
+    distances_.erase(node);
     const HierarchyNode& n = hierarchy_.node(node);
     for (const HierarchyPart& part : n.parts)
         if (store_.resident(n.key, part.id)) store_.release(n.key, part.id);
 }
 
+std::vector<const char*> session_limit_names(uint8_t limits) {
+    std::vector<const char*> out;
+    const std::pair<SessionLimit, const char*> names[] = {
+        {kLimitFinestLevel, "finest_level"}, {kLimitTriangles, "triangle_budget"}, {kLimitGpuBytes, "gpu_budget"},
+        {kLimitCpuBytes, "cpu_budget"},      {kLimitFailedNode, "failed_node"},    {kLimitPending, "pending"}};
+    for (auto [bit, name] : names)
+        if (limits & bit) out.push_back(name);
+    return out;
+}
+
+// The box of a node's decoded vertices (world): where its geometry really is, for the cut
+// engine's projected errors (the hierarchy's box also covers the descendants).
+Aabb StreamingSession::data_bounds(const HierarchyNode& node, const DiamondFragments& fragments) const {
+    const CatpMeta& meta = index_->meta();
+    Aabb box;
+    std::vector<std::array<int64_t, 3>> exact;
+    DiamondInfo info = diamond_info(DiamondId{node.key});
+    for (const HierarchyPart& part : node.parts) {
+        const FragmentMesh& fragment = fragments.slots[part.id];
+        if (fragment.indices.empty() || !decode_fragment_integer_positions(fragment, info, int(part.id), exact)) continue;
+        for (const auto& p : exact) {
+            std::array<double, 3> world;
+            for (int k = 0; k < 3; ++k) world[k] = meta.origin[k] + double(p[k]) / meta.layout.grid * meta.cell;
+            box.extend(world);
+        }
+    }
+    if (box.empty()) return box;
+    // Rounding: a hair larger, never smaller, than the decoded positions.
+    double slack = meta.cell * 1e-6;
+    for (int k = 0; k < 3; ++k) {
+        box.min[k] -= slack + std::abs(box.min[k]) * 1e-12;
+        box.max[k] += slack + std::abs(box.max[k]) * 1e-12;
+    }
+    return box;
+}
+
+// The distance from the eye to the triangles of a resident node (all its parts: a superset of
+// what it draws), measured on the CPU from the decoded vertices. Distances are 1-Lipschitz in
+// the eye, so an earlier measure minus how far the eye moved since is still a lower bound; the
+// triangles are measured again only when the eye moved more than a tenth of that distance.
+double StreamingSession::data_distance(uint32_t node, const std::array<double, 3>& eye) {
+    auto moved = [&](const std::array<double, 3>& from) {
+        return std::sqrt((eye[0] - from[0]) * (eye[0] - from[0]) + (eye[1] - from[1]) * (eye[1] - from[1]) +
+                         (eye[2] - from[2]) * (eye[2] - from[2]));
+    };
+    auto cached = distances_.find(node);
+    if (cached != distances_.end() && moved(cached->second.eye) <= 0.1 * cached->second.distance)
+        return cached->second.distance - moved(cached->second.eye);
+    auto it = decoded_.find(node);
+    if (it == decoded_.end()) return 0;
+    const HierarchyNode& n = hierarchy_.node(node);
+    const CatpMeta& meta = index_->meta();
+    DiamondInfo info = diamond_info(DiamondId{n.key});
+    std::vector<std::array<int64_t, 3>> exact;
+    std::vector<std::array<double, 3>> world;
+    double best2 = INFINITY;
+    for (const HierarchyPart& part : n.parts) {
+        const FragmentMesh& fragment = it->second->slots[part.id];
+        if (fragment.indices.empty() || !decode_fragment_integer_positions(fragment, info, int(part.id), exact)) continue;
+        world.resize(exact.size());
+        for (size_t v = 0; v < exact.size(); ++v)
+            for (int k = 0; k < 3; ++k) world[v][k] = meta.origin[k] + double(exact[v][k]) / meta.layout.grid * meta.cell;
+        for (size_t t = 0; t + 2 < fragment.indices.size(); t += 3)
+            best2 = std::min(best2, point_triangle_distance2(eye, world[fragment.indices[t]], world[fragment.indices[t + 1]],
+                                                             world[fragment.indices[t + 2]]));
+    }
+    if (!std::isfinite(best2)) return 0;
+    // Decoding rounds: a hair less than measured, never more.
+    double distance = std::max(0.0, std::sqrt(best2) * (1 - 1e-9) - meta.cell * 1e-6);
+    distances_[node] = {eye, distance};
+    return distance;
+}
+
 void StreamingSession::integrate(std::vector<FetchedNode>& arrived) {
     for (FetchedNode& f : arrived) {
         supplied_.erase(f.key);
-        if (!f.ok || !f.fragments || f.node == kNoNode) continue;  // failed: retried if still wanted
+        if (!f.ok || !f.fragments || f.node == kNoNode) {
+            // Failed every attempt: recorded once (the fetcher retries it later if still wanted).
+            if (!f.ok && f.node != kNoNode) residency_->set_failed(f.node, true);
+            if (!f.ok && f.node != kNoNode && failed_keys_.insert(f.key).second) {
+                std::string error = f.error, prefix = "node " + std::to_string(f.key) + ": ";
+                if (error.rfind(prefix, 0) == 0) error.erase(0, prefix.size());  // the key is said once
+                failures_.push_back({f.key, hierarchy_.node(f.node).level, error});
+            }
+            continue;
+        }
+        failed_keys_.erase(f.key);
+        residency_->set_failed(f.node, false);
         const HierarchyNode& n = hierarchy_.node(f.node);
         if (f.compressed) compressed_->insert(n.key, f.compressed, f.compressed->size());
         NodeBytes bytes;
@@ -60,7 +150,7 @@ void StreamingSession::integrate(std::vector<FetchedNode>& arrived) {
                          fragment.indices.size() * (fragment.vertices.size() < 65536 ? 2 : 4);
         }
         counter_->set_counts(f.node, counts.data(), counts.size());
-        residency_->set_resident(f.node, bytes);
+        residency_->set_resident(f.node, bytes, data_bounds(n, *f.fragments));
         decoded_[f.node] = f.fragments;
     }
 }
@@ -134,9 +224,31 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
     s.cut_ms = frame.stats.seconds * 1000.0;
     s.certified_error_px = frame.stats.certified_error_px;
     s.holes = frame.stats.holes;
-    converged_ = frame.requests.empty() && frame.stats.holes == 0 && frame.stats.refinements == 0 &&
-                 frame.stats.coarsenings == 0 && fetcher_->idle() && arrived.empty();
+    s.arrived = arrived.size();
+    s.cut_changes = frame.stats.refinements + frame.stats.coarsenings;
+    s.failed_nodes = failures_.size();
+    settled_ = frame.requests.empty() && frame.stats.holes == 0 && frame.stats.refinements == 0 &&
+               frame.stats.coarsenings == 0 && fetcher_->idle() && arrived.empty();
+    s.settled = settled_;
+    s.tolerance_met = s.holes == 0 && s.certified_error_px <= settings_.tolerance_px;
+    if (!s.tolerance_met) s.limits = limits(frame, s);
     return s;
+}
+
+// What keeps the error above the tolerance: the finest level, budgets, failed nodes, or data
+// still on its way (any mix; see SessionLimit).
+uint8_t StreamingSession::limits(const CutFrame& frame, const SessionFrameStats& s) const {
+    uint8_t out = 0;
+    const CutFrameStats& c = frame.stats;
+    if (c.leaves_over_tolerance) out |= kLimitFinestLevel;
+    if (c.budgets_binding & kPrimitiveBudget) out |= kLimitTriangles;
+    if (c.budgets_binding & kGpuBudget) out |= kLimitGpuBytes;
+    if (c.budgets_binding & kCpuBudget) out |= kLimitCpuBytes;
+    bool failed = false, waiting = false;
+    for (const CutRequest& r : frame.requests) (failed_keys_.count(r.key) ? failed : waiting) = true;
+    if (failed) out |= kLimitFailedNode;
+    if (waiting || c.capped || (!s.settled && !failed)) out |= kLimitPending;
+    return out;
 }
 
 RenderStats StreamingSession::draw(const Camera& camera, const RenderSettings& render) {

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstdio>
 #include <limits>
+#include <unistd.h>
 
 #include <epoxy/gl.h>
 // epoxy first: GLFW must not include the system GL header.
@@ -15,6 +16,7 @@
 
 #include "base/error.h"
 #include "catp/lattice.h"
+#include "client/gl_context.h"
 #include "client/image.h"
 #include "common_codec/packed_vertex.h"
 
@@ -219,6 +221,7 @@ struct DesktopViewer::Impl {
     GLFWwindow* window = nullptr;
     bool imgui_glfw = false, imgui_gl = false;
     std::unique_ptr<StreamingSession> session;
+    std::unique_ptr<Framebuffer> framebuffer;  // the scene, multisampled with --msaa
     OrbitController controller;
     RenderSettings render;
     float tolerance = 1.5f;
@@ -233,9 +236,15 @@ struct DesktopViewer::Impl {
     bool pick_pending = false;
     double pick_x = 0, pick_y = 0;  // window coordinates
     bool screenshot_requested = false;
-    int screenshot_counter = 0;
     std::string message;  // last status line (screenshot saved, nothing picked, ...)
     double message_time = -1;
+    // Drawing on demand: events seen by the callbacks, frames still to draw after the last
+    // change (Dear ImGui settles hover states over a few frames), when anything last changed.
+    uint64_t events = 0, events_drawn = 0;
+    int frames_owed = 2;
+    double last_change = 0;
+    bool message_shown = false;
+    size_t failures_reported = 0;
 
     Camera last_camera;
     SessionFrameStats stats;
@@ -246,7 +255,11 @@ struct DesktopViewer::Impl {
     ~Impl();
 
     void open();
-    void loop_frame(bool last);
+    // One iteration: events, the session's step, and a frame drawn if anything changed (or
+    // `force`). Returns whether it drew.
+    bool loop_frame(bool last, bool force);
+    // Seconds to sleep in the event queue before the next iteration when nothing changed.
+    double idle_wait() const;
     void overlay();
     void save_screenshot(const std::string& path, int width, int height);
     void set_message(const std::string& m) {
@@ -259,11 +272,17 @@ struct DesktopViewer::Impl {
     static void on_mouse_button(GLFWwindow* w, int button, int action, int mods);
     static void on_scroll(GLFWwindow* w, double dx, double dy);
     static void on_key(GLFWwindow* w, int key, int scancode, int action, int mods);
+    // Events that change nothing of ours but need a frame (hovering the overlay, a resize).
+    static void on_cursor(GLFWwindow* w, double, double) { of(w).events++; }
+    static void on_char(GLFWwindow* w, unsigned) { of(w).events++; }
+    static void on_refresh(GLFWwindow* w) { of(w).events++; }
+    static void on_size(GLFWwindow* w, int, int) { of(w).events++; }
 };
 
 DesktopViewer::Impl::~Impl() {
     if (window) glfwMakeContextCurrent(window);
-    session.reset();  // GL objects go while the context is current
+    framebuffer.reset();  // GL objects go while the context is current
+    session.reset();
     if (imgui_gl) ImGui_ImplOpenGL3_Shutdown();
     if (imgui_glfw) ImGui_ImplGlfw_Shutdown();
     if (ImGui::GetCurrentContext()) ImGui::DestroyContext();
@@ -273,6 +292,7 @@ DesktopViewer::Impl::~Impl() {
 
 void DesktopViewer::Impl::on_mouse_button(GLFWwindow* w, int button, int action, int mods) {
     Impl& v = of(w);
+    v.events++;
     double x, y;
     glfwGetCursorPos(w, &x, &y);
     if (action == GLFW_RELEASE) {
@@ -303,11 +323,13 @@ void DesktopViewer::Impl::on_mouse_button(GLFWwindow* w, int button, int action,
 }
 
 void DesktopViewer::Impl::on_scroll(GLFWwindow* w, double, double dy) {
+    of(w).events++;
     if (ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureMouse) return;
     of(w).controller.dolly(dy);
 }
 
 void DesktopViewer::Impl::on_key(GLFWwindow* w, int key, int, int action, int) {
+    of(w).events++;
     if (action != GLFW_PRESS) return;
     Impl& v = of(w);
     if (key == GLFW_KEY_ESCAPE) {
@@ -329,6 +351,7 @@ void DesktopViewer::Impl::open() {
     glfwWindowHint(GLFW_OPENGL_PROFILE, GLFW_OPENGL_CORE_PROFILE);
     glfwWindowHint(GLFW_OPENGL_FORWARD_COMPAT, GLFW_TRUE);
     glfwWindowHint(GLFW_DEPTH_BITS, 24);
+    glfwWindowHint(GLFW_SAMPLES, 0);  // the scene is drawn offscreen (multisampled with --msaa)
     std::string title = "catpaq view - " + settings.location;
     window = glfwCreateWindow(settings.width, settings.height, title.c_str(), nullptr, nullptr);
     if (!window)
@@ -341,6 +364,10 @@ void DesktopViewer::Impl::open() {
     glfwSetMouseButtonCallback(window, on_mouse_button);
     glfwSetScrollCallback(window, on_scroll);
     glfwSetKeyCallback(window, on_key);
+    glfwSetCursorPosCallback(window, on_cursor);
+    glfwSetCharCallback(window, on_char);
+    glfwSetWindowRefreshCallback(window, on_refresh);
+    glfwSetFramebufferSizeCallback(window, on_size);
 
     session = std::make_unique<StreamingSession>(settings.location, settings.session);
     tolerance = float(settings.session.tolerance_px);
@@ -361,20 +388,25 @@ void DesktopViewer::Impl::open() {
     if (!imgui_glfw || !imgui_gl) fail("cannot initialise the Dear ImGui backends");
 }
 
+// The scene as drawn (resolved, without the overlay).
 void DesktopViewer::Impl::save_screenshot(const std::string& path, int width, int height) {
-    std::vector<uint8_t> pixels(size_t(width) * size_t(height) * 4);
-    glBindFramebuffer(GL_READ_FRAMEBUFFER, 0);
-    glReadBuffer(GL_BACK);
-    glPixelStorei(GL_PACK_ALIGNMENT, 1);
-    glReadPixels(0, 0, width, height, GL_RGBA, GL_UNSIGNED_BYTE, pixels.data());
-    // GL rows are bottom-up; PNG rows top-down. The window may have no alpha channel.
-    std::vector<uint8_t> flipped(pixels.size());
-    size_t row = size_t(width) * 4;
-    for (int y = 0; y < height; ++y)
-        std::copy_n(pixels.data() + size_t(height - 1 - y) * row, row, flipped.data() + size_t(y) * row);
-    for (size_t i = 3; i < flipped.size(); i += 4) flipped[i] = 255;
-    write_png(path, width, height, flipped);
-    set_message("saved " + path);
+    std::vector<uint8_t> pixels = framebuffer->read_pixels();
+    for (size_t i = 3; i < pixels.size(); i += 4) pixels[i] = 255;
+    try {
+        write_png(path, width, height, pixels);
+        set_message("saved " + path);
+    } catch (const Error& e) {
+        set_message(std::string("screenshot not saved: ") + e.what());
+    }
+}
+
+std::string next_screenshot_path(const std::string& directory) {
+    for (int n = 0;; ++n) {
+        char name[64];
+        std::snprintf(name, sizeof name, "catpaq_view_%04d.png", n);
+        std::string path = directory == "." ? name : directory + "/" + name;
+        if (access(path.c_str(), F_OK) != 0) return path;
+    }
 }
 
 void DesktopViewer::Impl::overlay() {
@@ -387,11 +419,27 @@ void DesktopViewer::Impl::overlay() {
         ImGui::Text("nodes          %zu drawn, %zu refined", s.drawn_nodes, s.refined_nodes);
         ImGui::Text("fetched        %s in %llu requests", human_bytes(s.bytes_fetched).c_str(),
                     (unsigned long long)s.requests);
-        ImGui::Text("pending        %zu%s", s.pending, session->converged() ? " (converged)" : "");
+        ImGui::Text("pending        %zu%s", s.pending, s.settled ? " (settled)" : "");
         ImGui::Text("GPU / CPU      %s / %s", human_bytes(s.gpu_bytes).c_str(), human_bytes(s.cpu_bytes).c_str());
         ImGui::Text("cut            %.2f ms", s.cut_ms);
         ImGui::Text("frame          %.1f ms", frame_ms);
-        ImGui::Text("certified err  %.3f px", s.certified_error_px);
+        if (s.holes) ImGui::Text("certified err  not bounded yet (%zu nodes loading)", s.holes);
+        else ImGui::Text("certified err  %.3f px (%s)", s.certified_error_px, s.tolerance_met ? "within tolerance" : "over");
+        if (!s.tolerance_met && s.limits) {
+            std::string why;
+            for (const char* name : session_limit_names(s.limits)) why += (why.empty() ? "" : ", ") + std::string(name);
+            ImGui::Text("limited by     %s", why.c_str());
+        }
+        for (const NodeFailure& f : session->failures()) {
+            ImGui::TextColored(ImVec4(1.0f, 0.35f, 0.3f, 1.0f), "node %llu (level %u) failed: %s",
+                               (unsigned long long)f.key, unsigned(f.level), f.error.c_str());
+            if (&f - session->failures().data() >= 4) {
+                ImGui::TextColored(ImVec4(1.0f, 0.35f, 0.3f, 1.0f), "... %zu failed nodes in all",
+                                   session->failures().size());
+                break;
+            }
+        }
+        if (!session->failures().empty()) ImGui::TextDisabled("showing the coarser data; retried every few seconds");
         ImGui::Separator();
         if (ImGui::SliderFloat("tolerance px", &tolerance, 0.25f, 16.0f, "%.2f", ImGuiSliderFlags_Logarithmic))
             session->set_tolerance(double(tolerance));
@@ -410,19 +458,16 @@ void DesktopViewer::Impl::overlay() {
     ImGui::End();
 }
 
-void DesktopViewer::Impl::loop_frame(bool last) {
+bool DesktopViewer::Impl::loop_frame(bool last, bool force) {
     double frame_start = glfwGetTime();
-    glfwPollEvents();
     double x, y;
     glfwGetCursorPos(window, &x, &y);
     int win_w, win_h, fbw, fbh;
     glfwGetWindowSize(window, &win_w, &win_h);
     glfwGetFramebufferSize(window, &fbw, &fbh);
-    if (fbw <= 0 || fbh <= 0) {  // minimised
-        glfwWaitEventsTimeout(0.1);
-        return;
-    }
+    if (fbw <= 0 || fbh <= 0) return false;  // minimised
     double sx = win_w > 0 ? double(fbw) / win_w : 1.0, sy = win_h > 0 ? double(fbh) / win_h : 1.0;
+    bool changed = events != events_drawn || controller.flying() || drag != Drag::None || screenshot_requested;
     if (drag != Drag::None) {
         double dx = (x - last_x) * sx, dy = (y - last_y) * sy;
         if (drag == Drag::Orbit) controller.orbit(dx, dy);
@@ -447,24 +492,42 @@ void DesktopViewer::Impl::loop_frame(bool last) {
     Camera camera = controller.camera(fbw, fbh);
     stats = session->step(camera);
     last_camera = camera;
+    changed |= stats.arrived > 0 || stats.cut_changes > 0;
+    for (; failures_reported < session->failures().size(); ++failures_reported) {
+        const NodeFailure& f = session->failures()[failures_reported];
+        std::fprintf(stderr, "view: node %llu (level %u) cannot be loaded: %s (showing the coarser data)\n",
+                     (unsigned long long)f.key, unsigned(f.level), f.error.c_str());
+        changed = true;
+    }
+    bool message_visible = message.size() && glfwGetTime() - message_time < 4;
+    changed |= message_visible != message_shown;
+    if (changed) {
+        frames_owed = 3;
+        last_change = frame_start;
+    }
+    if (!force && frames_owed == 0) return false;
+    frames_owed = std::max(0, frames_owed - 1);
+    events_drawn = events;
+    message_shown = message_visible;
+
     if (headlight) {
         render.light_direction = {0, 0, 0};
     } else {
         glm::dvec3 d = controller.direction(double(light_azimuth) * kPi / 180.0, double(light_elevation) * kPi / 180.0);
         render.light_direction = {float(d.x), float(d.y), float(d.z)};
     }
-    glBindFramebuffer(GL_FRAMEBUFFER, 0);
-    glViewport(0, 0, fbw, fbh);
+    if (!framebuffer || framebuffer->width() != fbw || framebuffer->height() != fbh)
+        framebuffer = std::make_unique<Framebuffer>(fbw, fbh, settings.msaa);
+    framebuffer->bind();
     render_stats = session->draw(camera, render);
     glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
-
     if (screenshot_requested) {
         screenshot_requested = false;
-        char name[64];
-        std::snprintf(name, sizeof name, "catpaq_view_%04d.png", screenshot_counter++);
-        save_screenshot(name, fbw, fbh);
+        save_screenshot(next_screenshot_path(), fbw, fbh);
     }
     if (last && settings.screenshot.size()) save_screenshot(settings.screenshot, fbw, fbh);
+    framebuffer->blit_to_window();
+    glViewport(0, 0, fbw, fbh);
 
     ImGui_ImplOpenGL3_NewFrame();
     ImGui_ImplGlfw_NewFrame();
@@ -474,6 +537,15 @@ void DesktopViewer::Impl::loop_frame(bool last) {
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
     glfwSwapBuffers(window);
     frame_ms = (glfwGetTime() - frame_start) * 1000.0;
+    return true;
+}
+
+double DesktopViewer::Impl::idle_wait() const {
+    // Settled: nothing will change until an event (or a status message expires).
+    if (session->settled()) return 0.5;
+    // Streaming: look again soon; when nothing has arrived for a while (a failed node waiting
+    // for its retry), less often.
+    return glfwGetTime() - last_change > 0.25 ? 0.1 : 0.004;
 }
 
 DesktopViewer::DesktopViewer(const ViewerSettings& settings) : impl_(std::make_unique<Impl>(settings)) {
@@ -484,11 +556,29 @@ DesktopViewer::~DesktopViewer() = default;
 
 int DesktopViewer::run() {
     Impl& v = *impl_;
-    int limit = v.settings.frames;
-    for (int frame = 0; !glfwWindowShouldClose(v.window); ++frame) {
-        bool last = limit > 0 && frame + 1 >= limit;
-        v.loop_frame(last);
-        if (last) break;
+    const int limit = v.settings.frames;
+    const double deadline = v.settings.exit_after > 0 ? glfwGetTime() + v.settings.exit_after : 0;
+    for (int frame = 0; !glfwWindowShouldClose(v.window);) {
+        if (limit > 0) {
+            // Scripted (--frames): every iteration draws, as fast as it can.
+            glfwPollEvents();
+            bool last = frame + 1 >= limit;
+            frame += v.loop_frame(last, true);
+            if (last) break;
+            continue;
+        }
+        if (deadline > 0 && glfwGetTime() >= deadline) {
+            if (v.settings.screenshot.size() && v.framebuffer)
+                v.save_screenshot(v.settings.screenshot, v.framebuffer->width(), v.framebuffer->height());
+            break;
+        }
+        if (!v.loop_frame(false, false)) {
+            double wait = v.idle_wait();
+            if (deadline > 0) wait = std::max(0.0, std::min(wait, deadline - glfwGetTime()));
+            glfwWaitEventsTimeout(wait);
+        } else {
+            glfwPollEvents();
+        }
     }
     return 0;
 }

@@ -70,13 +70,14 @@ Format sniff(const std::string& path) {
 
 }  // namespace
 
-Mesh read_mesh(const std::string& path) {
+Mesh read_mesh(const std::string& path, std::vector<std::string>* dropped) {
     Format format = format_from_extension(path);
     if (format == Format::Unknown) format = sniff(path);
     Mesh mesh;
+    std::vector<std::string> ignored;
     switch (format) {
-        case Format::Ply: mesh = mesh_io::read_ply(path); break;
-        case Format::Obj: mesh = mesh_io::read_obj(path); break;
+        case Format::Ply: mesh = mesh_io::read_ply(path, dropped ? *dropped : ignored); break;
+        case Format::Obj: mesh = mesh_io::read_obj(path, dropped ? *dropped : ignored); break;
         case Format::Off: mesh = mesh_io::read_off(path); break;
         case Format::Stl: mesh = mesh_io::read_stl(path); break;
         case Format::Unknown: fail("'%s': unknown mesh format (expected PLY, OBJ, OFF or STL)", path.c_str());

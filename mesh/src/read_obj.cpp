@@ -1,5 +1,7 @@
-// Wavefront OBJ: geometry ("v", "f") plus MeshLab-style vertex colours ("v x y z r g b");
-// every other statement (vt, g, o, s, usemtl, mtllib, l, p, ...) is ignored.
+// Wavefront OBJ: geometry ("v", "f"), MeshLab-style vertex colours ("v x y z r g b") and normals
+// ("vn"), per vertex or per face corner (averaged per vertex). Texture coordinates ("vt"),
+// materials ("mtllib", "usemtl"), lines and points ("l", "p") and free-form geometry are left
+// out and reported as dropped; groupings ("g", "o", "s") carry nothing a mesh holds.
 #include <algorithm>
 #include <string>
 #include <string_view>
@@ -16,7 +18,7 @@ namespace {
 class ObjReader {
 public:
     explicit ObjReader(const std::string& path) : file_(path) {}
-    Mesh read();
+    Mesh read(std::vector<std::string>& dropped);
 
 private:
     bool next_statement(std::string_view& line);
@@ -26,7 +28,8 @@ private:
     uint32_t resolve(int64_t index, size_t count, const char* what);
     void parse_corner(std::string_view corner, uint32_t& vertex, bool& has_normal, uint32_t& normal);
     void finish_colors(Mesh& mesh) const;
-    void finish_normals(Mesh& mesh) const;
+    void finish_normals(Mesh& mesh);
+    void report_dropped(std::vector<std::string>& dropped) const;
 
     InputFile file_;
     std::string joined_;  // a statement continued over several lines with '\'
@@ -36,6 +39,17 @@ private:
     std::vector<uint32_t> indices_;
     bool normals_follow_vertices_ = true;  // every corner so far had vn index == v index
     float max_color_ = 0.0f;
+    // Per-corner normals gathered per vertex: the sum of their unit vectors, how many corners
+    // gave one, and the first vn index (to count vertices whose corners disagree).
+    std::vector<Vec3d> normal_sums_;
+    std::vector<uint32_t> normal_corners_, first_normal_;
+    static constexpr uint32_t kCornersDisagree = UINT32_MAX - 1;  // in first_normal_
+    size_t corners_with_normal_ = 0, corners_without_normal_ = 0;
+    // Statements left out: texture coordinates, material statements, lines/points, other.
+    size_t texcoords_ = 0, materials_ = 0, polylines_ = 0, freeform_ = 0;
+    size_t texcoord_corners_ = 0;
+    std::string material_library_;
+    std::vector<std::string> notes_;  // what finish_normals did that the user should know
 };
 
 // The next line with continuations ('\' at the end) joined and the comment removed.
@@ -119,8 +133,11 @@ void ObjReader::parse_corner(std::string_view corner, uint32_t& vertex, bool& ha
     int64_t index;
     if (!parse_int(parts[0], index)) file_.fail_line("malformed face corner %s", quoted(corner).c_str());
     vertex = resolve(index, positions_.size(), "vertex");
-    if (n > 1 && !parts[1].empty() && !parse_int(parts[1], index))
-        file_.fail_line("malformed texture index in face corner %s", quoted(corner).c_str());
+    if (n > 1 && !parts[1].empty()) {
+        if (!parse_int(parts[1], index))
+            file_.fail_line("malformed texture index in face corner %s", quoted(corner).c_str());
+        texcoord_corners_++;
+    }
     has_normal = n == 3 && !parts[2].empty();
     if (has_normal) {
         if (!parse_int(parts[2], index))
@@ -138,6 +155,25 @@ void ObjReader::face(Tokens& tokens) {
         bool has_normal;
         parse_corner(token, vertex, has_normal, normal);
         if (!has_normal || normal != vertex) normals_follow_vertices_ = false;
+        if (has_normal) {
+            if (normal_sums_.size() <= vertex) {
+                normal_sums_.resize(positions_.size(), Vec3d{0, 0, 0});
+                normal_corners_.resize(positions_.size(), 0);
+                first_normal_.resize(positions_.size(), UINT32_MAX);
+            }
+            const Vec3d& vn = normals_[normal];
+            if (finite3(vn[0], vn[1], vn[2])) {
+                Vec3f u = unit_normal(vn[0], vn[1], vn[2]);
+                for (int k = 0; k < 3; ++k) normal_sums_[vertex][k] += u[k];
+            }
+            normal_corners_[vertex]++;
+            uint32_t& first = first_normal_[vertex];
+            if (first == UINT32_MAX) first = normal;
+            else if (first != kCornersDisagree && first != normal && normals_[first] != vn) first = kCornersDisagree;
+            corners_with_normal_++;
+        } else {
+            corners_without_normal_++;
+        }
         if (corners == 0) first = vertex;
         else if (corners >= 2) push_triangle(indices_, first, previous, vertex);
         previous = vertex;
@@ -156,18 +192,74 @@ void ObjReader::finish_colors(Mesh& mesh) const {
         mesh.colors.push_back({unit_to_byte(c[0] * scale), unit_to_byte(c[1] * scale), unit_to_byte(c[2] * scale)});
 }
 
-// "vn" entries become per-vertex normals only when they are unambiguous: one per vertex, and
-// every face corner names normal i for vertex i. Otherwise they are per-corner data a vertex
-// mesh cannot hold, and are dropped.
-void ObjReader::finish_normals(Mesh& mesh) const {
-    if (!normals_follow_vertices_ || indices_.empty() || normals_.size() != positions_.size()) return;
-    for (const Vec3d& n : normals_)
-        if (!finite3(n[0], n[1], n[2])) return;
-    mesh.normals.reserve(normals_.size());
-    for (const Vec3d& n : normals_) mesh.normals.push_back(unit_normal(n[0], n[1], n[2]));
+// "vn" entries used as they are when they are per vertex (one per vertex, and every face corner
+// names normal i for vertex i). Per face corner (most exporters: "f v/vt/vn" with normals of
+// their own numbering), each vertex gets the average of its corners' normals (a mesh holds one
+// normal per vertex: where corners disagree, at hard edges, they are averaged); vertices no
+// corner gives a normal get area-weighted ones. Both are reported.
+void ObjReader::finish_normals(Mesh& mesh) {
+    if (indices_.empty() || normals_.empty() || corners_with_normal_ == 0) return;
+    if (normals_follow_vertices_ && normals_.size() == positions_.size()) {
+        bool finite = true;
+        for (const Vec3d& n : normals_) finite &= finite3(n[0], n[1], n[2]);
+        if (finite) {
+            mesh.normals.reserve(normals_.size());
+            for (const Vec3d& n : normals_) mesh.normals.push_back(unit_normal(n[0], n[1], n[2]));
+            return;
+        }
+    }
+    normal_sums_.resize(positions_.size(), Vec3d{0, 0, 0});
+    normal_corners_.resize(positions_.size(), 0);
+    first_normal_.resize(positions_.size(), UINT32_MAX);
+    size_t missing = 0, disagree = 0;
+    std::vector<bool> used(positions_.size(), false);
+    for (uint32_t i : indices_) used[i] = true;
+    for (size_t v = 0; v < positions_.size(); ++v) {
+        if (!used[v]) continue;
+        missing += normal_corners_[v] == 0;
+        disagree += first_normal_[v] == kCornersDisagree;
+    }
+    std::vector<Vec3f> computed;
+    if (missing) {
+        Mesh geometry;
+        geometry.positions = positions_;
+        geometry.indices = indices_;
+        computed = compute_vertex_normals(geometry);
+    }
+    mesh.normals.resize(positions_.size());
+    for (size_t v = 0; v < positions_.size(); ++v) {
+        const Vec3d& sum = normal_sums_[v];
+        mesh.normals[v] = normal_corners_[v] ? unit_normal(sum[0], sum[1], sum[2])
+                          : computed.empty() ? Vec3f{0.0f, 0.0f, 1.0f}
+                                             : computed[v];
+    }
+    if (disagree)
+        notes_.push_back(strprintf("per-corner normals of %zu vertices that differ between faces (hard edges): "
+                                   "averaged, one normal per vertex",
+                                   disagree));
+    if (missing)
+        notes_.push_back(strprintf("normals for %zu vertices that no face corner gives one: computed from the faces",
+                                   missing));
 }
 
-Mesh ObjReader::read() {
+void ObjReader::report_dropped(std::vector<std::string>& dropped) const {
+    if (texcoords_ || texcoord_corners_)
+        dropped.push_back(strprintf("texture coordinates (%zu 'vt' statements, used by %zu face corners): not kept",
+                                    texcoords_, texcoord_corners_));
+    if (materials_)
+        dropped.push_back(strprintf("materials (%zu 'mtllib'/'usemtl' statements%s): not kept; colours come from "
+                                    "vertex colours only",
+                                    materials_, material_library_.empty() ? "" : (", library " + material_library_).c_str()));
+    if (polylines_) dropped.push_back(strprintf("%zu lines and points ('l', 'p'): not surface, not kept", polylines_));
+    if (freeform_)
+        dropped.push_back(strprintf("%zu free-form geometry statements (curves, surfaces): not kept", freeform_));
+    if (!normals_.empty() && corners_with_normal_ == 0)
+        dropped.push_back(strprintf("%zu 'vn' normals that no face uses: normals computed from the faces",
+                                    normals_.size()));
+    dropped.insert(dropped.end(), notes_.begin(), notes_.end());
+}
+
+Mesh ObjReader::read(std::vector<std::string>& dropped) {
     std::string_view line;
     while (next_statement(line)) {
         Tokens tokens(line);
@@ -176,11 +268,20 @@ Mesh ObjReader::read() {
         if (keyword == "v") vertex(tokens);
         else if (keyword == "vn") normal(tokens);
         else if (keyword == "f" || keyword == "fo") face(tokens);
+        else if (keyword == "vt") texcoords_++;
+        else if (keyword == "usemtl" || keyword == "mtllib") {
+            materials_++;
+            std::string_view library;
+            if (keyword == "mtllib" && material_library_.empty() && tokens.next(library)) material_library_ = library;
+        } else if (keyword == "l" || keyword == "p") polylines_++;
+        else if (keyword == "vp" || keyword == "curv" || keyword == "curv2" || keyword == "surf" || keyword == "cstype")
+            freeform_++;
         if (positions_.size() > UINT32_MAX) file_.fail_line("more vertices than 32-bit indices can address");
     }
     Mesh mesh;
     finish_colors(mesh);
     finish_normals(mesh);
+    report_dropped(dropped);
     mesh.positions = std::move(positions_);
     mesh.indices = std::move(indices_);
     return mesh;
@@ -188,6 +289,10 @@ Mesh ObjReader::read() {
 
 }  // namespace
 
-Mesh read_obj(const std::string& path) { return ObjReader(path).read(); }
+Mesh read_obj(const std::string& path, std::vector<std::string>& dropped) {
+    ObjReader reader(path);
+    Mesh mesh = reader.read(dropped);
+    return mesh;
+}
 
 }  // namespace catpaq::mesh_io

@@ -703,6 +703,44 @@ uint64_t PlyStream::face_count() const {
 bool PlyStream::has_normals() const { return impl_->normals; }
 bool PlyStream::has_colors() const { return impl_->colors; }
 
+std::vector<std::string> PlyStream::dropped() const {
+    const Impl& s = *impl_;
+    std::vector<std::string> out;
+    auto names = [](const std::vector<std::string>& list) {
+        std::string text;
+        for (const std::string& n : list) text += (text.empty() ? "" : ", ") + n;
+        return text;
+    };
+    std::vector<std::string> unused;
+    const PlyElement& vertex = s.elements[s.vertex_element];
+    for (size_t p = 0; p < vertex.properties.size(); ++p) {
+        bool used = false;
+        for (int f = 0; f < kFieldCount; ++f)
+            // Normals and colours only count when all three components are there.
+            used |= s.field[f] == p && (f < kNx || (f < kRed ? s.normals : s.colors));
+        if (!used) unused.push_back(vertex.properties[p].name);
+    }
+    if (!unused.empty()) out.push_back("vertex properties " + names(unused) + " (not kept)");
+    if (s.face_element != kNone) {
+        const PlyElement& face = s.elements[s.face_element];
+        std::vector<std::string> colour, other;
+        for (size_t p = 0; p < face.properties.size(); ++p) {
+            if (p == s.index_list) continue;
+            const std::string& n = face.properties[p].name;
+            bool is_colour = n == "red" || n == "green" || n == "blue" || n == "alpha" || n == "r" || n == "g" || n == "b";
+            (is_colour ? colour : other).push_back(n);
+        }
+        if (!colour.empty())
+            out.push_back(strprintf("face colours (%s) of %llu faces: colours are kept per vertex only",
+                                    names(colour).c_str(), ull(face.count)));
+        if (!other.empty()) out.push_back("face properties " + names(other) + " (not kept)");
+    }
+    for (size_t e = 0; e < s.elements.size(); ++e)
+        if (e != s.vertex_element && e != s.face_element && s.elements[e].count > 0)
+            out.push_back(strprintf("%llu '%s' elements (not kept)", ull(s.elements[e].count), s.elements[e].name.c_str()));
+    return out;
+}
+
 size_t PlyStream::read_vertices(size_t max, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals,
                                 std::vector<Rgb8>* colors) {
     Impl& s = *impl_;
@@ -741,8 +779,9 @@ void PlyStream::finish() {
 
 namespace mesh_io {
 
-Mesh read_ply(const std::string& path) {
+Mesh read_ply(const std::string& path, std::vector<std::string>& dropped) {
     PlyStream stream(path);
+    dropped = stream.dropped();
     Mesh mesh;
     // The header check bounds these counts by the file size, so reserving is safe.
     mesh_io::reserve_huge(mesh.positions, stream.vertex_count());

@@ -10,8 +10,9 @@
 
 namespace catpaq::mesh_io {
 
-Mesh read_ply(const std::string& path);
-Mesh read_obj(const std::string& path);
+// `dropped` receives what the file holds and the mesh cannot (see read_mesh).
+Mesh read_ply(const std::string& path, std::vector<std::string>& dropped);
+Mesh read_obj(const std::string& path, std::vector<std::string>& dropped);
 Mesh read_off(const std::string& path);
 Mesh read_stl(const std::string& path);
 

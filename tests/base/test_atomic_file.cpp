@@ -46,3 +46,42 @@ TEST(AtomicFile, UnwritableDirectoryIsAClearError) {
         EXPECT_NE(std::string(e.what()).find("/nonexistent_dir_catpaq/x.bin"), std::string::npos);
     }
 }
+
+// While it is written, the file has no name at all (O_TMPFILE): however the process ends, no
+// temporary is left next to the output.
+TEST(AtomicFile, NothingIsNamedUntilCommit) {
+    fs::path path = scratch("c.bin");
+    fs::remove(path);
+    AtomicFile file(path.string());
+    file.write("data", 4);
+    if (!file.anonymous()) GTEST_SKIP() << "no O_TMPFILE on this file system";
+    for (auto& entry : fs::directory_iterator(path.parent_path()))
+        EXPECT_EQ(entry.path().filename().string().find("c.bin"), std::string::npos) << entry.path();
+    file.commit();
+    EXPECT_EQ(read_file(path.string()), "data");
+}
+
+TEST(AtomicFile, CommitReplacesAnExistingFileWholly) {
+    fs::path path = scratch("d.bin");
+    write_file_atomic(path.string(), "old contents", 12);
+    {
+        AtomicFile file(path.string());
+        file.write("new", 3);
+        EXPECT_EQ(read_file(path.string()), "old contents");
+        file.commit();
+    }
+    EXPECT_EQ(read_file(path.string()), "new");
+    for (auto& entry : fs::directory_iterator(path.parent_path()))
+        EXPECT_EQ(entry.path().filename().string().find("d.bin.tmp"), std::string::npos) << entry.path();
+}
+
+TEST(AtomicFile, ADirectoryIsRefusedByName) {
+    fs::path dir = scratch("e_dir");
+    fs::create_directories(dir);
+    try {
+        AtomicFile file(dir.string());
+        FAIL() << "expected an error";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(dir.string() + "' is a directory"), std::string::npos) << e.what();
+    }
+}

@@ -1,6 +1,10 @@
 // Readers on small well-formed files, including the less common corners of each format.
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <filesystem>
+
+#include "base/error.h"
 #include "mesh/io.h"
 #include "test_util.h"
 
@@ -8,6 +12,7 @@ using namespace catpaq;
 using catpaq::test::put_be;
 using catpaq::test::put_le;
 using catpaq::test::write_file;
+namespace fs = std::filesystem;
 
 namespace {
 
@@ -158,11 +163,72 @@ TEST(ReadObj, AllCornerFormsNegativeIndicesAndPolygons) {
                                   "f 4 1 5 \\\n"              // continued on the next line
                                   "  3\n"
                                   "l 1 2\n");
-    Mesh mesh = read_mesh(path);
+    std::vector<std::string> dropped;
+    Mesh mesh = read_mesh(path, &dropped);
     EXPECT_EQ(mesh.vertex_count(), 5u);
     EXPECT_EQ(mesh.indices, (std::vector<uint32_t>{0, 1, 2, 0, 2, 3, 0, 1, 4, 1, 2, 4, 3, 0, 4, 3, 4, 2}));
-    EXPECT_FALSE(mesh.has_normals());  // the normal indices do not follow the vertex indices
+    // Per-corner normals (their indices do not follow the vertex indices) become per-vertex ones;
+    // vertex 4 has none in any corner: computed from the faces.
+    ASSERT_TRUE(mesh.has_normals());
+    EXPECT_EQ(mesh.normals[0], (Vec3f{0, 0, 1}));
     EXPECT_FALSE(mesh.has_colors());
+    std::string all;
+    for (const std::string& d : dropped) all += d + "\n";
+    EXPECT_NE(all.find("texture coordinates (3 'vt' statements, used by 6 face corners)"), std::string::npos) << all;
+    EXPECT_NE(all.find("materials (2 'mtllib'/'usemtl' statements, library thing.mtl)"), std::string::npos) << all;
+    EXPECT_NE(all.find("1 lines and points"), std::string::npos) << all;
+    EXPECT_NE(all.find("normals for 1 vertices that no face corner gives one: computed"), std::string::npos) << all;
+}
+
+// Before, "vn" normals were used only when numbered like the vertices; an OBJ from a modelling
+// tool (per-corner normals, "f v/vt/vn") lost them silently. A cube with hard edges: each
+// vertex averages the normals of its three faces, and the reader says so.
+TEST(ReadObj, PerCornerNormalsBecomePerVertexNormals) {
+    std::string text;
+    for (int i = 0; i < 8; ++i) text += strprintf("v %d %d %d\n", i & 1, (i >> 1) & 1, (i >> 2) & 1);
+    text += "vn -1 0 0\nvn 1 0 0\nvn 0 -1 0\nvn 0 1 0\nvn 0 0 -1\nvn 0 0 1\n";
+    // Faces as quads: x=0 (normal 1), x=1 (2), y=0 (3), y=1 (4), z=0 (5), z=1 (6).
+    const int quads[6][4] = {{1, 5, 7, 3}, {2, 4, 8, 6}, {1, 2, 6, 5}, {3, 7, 8, 4}, {1, 3, 4, 2}, {5, 6, 8, 7}};
+    for (int f = 0; f < 6; ++f)
+        text += strprintf("f %d//%d %d//%d %d//%d %d//%d\n", quads[f][0], f + 1, quads[f][1], f + 1, quads[f][2], f + 1,
+                          quads[f][3], f + 1);
+    std::vector<std::string> dropped;
+    Mesh mesh = read_mesh(write_file("hard_cube.obj", text), &dropped);
+    ASSERT_TRUE(mesh.has_normals());
+    const float c = float(1 / std::sqrt(3.0));
+    EXPECT_NEAR(mesh.normals[0][0], -c, 1e-6);  // corner (0,0,0): faces x=0, y=0, z=0
+    EXPECT_NEAR(mesh.normals[0][1], -c, 1e-6);
+    EXPECT_NEAR(mesh.normals[0][2], -c, 1e-6);
+    EXPECT_NEAR(mesh.normals[7][0], c, 1e-6);   // corner (1,1,1)
+    ASSERT_EQ(dropped.size(), 1u);
+    EXPECT_NE(dropped[0].find("8 vertices that differ between faces"), std::string::npos) << dropped[0];
+}
+
+// PLY face colours have no place in a per-vertex mesh: said, not silently dropped.
+TEST(ReadPly, FaceColoursAndOtherPropertiesAreReportedAsDropped) {
+    std::string path = write_file("face_colours.ply",
+                                  "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+                                  "property float z\nproperty float u\nproperty float v\n"
+                                  "element face 1\nproperty list uchar int vertex_indices\nproperty uchar red\n"
+                                  "property uchar green\nproperty uchar blue\nelement edge 2\nproperty int vertex1\n"
+                                  "property int vertex2\nend_header\n0 0 0 0 0\n1 0 0 1 0\n0 1 0 0 1\n3 0 1 2 255 0 0\n"
+                                  "0 1\n1 2\n");
+    std::vector<std::string> dropped;
+    Mesh mesh = read_mesh(path, &dropped);
+    EXPECT_EQ(mesh.triangle_count(), 1u);
+    std::string all;
+    for (const std::string& d : dropped) all += d + "\n";
+    EXPECT_NE(all.find("face colours (red, green, blue) of 1 faces"), std::string::npos) << all;
+    EXPECT_NE(all.find("vertex properties u, v"), std::string::npos) << all;
+    EXPECT_NE(all.find("2 'edge' elements"), std::string::npos) << all;
+    // A plain file drops nothing.
+    dropped.clear();
+    Mesh plain;
+    plain.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}};
+    plain.indices = {0, 1, 2};
+    write_ply((fs::path(path).parent_path() / "plain.ply").string(), plain);
+    read_mesh((fs::path(path).parent_path() / "plain.ply").string(), &dropped);
+    EXPECT_TRUE(dropped.empty()) << dropped[0];
 }
 
 TEST(ReadObj, MeshLabVertexColoursAndMatchingNormals) {

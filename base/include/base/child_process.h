@@ -1,7 +1,8 @@
 #pragma once
 // Runs a program as a child process and measures it from outside: its exit status, wall time
 // and peak resident memory as the kernel counts it (wait4's ru_maxrss, the high-water mark, not
-// sampled). For tests and benchmarks that check what a tool promises about its own memory.
+// sampled), and its CPU time. For tests and benchmarks that check what a tool promises about
+// its own memory and time.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -12,6 +13,7 @@ struct ChildRun {
     int status = -1;          // exit status; 128 + signal when killed; 127 when it could not start
     uint64_t peak_bytes = 0;  // peak resident memory
     double seconds = 0;       // wall time
+    double cpu_seconds = 0;   // user + system time of the child and the children it waited for
     std::string output;       // stdout and stderr, interleaved
 };
 

@@ -31,16 +31,25 @@
 //     never refined for their own sake, and they request nothing. At most max_new_requests new
 //     requests per frame; requests made earlier and no longer wanted are reported as cancelled.
 //
-// Projected error of a node: error * k / max(distance from the eye to the closest point of its
-// view boxes in the frustum, near), k = viewport height / (2 tan(fov / 2)) pixels per unit at
-// distance 1 — an upper bound of the on-screen size of the node's error. View boxes
-// (HierarchyNode::view_boxes: for CATP, the node's tetrahedra that hold geometry) nest along
-// parent edges and errors are monotone, so a node that needs refinement has a parent that needs
-// it at least as much: refining from the roots reaches it. (The nodes' full bounds, which also
-// hold what descendants add through their other parents, made close views refine diamonds for
-// their neighbours' sake: 14-17% of the dataset on the report's close views, fetch_bench.)
+// Projected error of a node: k * asin(error / d) pixels, d a lower bound of the distance from the
+// eye to the node's geometry: the nearest of its view boxes in the frustum
+// (HierarchyNode::view_boxes: for CATP the diamond's tetrahedra that hold geometry, its own or
+// its descendants'), or the box of its decoded data when the residency knows it and it is
+// farther (Residency::data_bounds), and up close, where the eye is nearer the box than the box is
+// wide, the distance to the node's triangles themselves (Residency::data_distance); k = viewport
+// height / (2 tan(fov / 2)) pixels per radian at the centre of the view. A surface point at
+// distance >= d and a point within `error` of it are at most asin(error / d) apart as seen from
+// the eye (for d > error; else anything up to pi, the whole view): an upper bound of the
+// on-screen deviation that stays finite when the eye comes close (the former error * k / d
+// reached 18,000 px with the eye inside a node's box). For error << d it is error * k / d.
+// View boxes nest along parent edges and errors are monotone, so a node that needs refinement
+// has a parent that needs it at least as much: refining from the roots reaches it. (The nodes'
+// full bounds, which also hold what descendants add through their other parents, made close
+// views refine diamonds for their neighbours' sake: 14-17% of the dataset on the report's close
+// views, fetch_bench.)
 #include <array>
 #include <cstdint>
+#include <functional>
 #include <limits>
 #include <string>
 #include <vector>
@@ -48,6 +57,9 @@
 #include "client/hierarchy.h"
 
 namespace catpaq {
+
+// k * asin(error / distance) pixels, or k * pi when error >= distance (see above).
+double projected_error_px(double error, double distance, double k);
 
 struct ViewParams {
     std::array<double, 3> eye{0, 0, 0};
@@ -60,7 +72,7 @@ struct ViewParams {
     double pixels_per_unit = 0;
     double viewport_height = 0;
     double fov_y_radians = 0;
-    double near = 1e-3;         // distances are clamped to at least this (world units)
+    double near = 1e-3;         // the near clip distance (world units): the near frustum plane
     double tolerance_px = 1.5;  // refine while the projected error exceeds this
     double hysteresis = 0.7;    // coarsen only below tolerance * hysteresis
     // Visibility hysteresis: a node leaving the frustum keeps its projected error for coarsening
@@ -72,6 +84,8 @@ struct ViewParams {
     // instead of waiting for it: the child would be refined again as soon as it is drawn, so its
     // data is never fetched (only what the view finally draws, and children coarser than
     // skip_factor times the tolerance as a preview). 0: never skip (every level is fetched).
+    // A node whose fetches fail (Residency::failed) is never skipped through: its subtree takes
+    // every level, so the rest of the view still refines around it.
     double skip_factor = 0;
 
     double k() const;
@@ -133,6 +147,26 @@ public:
     virtual bool resident(uint32_t node) const = 0;
     // Exact when resident, an estimate otherwise.
     virtual NodeBytes bytes(uint32_t node) const = 0;
+    // The box of a resident node's own data (world), or nullptr: where the node's geometry
+    // really is, for the projected error (see above). Must lie within the hierarchy's box.
+    virtual const Aabb* data_bounds(uint32_t node) const {
+        (void)node;
+        return nullptr;
+    }
+    // True for a node whose every fetch failed so far: a refinement that skips levels does not
+    // wait on it, it takes every level (see ViewParams::skip_factor).
+    virtual bool failed(uint32_t node) const {
+        (void)node;
+        return false;
+    }
+    // A lower bound of the distance from `eye` to a resident node's own geometry, or 0 if
+    // unknown. Asked only of nodes whose data box is closer to the eye than it is wide: there
+    // the box says little (the eye may be inside it, far from any triangle).
+    virtual double data_distance(uint32_t node, const std::array<double, 3>& eye) const {
+        (void)node;
+        (void)eye;
+        return 0;
+    }
     // Optional change feed, so the engine recounts only what changed instead of the whole cut
     // each frame: appends the nodes whose residency, bytes or draw counts changed since `cursor`
     // and advances it. Returns false (cursor still advanced) when it cannot tell; the engine
@@ -165,8 +199,21 @@ public:
     bool resident(uint32_t node) const override { return resident_[node] != 0; }
     NodeBytes bytes(uint32_t node) const override;
     bool changes_since(uint64_t& cursor, std::vector<uint32_t>& out) const override { return log_.since(cursor, out); }
-    void set_resident(uint32_t node, NodeBytes bytes);
+    const Aabb* data_bounds(uint32_t node) const override {
+        return resident_[node] && !data_bounds_[node].empty() ? &data_bounds_[node] : nullptr;
+    }
+    double data_distance(uint32_t node, const std::array<double, 3>& eye) const override {
+        return resident_[node] && distance_ ? distance_(node, eye) : 0.0;
+    }
+    // Measures data_distance (the owner knows the nodes' geometry).
+    void set_distance_function(std::function<double(uint32_t, const std::array<double, 3>&)> f) {
+        distance_ = std::move(f);
+    }
+    // `data`: the box of the node's decoded geometry, if known (empty: unknown).
+    void set_resident(uint32_t node, NodeBytes bytes, const Aabb& data = Aabb{});
     void set_evicted(uint32_t node);
+    bool failed(uint32_t node) const override { return failed_[node] != 0; }
+    void set_failed(uint32_t node, bool failed) { failed_[node] = failed; }
     size_t resident_count() const { return resident_count_; }
 
 private:
@@ -174,6 +221,9 @@ private:
     double bytes_per_primitive_;
     std::vector<uint8_t> resident_;
     std::vector<NodeBytes> bytes_;
+    std::vector<Aabb> data_bounds_;
+    std::vector<uint8_t> failed_;
+    std::function<double(uint32_t, const std::array<double, 3>&)> distance_;
     size_t resident_count_ = 0;
     ChangeLog log_;
 };
@@ -198,6 +248,9 @@ struct CutRequest {
     double priority = 0;  // projected error (pixels) of the node that needs it
 };
 
+// Budgets, as bits of CutFrameStats::budgets_binding.
+enum BudgetBit : uint8_t { kPrimitiveBudget = 1, kGpuBudget = 2, kCpuBudget = 4 };
+
 struct CutFrameStats {
     uint64_t frame = 0;
     uint64_t primitives = 0, gpu_bytes = 0, cpu_bytes = 0;
@@ -206,7 +259,11 @@ struct CutFrameStats {
     size_t holes = 0;  // drawn nodes with data that are not resident (draw nothing yet)
     uint32_t refinements = 0, coarsenings = 0;
     uint32_t budget_blocked = 0;  // refinements refused by a budget
+    uint8_t budgets_binding = 0;  // which budgets refused them (BudgetBit)
     uint32_t waiting = 0;         // refinements waiting for data
+    uint32_t capped = 0;          // refinements left for later frames (max_refinements)
+    // Drawn finest-level nodes whose projected error exceeds the tolerance: nothing finer exists.
+    uint32_t leaves_over_tolerance = 0;
     uint32_t new_requests = 0;
     bool over_budget = false;  // a budget is exceeded and coarsening could not fix it (yet)
     double seconds = 0;
@@ -302,6 +359,7 @@ private:
     // The hierarchy in a compact layout for the per-frame loops (no pointer chasing).
     std::vector<uint32_t> par_off_, par_, ch_off_, ch_;
     std::vector<uint32_t> box_off_;           // view boxes of node n: box_[box_off_[n] .. box_off_[n + 1])
+    std::vector<double> box_width_;           // the largest extent of their union
     std::vector<std::array<double, 6>> box_;  // min xyz, max xyz
     std::vector<double> error_;
     std::vector<uint8_t> flags_;  // bit 0 has data, bit 1 leaf

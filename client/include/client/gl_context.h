@@ -60,6 +60,9 @@ public:
     Framebuffer& operator=(const Framebuffer&) = delete;
 
     void bind();  // binds for drawing and sets the viewport to the whole target
+    // Copies the image (resolved, when multisampled) to the window's framebuffer (object 0),
+    // whose size must be the same.
+    void blit_to_window();
     // The colour buffer as RGBA8, rows top-down (row 0 is the top of the image).
     std::vector<uint8_t> read_pixels();
 

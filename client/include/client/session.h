@@ -33,7 +33,27 @@ struct SessionSettings {
     FetcherSettings fetcher;
 };
 
-// Statistics of one step (what `render --stats` writes per frame).
+// A node the session could not get: its fetch or decode failed every attempt (the fetcher
+// tries it again later while it is wanted; the cut keeps its coarser ancestor meanwhile).
+struct NodeFailure {
+    uint64_t key = 0;
+    uint16_t level = 0;
+    std::string error;  // the last problem: HTTP status, checksum mismatch, bytes past the end, ...
+};
+
+// Why the certified error is above the tolerance (bits of SessionFrameStats::limits).
+enum SessionLimit : uint8_t {
+    kLimitFinestLevel = 1,     // drawn finest-level nodes are over the tolerance
+    kLimitTriangles = 2,       // a refinement would pass --max-triangles
+    kLimitGpuBytes = 4,        // ... the GPU budget
+    kLimitCpuBytes = 8,        // ... the CPU budget
+    kLimitFailedNode = 16,     // a node the cut needs failed (NodeFailure)
+    kLimitPending = 32,        // data the cut needs is still on its way
+};
+// The names of the set bits, as JSON strings ("finest_level", "triangle_budget", ...).
+std::vector<const char*> session_limit_names(uint8_t limits);
+
+// Statistics of one step (what `render --stats` writes per frame: docs/formats/stats.md).
 struct SessionFrameStats {
     uint64_t triangles = 0;       // drawn this frame
     size_t drawn_nodes = 0, refined_nodes = 0, fragments = 0;
@@ -44,6 +64,15 @@ struct SessionFrameStats {
     double cut_ms = 0;
     double certified_error_px = 0;  // largest projected error of any drawn node
     size_t holes = 0;             // drawn nodes whose data is not resident yet
+    size_t arrived = 0;           // nodes integrated by this step
+    uint32_t cut_changes = 0;     // refinements and coarsenings of this step
+    size_t failed_nodes = 0;      // failures so far (StreamingSession::failures)
+    // Nothing pending: no request outstanding, nothing arriving, every drawn node resident and
+    // the cut stable for this camera. Says nothing about the error (tolerance_met does).
+    bool settled = false;
+    // The certified error is within the tolerance (and no drawn node is a hole).
+    bool tolerance_met = false;
+    uint8_t limits = 0;  // SessionLimit bits: what kept the error above the tolerance
 };
 
 class StreamingSession {
@@ -60,8 +89,10 @@ public:
     // Integrates arrived nodes, updates the cut for the camera and issues requests. Never waits.
     SessionFrameStats step(const Camera& camera);
     // True when nothing is being fetched and every drawn node is resident with the cut stable
-    // for the last step's camera.
-    bool converged() const { return converged_; }
+    // for the last step's camera (SessionFrameStats::settled of the last step).
+    bool settled() const { return settled_; }
+    // Nodes that failed every attempt so far, in the order they failed (each once).
+    const std::vector<NodeFailure>& failures() const { return failures_; }
     // Draws the current cut into the bound framebuffer.
     RenderStats draw(const Camera& camera, const RenderSettings& render);
     // The (diamond, slot) fragments drawn by the current cut.
@@ -71,6 +102,9 @@ public:
 
 private:
     void integrate(std::vector<FetchedNode>& arrived);
+    Aabb data_bounds(const HierarchyNode& node, const DiamondFragments& fragments) const;
+    double data_distance(uint32_t node, const std::array<double, 3>& eye);
+    uint8_t limits(const CutFrame& frame, const SessionFrameStats& s) const;
     void evict(uint32_t node);
 
     SessionSettings settings_;
@@ -88,7 +122,15 @@ private:
     std::unordered_set<uint64_t> supplied_;  // handed to the fetcher, not arrived yet
     std::vector<DrawItem> items_;
     uint64_t prefix_bytes_ = 0;
-    bool converged_ = false;
+    bool settled_ = false;
+    std::vector<NodeFailure> failures_;
+    // data_distance's last measure per node: the eye it was taken from and the distance.
+    struct MeasuredDistance {
+        std::array<double, 3> eye;
+        double distance;
+    };
+    std::unordered_map<uint32_t, MeasuredDistance> distances_;
+    std::unordered_set<uint64_t> failed_keys_;  // failed and not delivered since
 };
 
 }  // namespace catpaq

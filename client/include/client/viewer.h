@@ -4,8 +4,14 @@
 // Controls: left drag orbits around the target, right drag (or shift + left drag) pans, the wheel
 // dollies towards the target, a double click flies to the point under the cursor (a ray cast on
 // the CPU against the triangles of the drawn cut, decoded exactly as the vertex shader does),
-// F12 or P saves a screenshot, Escape quits. A Dear ImGui overlay shows the session's statistics
-// and has a tolerance slider, light direction and background colour controls.
+// F12 or P saves a screenshot (catpaq_view_NNNN.png in the working directory, the first free
+// number: earlier ones are never overwritten), Escape quits. A Dear ImGui overlay shows the
+// session's statistics (and nodes that failed to load: the coarser data stays on screen) and has
+// a tolerance slider, light direction and background colour controls.
+//
+// The window is drawn on demand: after input, while the camera moves, when data arrives or the
+// cut changes. In between the viewer sleeps in the event queue (a settled, idle view used 0.9 of
+// a core redrawing the same image at the display's rate before).
 //
 // The camera controller and the ray-triangle test are plain code without GL, testable alone.
 #include <array>
@@ -94,14 +100,20 @@ std::optional<double> intersect_triangle(const Ray& ray, const glm::dvec3& a, co
 // on the CPU with decode_packed_vertex, as the shader does), in world coordinates.
 std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera& camera, const Ray& ray);
 
+// The path of the next screenshot: DIRECTORY/catpaq_view_NNNN.png with the smallest number not
+// taken, so a screenshot never replaces an earlier one.
+std::string next_screenshot_path(const std::string& directory = ".");
+
 struct ViewerSettings {
     std::string location;           // dataset: local .cpq path or URL
     SessionSettings session;
     int width = 1280, height = 800;
     int up_axis = 2;                // 1: y up, 2: z up
-    int frames = 0;                 // > 0: render this many frames, then exit
+    int frames = 0;                 // > 0: render this many frames (every one drawn), then exit
+    double exit_after = 0;          // > 0: run the interactive loop this many seconds, then exit
     std::string screenshot;         // save the last frame here (PNG)
     bool vsync = true;
+    int msaa = 0;                   // anti-aliasing samples per pixel (0: none)
 };
 
 // Thrown when no window can be opened (no display): the caller tells the user to render headless.

@@ -7,7 +7,8 @@
 // data, counts that disagree with the data, non-finite coordinates, indices out of range,
 // faces with fewer than three vertices. Nothing is silently repaired except what is documented:
 // polygons are fan-triangulated, STL corners are welded, file normals that are not unit
-// length are normalised (zero normals become +z, as in compute_vertex_normals).
+// length are normalised (zero normals become +z, as in compute_vertex_normals). Content a Mesh
+// cannot hold is not dropped silently: read_mesh and PlyStream report it (`dropped`).
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -20,8 +21,12 @@ namespace catpaq {
 // Reads a PLY, OBJ, OFF or STL file. The format is chosen by extension (case-insensitive)
 // or, for other extensions, by sniffing the first bytes. The result passes validate_mesh and
 // has at least one triangle. Normals and colours are kept when the file has them for every
-// vertex.
-Mesh read_mesh(const std::string& path);
+// vertex; OBJ normals given per face corner ("vn" with indices of their own) become per-vertex
+// normals (the corners' normals averaged; vertices without any get area-weighted ones).
+// `dropped`, if given, receives one sentence per kind of content the mesh cannot hold and the
+// reader left out (OBJ texture coordinates, materials, lines; PLY face colours, other
+// properties and elements; ...), for the tools to warn about.
+Mesh read_mesh(const std::string& path, std::vector<std::string>* dropped = nullptr);
 
 // Writes `mesh` (which must pass validate_mesh) as PLY: binary little-endian or ascii. Positions
 // are float, or double when any |coordinate| > 1e5 (projected scan coordinates); normals
@@ -47,6 +52,9 @@ public:
     uint64_t face_count() const;  // polygons as declared; 0 when there is no face element
     bool has_normals() const;     // nx, ny, nz present
     bool has_colors() const;      // red, green, blue present
+    // What the header declares that a Mesh cannot hold and the reader skips (face colours, other
+    // properties and elements), one sentence per kind.
+    std::vector<std::string> dropped() const;
 
     // Reads up to `max` further vertices and appends them to `positions` (and to `normals` and
     // `colors` when those are non-null; they must then be offered by the file). Returns the
