@@ -30,7 +30,8 @@ static const char* kRenderUsage =
     "options:\n"
     "  --camera-path FILE     JSON camera path (docs/formats/camera-path.md); default: an orbit\n"
     "  --orbit N              frames of the default orbit (default 8)\n"
-    "  --up y|z               the model's up axis, for the default orbit (default z)\n"
+    "  --up y|z               the model's up axis, for the default orbit (default: the dataset's,\n"
+    "                         recorded by convert --up; z for datasets that record none)\n"
     "  --size WxH             image size (default 640x480; overrides the path's)\n"
     "  --msaa N               anti-aliasing samples per pixel (0, 2, 4, 8; default 0)\n"
     "  --tolerance PX         screen-space error tolerance in pixels (default 1.5)\n"
@@ -156,8 +157,8 @@ int cmd_render(int argc, char** argv) {
     const std::string location = options.positional()[0];
     std::string path_file = options.get("camera-path", "");
     int orbit = int(options.integer("orbit", 8, 1, 100000));
-    std::string up = options.get("up", "z");
-    if (up != "y" && up != "z") usage_error("--up: '%s' is not y or z", up.c_str());
+    std::string up = options.get("up", "");
+    if (!up.empty() && up != "y" && up != "z") usage_error("--up: '%s' is not y or z", up.c_str());
     int width = 640, height = 480;
     bool size_given = options.has("size");
     if (size_given) parse_size(options.get("size", ""), width, height);
@@ -202,6 +203,7 @@ int cmd_render(int argc, char** argv) {
     double start = now_seconds();
     StreamingSession session(location, settings);
     const CatpMeta& meta = session.index().meta();
+    if (up.empty()) up = meta.up == UpAxis::PosY || meta.up == UpAxis::NegY ? "y" : "z";  // the dataset's
     if (path_file.empty() && up == "z") {
         path = orbit_path({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
                           {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]}, orbit, width, height);

@@ -19,7 +19,8 @@ static const char* kViewUsage =
     "options:\n"
     "  --size WxH             window size (default 1280x800)\n"
     "  --tolerance PX         screen-space error tolerance in pixels (default 1.5)\n"
-    "  --up y|z               the model's up axis for the initial camera (default z)\n"
+    "  --up y|z               the model's up axis for the initial camera (default: the dataset's,\n"
+    "                         recorded by convert --up; z for datasets that record none)\n"
     "  --msaa N               anti-aliasing samples per pixel (0, 2, 4, 8; default 4)\n"
     "  --frames N             draw N frames (every one, as fast as possible), then exit (for tests)\n"
     "  --exit-after SECONDS   run as usual (drawing on demand), then exit (for tests)\n"
@@ -49,10 +50,10 @@ int cmd_view(int argc, char** argv) {
     settings.location = options.positional()[0];
     if (options.has("size")) parse_view_size(options.get("size", ""), settings.width, settings.height);
     settings.session.tolerance_px = options.number("tolerance", 1.5, 0.05, 1000);
-    std::string up = options.get("up", "z");
+    std::string up = options.get("up", "");
     if (up == "y" || up == "Y") settings.up_axis = 1;
     else if (up == "z" || up == "Z") settings.up_axis = 2;
-    else usage_error("--up: '%s' is not y or z", up.c_str());
+    else if (!up.empty()) usage_error("--up: '%s' is not y or z", up.c_str());
     settings.frames = int(options.integer("frames", 0, 1, 1 << 30));
     settings.exit_after = options.number("exit-after", 0, 0.01, 1e9);
     settings.msaa = int(options.integer("msaa", 4, 0, 64));

@@ -372,6 +372,8 @@ void DesktopViewer::Impl::open() {
     session = std::make_unique<StreamingSession>(settings.location, settings.session);
     tolerance = float(settings.session.tolerance_px);
     const CatpMeta& meta = session->index().meta();
+    // The up axis: as asked, else the dataset's (z when it records none).
+    if (settings.up_axis == 0) controller = OrbitController(meta.up == UpAxis::PosY || meta.up == UpAxis::NegY ? 1 : 2);
     int fbw, fbh;
     glfwGetFramebufferSize(window, &fbw, &fbh);
     controller.frame_box({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},

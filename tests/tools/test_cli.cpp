@@ -470,6 +470,28 @@ std::vector<std::string> lines_of(const std::string& text) {
 
 }  // namespace
 
+// The up axis is the dataset's: convert records it (default y, the bunny's), render's default
+// orbit uses it; --up overrides it.
+TEST(Cli, RenderOrbitsAroundTheUpAxisTheDatasetRecords) {
+    fs::path dir = scratch() / "up_axis";
+    fs::create_directories(dir);
+    auto frame = [&](const std::string& name, const std::string& options) {
+        fs::path out = dir / name;
+        ToolRun r = run("render " + bunny_dataset().string() + " --orbit 1 --size 96x72 --out " + out.string() + " " + options);
+        EXPECT_EQ(r.status, 0) << r.output;
+        return read_file((out / "frame_0000.png").string());
+    };
+    const std::string recorded = frame("recorded", ""), y = frame("y", "--up y"), z = frame("z", "--up z");
+    EXPECT_EQ(recorded, y) << "the bunny's dataset records y up";
+    EXPECT_NE(recorded, z);
+    fs::path zup = dir / "bunny_z.cpq";
+    ToolRun c = run("convert " + std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply -o " + zup.string() + " --up z --quiet");
+    ASSERT_EQ(c.status, 0) << c.output;
+    ToolRun r = run("render " + zup.string() + " --orbit 1 --size 96x72 --out " + (dir / "zup").string());
+    ASSERT_EQ(r.status, 0) << r.output;
+    EXPECT_EQ(read_file((dir / "zup" / "frame_0000.png").string()), z);
+}
+
 // Before, a node failing its checksum made render wait out --timeout (here 120 s) and exit 0.
 // Now it stops within the fetcher's retries (about 1.5 s), naming the node and the reason, with
 // the statistics of the frames so far already written.

@@ -108,7 +108,7 @@ struct ViewerSettings {
     std::string location;           // dataset: local .cpq path or URL
     SessionSettings session;
     int width = 1280, height = 800;
-    int up_axis = 2;                // 1: y up, 2: z up
+    int up_axis = 0;                // 1: y up, 2: z up, 0: the dataset's (z if it records none)
     int frames = 0;                 // > 0: render this many frames (every one drawn), then exit
     double exit_after = 0;          // > 0: run the interactive loop this many seconds, then exit
     std::string screenshot;         // save the last frame here (PNG)
