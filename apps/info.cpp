@@ -66,6 +66,13 @@ static void dataset_info(const std::string& location) {
     std::printf("bounds:    [%.9g %.9g %.9g] - [%.9g %.9g %.9g]\n", m.bounds_min[0], m.bounds_min[1], m.bounds_min[2],
                 m.bounds_max[0], m.bounds_max[1], m.bounds_max[2]);
     std::printf("diagonal:  %.9g\n", std::sqrt(d2));
+    std::printf("vertices:  %s layout, grid %d\n", m.layout.name(), m.layout.grid);
+    if (m.precision > 0) {
+        std::printf("precision: %.6g", m.precision);
+        if (m.mean_edge > 0) std::printf(" (%.3g mean input edges of %.6g)", m.precision / m.mean_edge, m.mean_edge);
+        std::printf("\n");
+    }
+    std::printf("up axis:   %s\n", m.up == UpAxis::Unknown ? "not recorded (z assumed)" : up_axis_name(m.up));
     std::printf("%6s %9s %11s %12s %12s\n", "level", "diamonds", "triangles", "bytes", "max error");
     for (size_t l = 0; l < levels.size(); ++l)
         if (levels[l].diamonds)
