@@ -24,6 +24,8 @@ PackedVertex pack_vertex(const VertexLayout& layout, const BaryWeights& w, uint1
 }
 
 uint64_t color_payload(const VertexLayout& layout, const uint8_t rgb[3]) {
+    if (layout.kind == VertexLayoutKind::Rgb24)  // 8 bits as they are (the quantizer's hot path)
+        return (uint64_t(rgb[0]) << 24) | (uint64_t(rgb[1]) << 32) | (uint64_t(rgb[2]) << 40);
     const int bits = layout.color_bits(), shift = layout.color_shift();
     const uint32_t top = (1u << bits) - 1;
     uint64_t payload = 0;
