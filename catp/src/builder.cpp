@@ -6,6 +6,7 @@
 #include <cmath>
 #include <cstring>
 #include <malloc.h>
+#include <map>
 #include <mutex>
 #include <type_traits>
 #include <unordered_map>
@@ -395,6 +396,8 @@ private:
     std::unique_ptr<ArchiveWriter> archive_;
     std::vector<CatpLevelStats> stats_;
     std::mutex stats_mutex_;
+    // The slot table of the meta (catp/format.h), by (level, key): the archive's index order.
+    std::map<std::pair<uint16_t, uint64_t>, std::vector<uint32_t>> slot_bytes_;
     // The level being coarsened: its fragments, and each diamond's errors (lattice units).
     // `unquantized`: of its unquantized geometry from the original, 0 at the leaves, above them
     // the largest child's plus the diamond's own measured simplification error. `stored`: the
@@ -772,7 +775,8 @@ double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::a
     QuantizationLoss loss = quantization_loss(quantized, step / 4, step, excuse, leaf);
     const double lost = loss.nothing_drawn ? bounds_.diagonal() / place_.cell : loss.error;
     const double stored = std::max(unquantized_error + std::max(step, lost), children_stored);
-    std::vector<uint8_t> bytes = encode_diamond_node(node);
+    std::vector<uint32_t> slot_bytes;
+    std::vector<uint8_t> bytes = encode_diamond_node(node, &slot_bytes);
     ArchiveEntry entry;
     entry.key = id.bits;
     entry.level = uint16_t(info.level);
@@ -781,6 +785,7 @@ double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::a
     entry.error = float(stored * place_.cell);
     archive_->add_node(entry, bytes.data(), bytes.size());
     std::lock_guard lock(stats_mutex_);
+    slot_bytes_[{entry.level, entry.key}] = std::move(slot_bytes);
     if (leaf) {
         const double area = place_.cell * place_.cell;
         report_.lost_triangles += loss.triangles;
@@ -999,6 +1004,7 @@ void CatpBuild::finish_archive() {
     meta.up = settings_.up;
     meta.precision = report_.precision;
     meta.mean_edge = report_.mean_edge;
+    for (const auto& [node, sizes] : slot_bytes_) meta.slot_bytes.insert(meta.slot_bytes.end(), sizes.begin(), sizes.end());
     report_.file_bytes = archive_->finish(encode_catp_meta(meta));
 }
 

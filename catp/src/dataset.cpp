@@ -19,6 +19,37 @@ CatpIndex::CatpIndex(const ArchiveHeader& header, std::vector<uint8_t> meta, std
             fail("'%s': index entry %zu is not a valid diamond", source.c_str(), i);
         by_key_[e.key] = i;
     }
+    if (meta_.slot_bytes.empty()) return;
+    // The slot table must describe every entry's framing exactly (catp/format.h).
+    slot_offsets_.assign(entries_.size(), {});
+    slot_sizes_.assign(entries_.size(), {});
+    size_t next = 0;
+    for (size_t i = 0; i < entries_.size(); ++i) {
+        const ArchiveEntry& e = entries_[i];
+        uint64_t before = 0;
+        int earlier = 0;
+        for (int s = 0; s < 8; ++s) {
+            if (!(e.flags & (1u << s))) continue;
+            if (next == meta_.slot_bytes.size()) fail("'%s': the slot table is shorter than the index", source.c_str());
+            const uint32_t n = meta_.slot_bytes[next++];
+            slot_offsets_[i][size_t(s)] = e.offset + diamond_slot_offset(before, earlier);
+            slot_sizes_[i][size_t(s)] = n;
+            before += n;
+            ++earlier;
+        }
+        if (diamond_slot_offset(before, earlier - 1) != e.size)
+            fail("'%s': the slot table does not match the size of index entry %zu", source.c_str(), i);
+    }
+    if (next != meta_.slot_bytes.size()) fail("'%s': the slot table is longer than the index", source.c_str());
+}
+
+bool CatpIndex::slot_range(size_t entry_index, int slot, uint64_t& offset, uint32_t& size) const {
+    if (slot_offsets_.empty() || entry_index >= entries_.size() || slot < 0 || slot > 7 ||
+        !(entries_[entry_index].flags & (1u << slot)))
+        return false;
+    offset = slot_offsets_[entry_index][size_t(slot)];
+    size = slot_sizes_[entry_index][size_t(slot)];
+    return true;
 }
 
 CatpIndex CatpIndex::from_prefix(const uint8_t* data, size_t size, const std::string& source) {

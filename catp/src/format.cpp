@@ -27,6 +27,8 @@ std::vector<uint8_t> encode_catp_meta(const CatpMeta& m) {
     w.u16(uint16_t(m.layout.grid));
     w.f64(m.precision);
     w.f64(m.mean_edge);
+    w.u32(uint32_t(m.slot_bytes.size()));
+    for (uint32_t n : m.slot_bytes) w.varint(n);
     return std::move(w.bytes());
 }
 
@@ -35,7 +37,7 @@ std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m) {
     ByteReader r(data + 8, size - 8);
     uint32_t version = r.u32();
     if (!r.ok()) return "CATP metadata truncated";
-    if (version != 1 && version != kCatpMetaVersion)
+    if (version < 1 || version > kCatpMetaVersion)
         return strprintf("unsupported CATP metadata version %u (this build reads 1 to %u)", version, kCatpMetaVersion);
     m.lattice_bits = r.u32();
     for (double& v : m.origin) v = r.f64();
@@ -57,6 +59,19 @@ std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m) {
         m.precision = r.f64();
         m.mean_edge = r.f64();
     }
+    m.slot_bytes.clear();
+    if (version >= 3) {
+        const uint32_t n = r.u32();
+        // Each size takes at least one byte: a count beyond the bytes left is corrupt (and must
+        // not reserve memory).
+        if (!r.ok() || n > r.remaining()) return "CATP metadata has a truncated slot table";
+        m.slot_bytes.resize(n);
+        for (uint32_t& v : m.slot_bytes) {
+            const uint64_t x = r.varint();
+            if (x > UINT32_MAX) return "CATP metadata has an invalid slot size";
+            v = uint32_t(x);
+        }
+    }
     if (!r.ok()) return "CATP metadata truncated";
     if (!m.layout.valid())
         return strprintf("CATP metadata names an invalid vertex layout (%u, grid %d)", unsigned(m.layout.kind), m.layout.grid);
@@ -72,8 +87,9 @@ std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m) {
     return "";
 }
 
-std::vector<uint8_t> encode_diamond_node(const DiamondFragments& f) {
+std::vector<uint8_t> encode_diamond_node(const DiamondFragments& f, std::vector<uint32_t>* slot_bytes) {
     std::vector<uint8_t> out;
+    if (slot_bytes) slot_bytes->clear();
     out.push_back(f.slot_mask);
     for (int s = 0; s < 8; ++s) {
         if (!(f.slot_mask & (1 << s))) continue;
@@ -81,6 +97,7 @@ std::vector<uint8_t> encode_diamond_node(const DiamondFragments& f) {
         out.resize(at + 4);
         size_t n = fragment_encode(f.slots[s], out);
         for (int i = 0; i < 4; ++i) out[at + i] = uint8_t(n >> (8 * i));
+        if (slot_bytes) slot_bytes->push_back(uint32_t(n));
     }
     return out;
 }

@@ -87,22 +87,27 @@ Mesh sphere_with_extra_triangles() {
 }
 
 // Rewrites a dataset with every node passed through `edit` (which may change its fragments);
-// the index counts follow the payload.
+// the index counts and the meta's slot table follow the payload.
 void rewrite(const std::string& from, const std::string& to,
              const std::function<void(const ArchiveEntry&, DiamondFragments&)>& edit) {
     CatpFile file(from);
     ArchiveWriter writer(to, ArchiveKind::Catp);
-    for (const ArchiveEntry& e : file.index().entries()) {
+    CatpMeta meta = file.index().meta();
+    meta.slot_bytes.clear();
+    for (const ArchiveEntry& e : file.index().entries()) {  // in index order, as the slot table
         DiamondFragments node = file.decode(e);
         edit(e, node);
         ArchiveEntry entry = e;
         entry.count = 0;
         for (int s = 0; s < 8; ++s)
             if (node.slot_mask & (1 << s)) entry.count += uint32_t(node.slots[s].triangle_count());
-        std::vector<uint8_t> bytes = encode_diamond_node(node);
+        entry.flags = uint16_t((entry.flags & ~0xffu) | node.slot_mask);
+        std::vector<uint32_t> slot_bytes;
+        std::vector<uint8_t> bytes = encode_diamond_node(node, &slot_bytes);
+        meta.slot_bytes.insert(meta.slot_bytes.end(), slot_bytes.begin(), slot_bytes.end());
         writer.add_node(entry, bytes.data(), bytes.size());
     }
-    writer.finish(file.archive().meta());
+    writer.finish(encode_catp_meta(meta));
 }
 
 // The first leaf-level fragment vertex with exactly one zero weight (on one face of its

@@ -1,6 +1,7 @@
 #pragma once
 // Reading a CATP dataset: the metadata and index (from a local file or from the bytes a client
 // fetched), node decoding, and the CPU mirror of the vertex shader for whole fragments.
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -29,6 +30,12 @@ public:
     // Entry of a diamond, or nullptr if the diamond holds no geometry (absent from the index).
     const ArchiveEntry* find(DiamondId id) const;
     size_t entry_index(const ArchiveEntry* e) const { return size_t(e - entries_.data()); }
+    // True when the dataset has a slot table (meta version 3): slot fragments can be fetched
+    // on their own.
+    bool has_slot_ranges() const { return !slot_offsets_.empty(); }
+    // The file byte range of slot `slot`'s fragment in entry `entry_index` (which must have the
+    // slot in its mask); false without a slot table.
+    bool slot_range(size_t entry_index, int slot, uint64_t& offset, uint32_t& size) const;
 
     // World position of a lattice point.
     void lattice_to_world(const double lattice[3], double world[3]) const;
@@ -39,6 +46,9 @@ private:
     CatpMeta meta_;
     std::vector<ArchiveEntry> entries_;
     std::unordered_map<uint64_t, size_t> by_key_;
+    // With a slot table: per entry, 8 file offsets (0 for absent slots); sizes in the meta.
+    std::vector<std::array<uint64_t, 8>> slot_offsets_;
+    std::vector<std::array<uint32_t, 8>> slot_sizes_;
 };
 
 // A local dataset file: the index plus memory-mapped node bytes.

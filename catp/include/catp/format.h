@@ -12,8 +12,12 @@
 //   f64 precision   the largest distance of the finest level from the input that the converter
 //                   guaranteed (world units: its quantization step bound), as asked for
 //   f64 mean_edge   the input's mean edge length (world units)
+// version 3 adds the slot table, so that a client can fetch one slot's fragment of a node (a
+// byte range inside the node) without the rest:
+//   u32 n | n x varint size   per index entry in index order, per set bit s of its slot mask
+//                             ascending: the byte size of slot s's fragment
 // Version 1 datasets read as the Rgb24 layout with grid 463, up axis unknown, precision and mean
-// edge 0 (not recorded).
+// edge 0 (not recorded); versions 1 and 2 have no slot table (nodes are fetched whole).
 //
 // Node (one diamond; key = DiamondId bits, level = diamond level, flags = slot mask (bits 0-7) |
 // leaf (bit 8), count = triangles, error = object-space error bound in world units):
@@ -31,7 +35,7 @@
 
 namespace catpaq {
 
-constexpr uint32_t kCatpMetaVersion = 2;
+constexpr uint32_t kCatpMetaVersion = 3;
 
 // Which world axis points up (for viewers; stored from the input's convention or `convert --up`).
 enum class UpAxis : uint8_t { Unknown = 0, PosX, PosY, PosZ, NegX, NegY, NegZ };
@@ -55,6 +59,9 @@ struct CatpMeta {
     UpAxis up = UpAxis::Unknown;
     double precision = 0;  // world units; 0: not recorded
     double mean_edge = 0;  // world units; 0: not recorded
+    // Version 3: the fragment sizes of every entry's slots, in index order (see above); empty
+    // when the dataset has no slot table.
+    std::vector<uint32_t> slot_bytes;
 };
 
 std::vector<uint8_t> encode_catp_meta(const CatpMeta& meta);
@@ -67,7 +74,13 @@ struct DiamondFragments {
     std::array<FragmentMesh, 8> slots;
 };
 
-std::vector<uint8_t> encode_diamond_node(const DiamondFragments& fragments);
+// `slot_bytes`, when given, receives the byte size of each encoded slot fragment (ascending slots).
+std::vector<uint8_t> encode_diamond_node(const DiamondFragments& fragments, std::vector<uint32_t>* slot_bytes = nullptr);
+// Where slot s's fragment starts inside a node whose slots before it have the given sizes:
+// after the mask byte and, per slot, a u32 size.
+inline uint64_t diamond_slot_offset(uint64_t bytes_of_earlier_slots, int earlier_slots) {
+    return 1 + bytes_of_earlier_slots + 4 * uint64_t(earlier_slots + 1);
+}
 // Empty string on success, else what is wrong (truncated, corrupt fragment, a fragment of
 // another vertex layout than the dataset's `layout` when given, ...).
 std::string decode_diamond_node(const uint8_t* data, size_t size, const std::optional<VertexLayout>& layout,

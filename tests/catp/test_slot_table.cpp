@@ -1,0 +1,96 @@
+// The slot table (CATP meta version 3) lets a client fetch one slot's fragment of a node by byte
+// range: each range holds exactly that slot's fragment, decodable alone; a table that does not
+// match the index is refused; datasets without one still read (nodes fetched whole).
+#include <gtest/gtest.h>
+
+#include <filesystem>
+
+#include "base/error.h"
+#include "catp/builder.h"
+#include "catp/dataset.h"
+#include "mesh/generators.h"
+
+using namespace catpaq;
+namespace fs = std::filesystem;
+
+namespace {
+
+std::string build_torus(const std::string& name) {
+    fs::path dir = fs::temp_directory_path() / ("catpaq_slots_" + std::to_string(getpid()));
+    fs::create_directories(dir);
+    std::string path = (dir / (name + ".cpq")).string();
+    CatpBuildSettings settings;
+    settings.leaf_triangles = 300;
+    settings.progress = false;
+    build_catp(make_torus(20000), path, settings);
+    return path;
+}
+
+// The prefix of `file` (header, meta, index) with its meta replaced by `meta`.
+CatpIndex index_with_meta(const CatpFile& file, const CatpMeta& meta) {
+    const ArchiveReader& a = file.archive();
+    std::vector<ArchiveEntry> entries = a.entries();
+    return CatpIndex(a.header(), encode_catp_meta(meta), entries, "edited");
+}
+
+}  // namespace
+
+TEST(SlotTable, EachSlotRangeHoldsExactlyThatSlotsFragment) {
+    CatpFile file(build_torus("ranges"));
+    const CatpIndex& index = file.index();
+    ASSERT_TRUE(index.has_slot_ranges());
+    size_t slots = 0;
+    for (size_t i = 0; i < index.entries().size(); ++i) {
+        const ArchiveEntry& e = index.entries()[i];
+        DiamondFragments whole = file.decode(e);
+        for (int s = 0; s < 8; ++s) {
+            uint64_t offset = 0;
+            uint32_t size = 0;
+            const bool present = (e.flags & (1u << s)) != 0;
+            ASSERT_EQ(index.slot_range(i, s, offset, size), present);
+            if (!present) continue;
+            ASSERT_GE(offset, e.offset);
+            ASSERT_LE(offset + size, e.offset + e.size);
+            FragmentMesh alone;
+            ASSERT_EQ(fragment_decode(file.archive().data() + offset, size, alone), FragmentStatus::Ok);
+            EXPECT_EQ(alone.indices, whole.slots[size_t(s)].indices);
+            ASSERT_EQ(alone.vertices.size(), whole.slots[size_t(s)].vertices.size());
+            for (size_t v = 0; v < alone.vertices.size(); ++v)
+                ASSERT_EQ(alone.vertices[v].payload(), whole.slots[size_t(s)].vertices[v].payload());
+            ++slots;
+        }
+    }
+    EXPECT_GT(slots, index.entries().size());  // diamonds hold several slots
+}
+
+TEST(SlotTable, ATableThatDoesNotMatchTheIndexIsRefused) {
+    CatpFile file(build_torus("mismatch"));
+    CatpMeta meta = file.index().meta();
+    ASSERT_FALSE(meta.slot_bytes.empty());
+
+    CatpMeta longer = meta;
+    longer.slot_bytes.push_back(7);
+    EXPECT_THROW(index_with_meta(file, longer), Error);
+
+    CatpMeta shorter = meta;
+    shorter.slot_bytes.pop_back();
+    EXPECT_THROW(index_with_meta(file, shorter), Error);
+
+    // Same count and total, a byte moved from the last entry's slot to the first entry's.
+    ASSERT_GT(file.index().entries().size(), 1u);
+    CatpMeta shifted = meta;
+    shifted.slot_bytes.front() += 1;
+    shifted.slot_bytes.back() -= 1;
+    EXPECT_THROW(index_with_meta(file, shifted), Error);
+}
+
+TEST(SlotTable, ADatasetWithoutATableReadsAndHasNoSlotRanges) {
+    CatpFile file(build_torus("untabled"));
+    CatpMeta meta = file.index().meta();
+    meta.slot_bytes.clear();
+    CatpIndex index = index_with_meta(file, meta);
+    EXPECT_FALSE(index.has_slot_ranges());
+    uint64_t offset = 0;
+    uint32_t size = 0;
+    EXPECT_FALSE(index.slot_range(0, __builtin_ctz(index.entries()[0].flags | 0x100), offset, size));
+}
