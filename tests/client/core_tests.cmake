@@ -7,7 +7,7 @@ endif()
 file(GLOB CLIENT_CORE_TEST_SOURCES CONFIGURE_DEPENDS ${CMAKE_CURRENT_LIST_DIR}/test_core_*.cpp)
 catpaq_test(client_core_tests
   SOURCES ${CLIENT_CORE_TEST_SOURCES}
-  DEPS client_core catp mesh common_codec base Threads::Threads)
+  DEPS client_core catp_client catp mesh common_codec base Threads::Threads)
 # crack_check.h (the CATP crack test's welding and border count) lives with the catp tests.
 target_include_directories(client_core_tests PRIVATE ${PROJECT_SOURCE_DIR}/tests/catp)
 # Against the real server too, when it is part of the build.

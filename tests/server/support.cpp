@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "catp/format.h"
+#include "server_formats/describers.h"
 
 namespace catpaq::test {
 
@@ -156,6 +157,7 @@ RunningServer::RunningServer(const std::string& root, ServerSettings settings) {
     settings.port = 0;
     if (settings.threads == 0) settings.threads = 2;
     settings.log = [this](LogLevel level, std::string_view line) { log.add(level, line); };
+    if (settings.describers.empty()) settings.describers = builtin_dataset_describers();  // as `catpaq serve`
     server = std::make_unique<StreamingServer>(settings);
     port = server->start();
 }
