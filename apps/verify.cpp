@@ -125,7 +125,7 @@ int cmd_verify(int argc, char** argv) {
     const ArchiveKind kind = dataset_kind(dataset);
     for (const Verifier& v : kVerifiers)
         if (v.kind == kind) return v.run(dataset, mesh_path, settings);
-    fail("'%s' is a %s dataset: this build has no verifier for it", dataset.c_str(), archive_kind_name(kind));
+    fail("'%s' holds a dataset of kind %s: this build has no verifier for it", dataset.c_str(), archive_kind_name(kind));
 }
 
 }  // namespace catpaq

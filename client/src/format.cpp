@@ -39,7 +39,7 @@ const FormatModule* FormatRegistry::find(ArchiveKind kind) const {
 
 const FormatModule& FormatRegistry::module_for(const DatasetPrefix& prefix) const {
     const FormatModule* m = find(prefix.header.kind);
-    if (!m) fail("'%s' is a %s dataset, which this program cannot stream", prefix.source.c_str(),
+    if (!m) fail("'%s' holds a dataset of kind %s, which this program cannot stream", prefix.source.c_str(),
                  archive_kind_name(prefix.header.kind));
     return *m;
 }

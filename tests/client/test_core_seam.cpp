@@ -78,7 +78,7 @@ TEST(FormatSeam, ARegistryOpensADatasetByItsArchiveKind) {
         empty.module_for(prefix);
         ADD_FAILURE() << "no module, yet opened";
     } catch (const Error& e) {
-        EXPECT_NE(std::string(e.what()).find("is a points dataset"), std::string::npos) << e.what();
+        EXPECT_NE(std::string(e.what()).find("holds a dataset of kind points"), std::string::npos) << e.what();
     }
 }
 

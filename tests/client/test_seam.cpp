@@ -87,10 +87,13 @@ void expect_all_leaves_drawn(StreamingSession& session, const SessionFrameStats&
     EXPECT_EQ(s.fragments, 256u);
     ASSERT_EQ(session.items().size(), 256u);
     uint64_t triangles = 0;
+    const Hierarchy& h = session.hierarchy();
     for (const DrawnPart& item : session.items()) {
         const DecodedNode* decoded = session.decoded(item.key);
         ASSERT_NE(decoded, nullptr);
-        triangles += decoded->part_primitives.at(item.part);
+        const HierarchyNode& node = h.node(h.find(item.key));
+        for (size_t i = 0; i < node.parts.size(); ++i)  // part_primitives follow HierarchyNode::parts
+            if (node.parts[i].id == item.part) triangles += decoded->part_primitives.at(i);
     }
     EXPECT_EQ(triangles, s.triangles);
     EXPECT_GE(s.gpu_bytes, s.triangles * 36);  // the box renderer's float vertices, and earlier levels
