@@ -1,14 +1,15 @@
 #pragma once
 // LRU caches with byte budgets for the client's CPU side: compressed node bytes (optional) and
-// decoded nodes (opaque DecodedNode, client/format.h: any format). The nodes of the current cut are pinned every frame (CutEngine::pinned())
-// and never evicted; everything else goes least recently used first, so memory stays flat over
-// any camera path: bytes() <= budget() unless the pinned entries alone exceed it (the cut
-// engine's CPU budget is meant to be below the cache budget, leaving room for prefetched nodes).
-// The GPU store (client_gl) follows the same policy.
+// decoded nodes (DecodedNode, client/format.h: of any format). The nodes of the current cut are
+// pinned every frame (CutEngine::pinned()) and never evicted; everything else goes least recently
+// used first, so memory stays flat over any camera path: bytes() <= budget() unless the pinned
+// entries alone exceed it (the cut engine's CPU budget is meant to be below the cache budget,
+// leaving room for prefetched nodes). The format's GPU store (client/node_renderer.h) follows the
+// same policy.
 //
 // NodeStore glues them to the cut engine: it is the engine's Residency (a node is resident while
-// its decoded data is cached), keeps the exact per-part draw counts (PartDrawCounter) and evicts
-// under the same pins.
+// its decoded data is cached, with the data box the format gave it), keeps the exact per-part
+// draw counts (PartDrawCounter) and evicts under the same pins.
 #include <cstdint>
 #include <functional>
 #include <list>
