@@ -46,7 +46,9 @@ struct DatasetPrefix {
 
 // A node's data as its format decoded it. The format's subclass holds the data; the generic
 // side reads only these fields. Immutable once made: the fetcher's workers create it, the
-// session and the caches share it.
+// session and the caches share it. The fields are filled by the decoder rather than asked of
+// the format later, so that their work (CATP: a pass over every vertex for the data box) runs on
+// the workers, not on the render thread.
 class DecodedNode {
 public:
     virtual ~DecodedNode() = default;
@@ -110,7 +112,9 @@ public:
     virtual FormatSummary summary() const = 0;
 };
 
-// One format's factories.
+// One format's factories. The GPU side is a factory of its own, not a method of DatasetFormat, so
+// that what needs only the CPU side (the fetcher and engine tests, `info`, the benches) links
+// no GL.
 struct FormatModule {
     ArchiveKind kind = ArchiveKind::Catp;
     // Creates the format from a dataset's prefix; throws Error for metadata or an index it
