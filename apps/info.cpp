@@ -8,7 +8,7 @@
 #include "apps/commands.h"
 #include "base/error.h"
 #include "base/options.h"
-#include "catp/dataset.h"
+#include "client/builtin_formats.h"
 #include "client/fetcher.h"
 #include "common_codec/archive.h"
 #include "mesh/io.h"
@@ -20,8 +20,9 @@ static const char* kInfoUsage =
     "usage: catpaq info MESH|DATASET\n"
     "  For a mesh (PLY, OBJ, OFF, STL): counts, bounds, attributes and border edges.\n"
     "  For a dataset (a .cpq file, a server URL http://HOST:PORT/api/datasets/NAME, or the URL of a\n"
-    "  .cpq on a static server): its size, levels, input, bounds and stored error per level, read\n"
-    "  from the prefix alone (one request).\n";
+    "  .cpq on a static server): its size, levels, stored error per level and what its format\n"
+    "  records (CATP: input, bounds, vertex layout, precision, up axis), read from the prefix alone\n"
+    "  (one request).\n";
 
 // A URL, or a local file that starts with the dataset container's magic.
 static bool is_dataset(const std::string& location) {
@@ -34,50 +35,41 @@ static bool is_dataset(const std::string& location) {
 
 static void dataset_info(const std::string& location) {
     std::unique_ptr<NodeSource> source = open_node_source(location);
-    CatpIndex index = load_catp_index(*source);
-    const ArchiveHeader& h = index.header();
-    const CatpMeta& m = index.meta();
+    DatasetPrefix prefix = load_prefix(*source);
+    const ArchiveHeader& h = prefix.header;
+    // What the dataset's format says; a format this build cannot stream still gets the
+    // container's facts.
+    FormatSummary summary;
+    const FormatModule* module = builtin_formats().find(h.kind);
+    if (module) summary = module->open(prefix)->summary();
     struct Level {
-        size_t diamonds = 0;
-        uint64_t triangles = 0, bytes = 0;
+        size_t nodes = 0;
+        uint64_t primitives = 0, bytes = 0;
         double error = 0;
     };
     std::vector<Level> levels;
-    for (const ArchiveEntry& e : index.entries()) {
+    for (const ArchiveEntry& e : prefix.entries) {
         if (e.level >= levels.size()) levels.resize(size_t(e.level) + 1);
         Level& l = levels[e.level];
-        l.diamonds++;
-        l.triangles += e.count;
+        l.nodes++;
+        l.primitives += e.count;
         l.bytes += e.size;
         l.error = std::max(l.error, double(e.error));
     }
-    double d2 = 0;
-    for (int i = 0; i < 3; ++i) d2 += (m.bounds_max[i] - m.bounds_min[i]) * (m.bounds_max[i] - m.bounds_min[i]);
     std::printf("dataset:   %s\n", location.c_str());
     std::printf("format:    %s (container version %u)\n", archive_kind_name(h.kind), unsigned(h.version));
     std::printf("size:      %llu bytes, of which %llu of header, metadata and index\n", (unsigned long long)h.file_size,
                 (unsigned long long)(h.index_offset + h.index_size));
-    std::printf("nodes:     %u diamonds in %zu levels (leaf level %u)\n", unsigned(h.node_count), levels.size(),
-                unsigned(m.leaf_level));
-    std::printf("input:     %llu vertices, %llu triangles; colours %s, normals %s\n",
-                (unsigned long long)m.input_vertices, (unsigned long long)m.input_triangles,
-                (m.flags & 1) ? "from the input" : "none (one default colour)",
-                (m.flags & 2) ? "from the input" : "computed");
-    std::printf("bounds:    [%.9g %.9g %.9g] - [%.9g %.9g %.9g]\n", m.bounds_min[0], m.bounds_min[1], m.bounds_min[2],
-                m.bounds_max[0], m.bounds_max[1], m.bounds_max[2]);
-    std::printf("diagonal:  %.9g\n", std::sqrt(d2));
-    std::printf("vertices:  %s layout, grid %d\n", m.layout.name(), m.layout.grid);
-    if (m.precision > 0) {
-        std::printf("precision: %.6g", m.precision);
-        if (m.mean_edge > 0) std::printf(" (%.3g mean input edges of %.6g)", m.precision / m.mean_edge, m.mean_edge);
-        std::printf("\n");
-    }
-    std::printf("up axis:   %s\n", m.up == UpAxis::Unknown ? "not recorded (z assumed)" : up_axis_name(m.up));
-    std::printf("%6s %9s %11s %12s %12s\n", "level", "diamonds", "triangles", "bytes", "max error");
+    std::printf("nodes:     %u %s in %zu levels%s\n", unsigned(h.node_count), summary.node_noun.c_str(), levels.size(),
+                summary.levels_note.empty() ? "" : (" (" + summary.levels_note + ")").c_str());
+    if (!module) std::printf("client:    none in this build for %s datasets\n", archive_kind_name(h.kind));
+    for (const auto& [label, text] : summary.lines) std::printf("%-11s%s\n", (label + ":").c_str(), text.c_str());
+    std::printf("%6s %9s %11s %12s %12s\n", "level", summary.node_noun.c_str(), summary.primitive_noun.c_str(), "bytes",
+                "max error");
     for (size_t l = 0; l < levels.size(); ++l)
-        if (levels[l].diamonds)
-            std::printf("%6zu %9zu %11llu %12llu %12.4g\n", l, levels[l].diamonds,
-                        (unsigned long long)levels[l].triangles, (unsigned long long)levels[l].bytes, levels[l].error);
+        if (levels[l].nodes)
+            std::printf("%6zu %9zu %11llu %12llu %12.4g\n", l, levels[l].nodes, (unsigned long long)levels[l].primitives,
+                        (unsigned long long)levels[l].bytes, levels[l].error);
     std::printf("errors are stored bounds in model units (catpaq verify --mesh measures them)\n");
 }
 

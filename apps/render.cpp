@@ -1,5 +1,6 @@
 // catpaq render: headless rendering of a dataset (local path or URL) along a camera path, with
-// streaming exactly as an interactive client does it; PNG frames and per-frame statistics.
+// streaming exactly as an interactive client does it; PNG frames and per-frame statistics. Any
+// format this build streams (client/builtin_formats.h).
 #include <cerrno>
 #include <cmath>
 #include <cstring>
@@ -69,33 +70,13 @@ static std::array<float, 4> parse_color(const std::string& text) {
     return {r / 255.0f, g / 255.0f, b / 255.0f, 1.0f};
 }
 
-// The cut exactly as rendered: every drawn fragment's vertices decoded as the shader does.
+// The cut exactly as rendered: the drawn parts' geometry as the dataset's format draws it (CATP:
+// every drawn fragment's vertices decoded as the shader does), in world coordinates.
 static void export_cut(const StreamingSession& session, const Camera& camera, const std::string& path) {
-    const CatpMeta& meta = session.index().meta();
-    Camera cam = camera;
-    cam.fit_clip_planes({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
-                        {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]});
-    FrameTransform transform = frame_transform(cam, meta);
-    Mesh mesh;
-    for (const DrawItem& item : session.items()) {
-        const DiamondFragments* f = session.fragments(item.diamond_key);
-        if (!f) continue;
-        const FragmentMesh& frag = f->slots[item.slot];
-        Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(diamond_info(DiamondId{item.diamond_key}), item.slot));
-        std::array<LatticePoint, 4> corners = {t[0], t[1], t[2], t[3]};
-        uint32_t base = uint32_t(mesh.positions.size());
-        const VertexDecodeParams params = transform.params(corners);
-        for (const PackedVertex& v : frag.vertices) {
-            DecodedVertex d;
-            if (!decode_packed_vertex(v, params, d)) continue;
-            mesh.positions.push_back({transform.anchor_world.x + d.position[0], transform.anchor_world.y + d.position[1],
-                                      transform.anchor_world.z + d.position[2]});
-            mesh.normals.push_back({d.normal[0], d.normal[1], d.normal[2]});
-            mesh.colors.push_back({uint8_t(std::lround(d.color[0] * 255.0f)), uint8_t(std::lround(d.color[1] * 255.0f)),
-                                   uint8_t(std::lround(d.color[2] * 255.0f))});
-        }
-        for (uint32_t i : frag.indices) mesh.indices.push_back(base + i);
-    }
+    DrawnGeometry geometry = session.drawn_geometry({camera.eye.x, camera.eye.y, camera.eye.z});
+    Mesh& mesh = geometry.mesh;
+    for (Vec3d& p : mesh.positions)
+        for (size_t k = 0; k < 3; ++k) p[k] = geometry.origin[k] + p[k];
     write_ply(path, mesh);
 }
 
@@ -202,15 +183,15 @@ int cmd_render(int argc, char** argv) {
     // elapsed_ms in the statistics counts from here: a cold start includes loading the prefix.
     double start = now_seconds();
     StreamingSession session(location, settings);
-    const CatpMeta& meta = session.index().meta();
-    if (up.empty()) up = meta.up == UpAxis::PosY || meta.up == UpAxis::NegY ? "y" : "z";  // the dataset's
+    const Aabb bounds = session.format().world_bounds();
+    if (up.empty()) up = session.format().up_axis() == 1 ? "y" : "z";  // the dataset's
     if (path_file.empty() && up == "z") {
-        path = orbit_path({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
-                          {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]}, orbit, width, height);
+        path = orbit_path({bounds.min[0], bounds.min[1], bounds.min[2]}, {bounds.max[0], bounds.max[1], bounds.max[2]},
+                          orbit, width, height);
     } else if (path_file.empty()) {
         // A y-up model: orbit the box with y and z exchanged, then exchange them back.
-        path = orbit_path({meta.bounds_min[0], meta.bounds_min[2], meta.bounds_min[1]},
-                          {meta.bounds_max[0], meta.bounds_max[2], meta.bounds_max[1]}, orbit, width, height);
+        path = orbit_path({bounds.min[0], bounds.min[2], bounds.min[1]}, {bounds.max[0], bounds.max[2], bounds.max[1]},
+                          orbit, width, height);
         for (Camera& c : path.frames) {
             std::swap(c.eye.y, c.eye.z);
             std::swap(c.target.y, c.target.z);

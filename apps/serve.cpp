@@ -6,6 +6,7 @@
 #include "base/error.h"
 #include "base/options.h"
 #include "server/server.h"
+#include "server_formats/describers.h"
 
 namespace catpaq {
 
@@ -29,6 +30,7 @@ int cmd_serve(int argc, char** argv) {
         return 0;
     }
     ServerSettings settings;
+    settings.describers = builtin_dataset_describers();
     settings.root = options.require("root");
     settings.port = uint16_t(options.integer("port", 8080, 0, 65535));
     settings.bind = options.get("bind", "127.0.0.1");

@@ -1,11 +1,14 @@
-// catpaq verify DATASET [--mesh ORIGINAL]: checks a dataset's invariants and measures its error.
+// catpaq verify DATASET [--mesh ORIGINAL]: checks a dataset's invariants and measures its error,
+// with the verifier of the dataset's format.
 #include <algorithm>
 #include <cstdio>
+#include <fstream>
 
 #include "apps/commands.h"
 #include "base/error.h"
 #include "base/options.h"
 #include "catp/verify.h"
+#include "common_codec/archive.h"
 #include "mesh/io.h"
 
 namespace catpaq {
@@ -25,24 +28,15 @@ static const char* kVerifyUsage =
     "  --samples N     surface samples per level and direction (default 50000)\n"
     "  --quiet         no progress display\n";
 
-int cmd_verify(int argc, char** argv) {
-    Options options(argc, argv, kVerifyUsage, {"quiet"});
-    if (options.help()) {
-        std::printf("%s", kVerifyUsage);
-        return 0;
-    }
-    if (options.positional().size() != 1) usage_error("expected one dataset");
-    std::string mesh_path = options.get("mesh", "");
-    VerifySettings settings;
-    settings.samples_per_level = size_t(options.integer("samples", 50000, 100, 100000000));
-    settings.progress = !options.flag("quiet");
-    options.finish();
+// CATP: decodes every diamond, checks the invariants and, with the original, measures each
+// level's distance to it (catp/verify.h); prints the report.
+static int verify_catp_dataset(const std::string& dataset, const std::string& mesh_path, const VerifySettings& settings) {
     Mesh original;
     if (!mesh_path.empty()) original = read_mesh(mesh_path);
-    VerifyReport r = verify_catp(options.positional()[0], mesh_path.empty() ? nullptr : &original, settings);
+    VerifyReport r = verify_catp(dataset, mesh_path.empty() ? nullptr : &original, settings);
 
-    std::printf("dataset:  %s: %llu bytes, %zu diamonds, %zu fragments, %zu triangles\n",
-                options.positional()[0].c_str(), (unsigned long long)r.file_bytes, r.nodes, r.fragments, r.triangles);
+    std::printf("dataset:  %s: %llu bytes, %zu diamonds, %zu fragments, %zu triangles\n", dataset.c_str(),
+                (unsigned long long)r.file_bytes, r.nodes, r.fragments, r.triangles);
     std::printf("checks:   checksums %s, decode %s, flags %s, monotone errors %s, shared faces %s (%zu checked)\n",
                 r.checksum_failures ? "FAIL" : "ok", r.corrupt_nodes ? "FAIL" : "ok", r.bad_flags ? "FAIL" : "ok",
                 r.monotonicity_violations ? "FAIL" : "ok", r.face_mismatches ? "FAIL" : "ok", r.faces_checked);
@@ -94,6 +88,44 @@ int cmd_verify(int argc, char** argv) {
     for (const std::string& p : r.problems) std::printf("problem: %s\n", p.c_str());
     std::printf("%s\n", r.ok() ? "verify: OK" : "verify: FAILED");
     return r.ok() ? 0 : 1;
+}
+
+// The verifier of each dataset kind this build has (the format's own checks: the container's
+// checksums are one of them).
+struct Verifier {
+    ArchiveKind kind;
+    int (*run)(const std::string& dataset, const std::string& mesh_path, const VerifySettings& settings);
+};
+static const Verifier kVerifiers[] = {{ArchiveKind::Catp, verify_catp_dataset}};
+
+// The kind named in a dataset's header; CATP when the header cannot be read, so that its verifier
+// reports the problem (a missing file, a corrupt header) as it always has.
+static ArchiveKind dataset_kind(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    uint8_t header[kArchiveHeaderSize] = {};
+    in.read(reinterpret_cast<char*>(header), sizeof header);
+    ArchiveHeader h;
+    if (!in || !parse_archive_header(header, sizeof header, h).empty()) return ArchiveKind::Catp;
+    return h.kind;
+}
+
+int cmd_verify(int argc, char** argv) {
+    Options options(argc, argv, kVerifyUsage, {"quiet"});
+    if (options.help()) {
+        std::printf("%s", kVerifyUsage);
+        return 0;
+    }
+    if (options.positional().size() != 1) usage_error("expected one dataset");
+    std::string mesh_path = options.get("mesh", "");
+    VerifySettings settings;
+    settings.samples_per_level = size_t(options.integer("samples", 50000, 100, 100000000));
+    settings.progress = !options.flag("quiet");
+    options.finish();
+    const std::string& dataset = options.positional()[0];
+    const ArchiveKind kind = dataset_kind(dataset);
+    for (const Verifier& v : kVerifiers)
+        if (v.kind == kind) return v.run(dataset, mesh_path, settings);
+    fail("'%s' holds a dataset of kind %s: this build has no verifier for it", dataset.c_str(), archive_kind_name(kind));
 }
 
 }  // namespace catpaq

@@ -33,8 +33,9 @@
 //
 // The cut: the project's CutEngine (client/cut_engine.h) on the CATP hierarchy
 // (build_catp_hierarchy), every node resident with its exact bytes and per-slot triangle counts
-// (from decoding every node, as client/src/session.cpp does on arrival), no budgets, the view
-// built from the camera exactly as StreamingSession::step builds it; run until nothing changes.
+// (from decoding every node with CatpFormat::decode, as a session does on arrival), no budgets,
+// the view built from the camera exactly as StreamingSession::step builds it; run until nothing
+// changes.
 // On the report's 2M-triangle scans (first and last views of its paths) `catpaq render FILE
 // --camera-path VIEW --stats` fetched exactly the 64 KiB prefix probe plus (a), with the same
 // requests, triangles, refined and drawn counts and certified error.
@@ -59,6 +60,7 @@
 #include "catp/dataset.h"
 #include "catp/format.h"
 #include "catp/lattice.h"
+#include "catp_client/catp_format.h"
 #include "client/camera.h"
 #include "client/cut_engine.h"
 #include "client/fetcher.h"
@@ -105,6 +107,7 @@ struct FinestLevel {
 
 struct Dataset {
     std::unique_ptr<CatpFile> file;
+    std::unique_ptr<CatpFormat> format;  // decodes as the session does (catp_client/catp_format.h)
     Hierarchy hierarchy;
     std::unique_ptr<PartDrawCounter> counter;
     std::vector<NodeInfo> nodes;  // by hierarchy node
@@ -141,22 +144,6 @@ Aabb lattice_box_to_world(const CatpIndex& index, const Tetrahedron& t) {
     return box;
 }
 
-// The session's accounting of a decoded node (client/src/session.cpp, integrate): CPU bytes of
-// every part, GPU bytes of the parts with triangles (16-bit indices below 65536 vertices).
-NodeBytes decoded_bytes(const HierarchyNode& n, const DiamondFragments& f, std::vector<uint32_t>& counts) {
-    NodeBytes bytes;
-    counts.clear();
-    for (const HierarchyPart& part : n.parts) {
-        const FragmentMesh& fragment = f.slots[part.id];
-        counts.push_back(uint32_t(fragment.triangle_count()));
-        bytes.cpu += fragment.vertices.size() * sizeof(PackedVertex) + fragment.indices.size() * 4;
-        if (fragment.indices.empty()) continue;
-        bytes.gpu += fragment.vertices.size() * sizeof(PackedVertex) +
-                     fragment.indices.size() * (fragment.vertices.size() < 65536 ? 2 : 4);
-    }
-    return bytes;
-}
-
 // Appends a leaf slot's vertices and triangles in world coordinates (exact integer decode).
 void add_finest_slot(const CatpIndex& index, const DiamondInfo& info, int slot, const FragmentMesh& fragment,
                      uint32_t slot_bytes, FinestLevel& out) {
@@ -190,9 +177,11 @@ void load_node(Dataset& d, uint32_t n) {
     std::string error;
     const uint8_t* payload = d.file->archive().node(node.entry, &error);
     if (!payload) fail("%s", error.c_str());
-    DiamondFragments fragments;
-    std::string problem = decode_diamond_node(payload, entry.size, index.meta().layout, fragments);
+    // The session's decode and accounting (CatpFormat::decode): sizes, exact per-slot counts.
+    std::shared_ptr<const DecodedNode> decoded;
+    std::string problem = d.format->decode(n, payload, entry.size, decoded);
     if (!problem.empty()) fail("diamond %llu: %s", (unsigned long long)node.key, problem.c_str());
+    const DiamondFragments& fragments = catp_fragments(*decoded);
     std::array<uint32_t, 8> sizes = slot_sizes(payload, entry.size, node.key);
     DiamondInfo info = diamond_info(DiamondId{node.key});
     NodeInfo& out = d.nodes[n];
@@ -204,9 +193,8 @@ void load_node(Dataset& d, uint32_t n) {
         if (node.leaf) add_finest_slot(index, info, part.id, fragments.slots[part.id], p.bytes, d.finest);
     }
     d.finest.nodes += node.leaf;
-    std::vector<uint32_t> counts;
-    out.memory = decoded_bytes(node, fragments, counts);
-    d.counter->set_counts(n, counts.data(), counts.size());
+    out.memory = decoded->bytes;
+    d.counter->set_counts(n, decoded->part_primitives.data(), decoded->part_primitives.size());
     d.node_bytes += node.payload_bytes;
 }
 
@@ -214,7 +202,9 @@ void load_node(Dataset& d, uint32_t n) {
 Dataset load_dataset(const std::string& path) {
     Dataset d;
     d.file = std::make_unique<CatpFile>(path);
-    d.hierarchy = build_catp_hierarchy(d.file->index());
+    d.format = std::make_unique<CatpFormat>(
+        DatasetPrefix::parse(d.file->archive().data(), d.file->archive().prefix_size(), path));
+    d.hierarchy = d.format->hierarchy();
     d.counter = std::make_unique<PartDrawCounter>(d.hierarchy);
     d.nodes.resize(d.hierarchy.size());
     d.prefix_bytes = d.file->archive().prefix_size();

@@ -31,11 +31,11 @@
 #include "catp/builder.h"
 #include "catp/cut.h"
 #include "catp/dataset.h"
+#include "catp_client/catp_gpu.h"
+#include "catp_client/static_render.h"
 #include "client/camera.h"
-#include "client/catp_gpu.h"
 #include "client/gl_context.h"
 #include "client/image.h"
-#include "client/static_render.h"
 #include "mesh/generators.h"
 
 using namespace catpaq;

@@ -172,9 +172,15 @@ std::vector<uint8_t> fetch_prefix(NodeSource& source, int attempts) {
     fail("%s: cannot load the dataset prefix: %s", source.describe().c_str(), last.c_str());
 }
 
-CatpIndex load_catp_index(NodeSource& source, int attempts) {
+DatasetPrefix load_prefix(NodeSource& source, int attempts) {
     std::vector<uint8_t> bytes = fetch_prefix(source, attempts);
-    return CatpIndex::from_prefix(bytes.data(), bytes.size(), source.describe());
+    return DatasetPrefix::parse(bytes.data(), bytes.size(), source.describe());
+}
+
+NodeDecoder format_decoder(const DatasetFormat& format) {
+    return [&format](const FetchRequest& request, const uint8_t* data, size_t size, std::shared_ptr<const DecodedNode>& out) {
+        return format.decode(request.node, data, size, out);
+    };
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -192,12 +198,6 @@ FetchRequest FetchRequest::of(const HierarchyNode& node) {
 
 Fetcher::Fetcher(std::unique_ptr<NodeSource> source, FetcherSettings settings)
     : source_(std::move(source)), settings_(std::move(settings)) {
-    if (!settings_.decode) {
-        settings_.decode = [layout = settings_.layout](const FetchRequest&, const uint8_t* data, size_t size,
-                                                       DiamondFragments& out) {
-            return decode_diamond_node(data, size, layout, out);
-        };
-    }
     if (settings_.max_attempts == 0) settings_.max_attempts = 1;
     size_t threads = std::max<size_t>(1, settings_.decode_threads);
     for (size_t i = 0; i < threads; ++i) workers_.emplace_back([this] { decode_loop(); });
@@ -567,12 +567,15 @@ void Fetcher::decode_loop() {
             d.node.error = strprintf("node %llu: %zu bytes that do not match the index checksum",
                                      (unsigned long long)job.request.key, bytes.size());
         } else {
-            auto fragments = std::make_shared<DiamondFragments>();
+            std::shared_ptr<const DecodedNode> decoded;
             std::string problem;
-            try {
-                problem = settings_.decode(job.request, bytes.data(), bytes.size(), *fragments);
-            } catch (const std::exception& e) {
-                problem = e.what();
+            if (settings_.decode) {
+                try {
+                    problem = settings_.decode(job.request, bytes.data(), bytes.size(), decoded);
+                } catch (const std::exception& e) {
+                    problem = e.what();
+                }
+                if (problem.empty() && !decoded) problem = "the decoder gave no data";
             }
             if (!problem.empty()) {
                 d.corrupt = true;
@@ -580,7 +583,7 @@ void Fetcher::decode_loop() {
             } else {
                 d.node.ok = true;
                 d.node.compressed = job.bytes;
-                d.node.fragments = std::move(fragments);
+                d.node.decoded = std::move(decoded);
             }
         }
         {

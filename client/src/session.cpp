@@ -5,37 +5,37 @@
 
 #include "base/error.h"
 #include "base/sysinfo.h"
-#include "catp/dataset.h"
-#include "catp/distance.h"
-#include "common_codec/barycentric.h"
+#include "client/builtin_formats.h"
 
 namespace catpaq {
 
 StreamingSession::StreamingSession(const std::string& location, const SessionSettings& settings)
     : settings_(settings) {
     std::unique_ptr<NodeSource> source = open_node_source(location, settings.http);
-    std::vector<uint8_t> prefix = fetch_prefix(*source);
-    prefix_bytes_ = prefix.size();
-    index_ = std::make_unique<CatpIndex>(CatpIndex::from_prefix(prefix.data(), prefix.size(), location));
-    hierarchy_ = build_catp_hierarchy(*index_);
-    counter_ = std::make_unique<PartDrawCounter>(hierarchy_);
-    residency_ = std::make_unique<ResidencyTable>(hierarchy_);
+    std::vector<uint8_t> prefix_bytes = fetch_prefix(*source);
+    prefix_bytes_ = prefix_bytes.size();
+    DatasetPrefix prefix = DatasetPrefix::parse(prefix_bytes.data(), prefix_bytes.size(), location);
+    const FormatModule& module = (settings.formats ? *settings.formats : builtin_formats()).module_for(prefix);
+    format_ = module.open(prefix);
+    const Hierarchy& hierarchy = format_->hierarchy();
+    counter_ = std::make_unique<PartDrawCounter>(hierarchy);
+    residency_ = std::make_unique<ResidencyTable>(hierarchy);
     residency_->set_distance_function([this](uint32_t node, const std::array<double, 3>& eye) { return data_distance(node, eye); });
-    engine_ = std::make_unique<CutEngine>(hierarchy_, *counter_, settings.budgets);
+    engine_ = std::make_unique<CutEngine>(hierarchy, *counter_, settings.budgets);
     FetcherSettings fetcher_settings = settings.fetcher;
-    fetcher_settings.layout = index_->meta().layout;
+    fetcher_settings.decode = format_decoder(*format_);
     fetcher_ = std::make_unique<Fetcher>(std::move(source), fetcher_settings);
-    store_.set_budget(settings.gpu_cache_bytes);
-    store_.set_eviction_callback([this](uint64_t key, int) {
-        uint32_t node = hierarchy_.find(key);
+    renderer_ = module.create_renderer(*format_);
+    renderer_->set_budget(settings.gpu_cache_bytes);
+    renderer_->set_eviction_callback([this](uint64_t key, uint8_t) {
+        uint32_t node = format_->hierarchy().find(key);
         if (node != kNoNode) evict(node);
     });
-    renderer_ = std::make_unique<CatpRenderer>(store_);
     compressed_ = std::make_unique<CompressedCache>(settings.compressed_cache_bytes);
 }
 
 StreamingSession::~StreamingSession() {
-    store_.set_eviction_callback(nullptr);
+    if (renderer_) renderer_->set_eviction_callback(nullptr);
 }
 
 void StreamingSession::evict(uint32_t node) {
@@ -43,9 +43,9 @@ void StreamingSession::evict(uint32_t node) {
     residency_->set_evicted(node);
     decoded_.erase(node);
     distances_.erase(node);
-    const HierarchyNode& n = hierarchy_.node(node);
+    const HierarchyNode& n = hierarchy().node(node);
     for (const HierarchyPart& part : n.parts)
-        if (store_.resident(n.key, part.id)) store_.release(n.key, part.id);
+        if (renderer_->resident(n.key, part.id)) renderer_->release(n.key, part.id);
 }
 
 std::vector<const char*> session_limit_names(uint8_t limits) {
@@ -58,36 +58,10 @@ std::vector<const char*> session_limit_names(uint8_t limits) {
     return out;
 }
 
-// The box of a node's decoded vertices (world): where its geometry really is, for the cut
-// engine's projected errors (the hierarchy's box also covers the descendants).
-Aabb StreamingSession::data_bounds(const HierarchyNode& node, const DiamondFragments& fragments) const {
-    const CatpMeta& meta = index_->meta();
-    Aabb box;
-    std::vector<std::array<int64_t, 3>> exact;
-    DiamondInfo info = diamond_info(DiamondId{node.key});
-    for (const HierarchyPart& part : node.parts) {
-        const FragmentMesh& fragment = fragments.slots[part.id];
-        if (fragment.indices.empty() || !decode_fragment_integer_positions(fragment, info, int(part.id), exact)) continue;
-        for (const auto& p : exact) {
-            std::array<double, 3> world;
-            for (int k = 0; k < 3; ++k) world[k] = meta.origin[k] + double(p[k]) / meta.layout.grid * meta.cell;
-            box.extend(world);
-        }
-    }
-    if (box.empty()) return box;
-    // Rounding: a hair larger, never smaller, than the decoded positions.
-    double slack = meta.cell * 1e-6;
-    for (int k = 0; k < 3; ++k) {
-        box.min[k] -= slack + std::abs(box.min[k]) * 1e-12;
-        box.max[k] += slack + std::abs(box.max[k]) * 1e-12;
-    }
-    return box;
-}
-
-// The distance from the eye to the triangles of a resident node (all its parts: a superset of
-// what it draws), measured on the CPU from the decoded vertices. Distances are 1-Lipschitz in
-// the eye, so an earlier measure minus how far the eye moved since is still a lower bound; the
-// triangles are measured again only when the eye moved more than a tenth of that distance.
+// A lower bound of the distance from the eye to a resident node's geometry, measured by its
+// format (DatasetFormat::data_distance). Distances are 1-Lipschitz in the eye, so an earlier
+// measure minus how far the eye moved since is still a lower bound; the node is measured again
+// only when the eye moved more than a tenth of that distance.
 double StreamingSession::data_distance(uint32_t node, const std::array<double, 3>& eye) {
     auto moved = [&](const std::array<double, 3>& from) {
         return std::sqrt((eye[0] - from[0]) * (eye[0] - from[0]) + (eye[1] - from[1]) * (eye[1] - from[1]) +
@@ -98,60 +72,34 @@ double StreamingSession::data_distance(uint32_t node, const std::array<double, 3
         return cached->second.distance - moved(cached->second.eye);
     auto it = decoded_.find(node);
     if (it == decoded_.end()) return 0;
-    const HierarchyNode& n = hierarchy_.node(node);
-    const CatpMeta& meta = index_->meta();
-    DiamondInfo info = diamond_info(DiamondId{n.key});
-    std::vector<std::array<int64_t, 3>> exact;
-    std::vector<std::array<double, 3>> world;
-    double best2 = INFINITY;
-    for (const HierarchyPart& part : n.parts) {
-        const FragmentMesh& fragment = it->second->slots[part.id];
-        if (fragment.indices.empty() || !decode_fragment_integer_positions(fragment, info, int(part.id), exact)) continue;
-        world.resize(exact.size());
-        for (size_t v = 0; v < exact.size(); ++v)
-            for (int k = 0; k < 3; ++k) world[v][k] = meta.origin[k] + double(exact[v][k]) / meta.layout.grid * meta.cell;
-        for (size_t t = 0; t + 2 < fragment.indices.size(); t += 3)
-            best2 = std::min(best2, point_triangle_distance2(eye, world[fragment.indices[t]], world[fragment.indices[t + 1]],
-                                                             world[fragment.indices[t + 2]]));
-    }
-    if (!std::isfinite(best2)) return 0;
-    // Decoding rounds: a hair less than measured, never more.
-    double distance = std::max(0.0, std::sqrt(best2) * (1 - 1e-9) - meta.cell * 1e-6);
-    distances_[node] = {eye, distance};
-    return distance;
+    std::optional<double> distance = format_->data_distance(node, *it->second, eye);
+    if (!distance) return 0;
+    distances_[node] = {eye, *distance};
+    return *distance;
 }
 
 void StreamingSession::integrate(std::vector<FetchedNode>& arrived) {
     for (FetchedNode& f : arrived) {
         supplied_.erase(f.key);
-        if (!f.ok || !f.fragments || f.node == kNoNode) {
+        if (!f.ok || !f.decoded || f.node == kNoNode) {
             // Failed every attempt: recorded once (the fetcher retries it later if still wanted).
             if (!f.ok && f.node != kNoNode) residency_->set_failed(f.node, true);
             if (!f.ok && f.node != kNoNode && failed_keys_.insert(f.key).second) {
                 std::string error = f.error, prefix = "node " + std::to_string(f.key) + ": ";
                 if (error.rfind(prefix, 0) == 0) error.erase(0, prefix.size());  // the key is said once
-                failures_.push_back({f.key, hierarchy_.node(f.node).level, error});
+                failures_.push_back({f.key, hierarchy().node(f.node).level, error});
             }
             continue;
         }
         failed_keys_.erase(f.key);
         residency_->set_failed(f.node, false);
-        const HierarchyNode& n = hierarchy_.node(f.node);
+        const HierarchyNode& n = hierarchy().node(f.node);
         if (f.compressed) compressed_->insert(n.key, f.compressed, f.compressed->size());
-        NodeBytes bytes;
-        std::vector<uint32_t> counts;
-        for (const HierarchyPart& part : n.parts) {
-            const FragmentMesh& fragment = f.fragments->slots[part.id];
-            counts.push_back(uint32_t(fragment.triangle_count()));
-            bytes.cpu += fragment.vertices.size() * sizeof(PackedVertex) + fragment.indices.size() * 4;
-            if (fragment.indices.empty()) continue;
-            store_.upload(n.key, part.id, fragment);
-            bytes.gpu += fragment.vertices.size() * sizeof(PackedVertex) +
-                         fragment.indices.size() * (fragment.vertices.size() < 65536 ? 2 : 4);
-        }
-        counter_->set_counts(f.node, counts.data(), counts.size());
-        residency_->set_resident(f.node, bytes, data_bounds(n, *f.fragments));
-        decoded_[f.node] = f.fragments;
+        const DecodedNode& decoded = *f.decoded;
+        renderer_->upload(n, decoded);
+        counter_->set_counts(f.node, decoded.part_primitives.data(), decoded.part_primitives.size());
+        residency_->set_resident(f.node, decoded.bytes, decoded.data_bounds);
+        decoded_[f.node] = f.decoded;
     }
 }
 
@@ -162,9 +110,8 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
 
     Camera cam = camera;
     if (!cam.has_clip_planes()) {
-        const CatpMeta& m = index_->meta();
-        cam.fit_clip_planes({m.bounds_min[0], m.bounds_min[1], m.bounds_min[2]},
-                            {m.bounds_max[0], m.bounds_max[1], m.bounds_max[2]});
+        const Aabb bounds = format_->world_bounds();
+        cam.fit_clip_planes({bounds.min[0], bounds.min[1], bounds.min[2]}, {bounds.max[0], bounds.max[1], bounds.max[2]});
     }
     ViewParams view = ViewParams::look_at({camera.eye.x, camera.eye.y, camera.eye.z},
                                           {camera.target.x, camera.target.y, camera.target.z},
@@ -176,8 +123,9 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
 
     std::vector<FetchRequest> wanted;
     wanted.reserve(frame.requests.size());
+    const Hierarchy& h = hierarchy();
     for (const CutRequest& r : frame.requests) {
-        const HierarchyNode& n = hierarchy_.node(r.node);
+        const HierarchyNode& n = h.node(r.node);
         if (supplied_.count(n.key)) continue;
         if (const auto* bytes = compressed_->get(n.key)) {  // evicted earlier: decode again, no fetch
             fetcher_->supply(FetchRequest::of(n), *bytes);
@@ -188,27 +136,27 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
     }
     fetcher_->request(wanted);
 
-    // Keep the cut's fragments on the GPU; evict least recently used others past the budget.
-    store_.begin_frame();
-    store_.unpin_all();
+    // Keep the cut's parts on the GPU; evict least recently used others past the budget.
+    renderer_->begin_frame();
+    renderer_->unpin_all();
     for (uint32_t node : engine_->pinned()) {
-        const HierarchyNode& n = hierarchy_.node(node);
+        const HierarchyNode& n = h.node(node);
         for (const HierarchyPart& part : n.parts)
-            if (store_.resident(n.key, part.id)) store_.pin(n.key, part.id);
+            if (renderer_->resident(n.key, part.id)) renderer_->pin(n.key, part.id);
     }
     items_.clear();
     for (uint32_t node : engine_->drawn_nodes()) {
-        const HierarchyNode& n = hierarchy_.node(node);
+        const HierarchyNode& n = h.node(node);
         if (!n.has_data) continue;
         for (const HierarchyPart& part : n.parts) {
             bool parent_refined = part.parent == kNoNode || engine_->refined(part.parent);
-            if (parent_refined && store_.resident(n.key, part.id)) {
+            if (parent_refined && renderer_->resident(n.key, part.id)) {
                 items_.push_back({n.key, part.id});
-                store_.mark_used(n.key, part.id);
+                renderer_->mark_used(n.key, part.id);
             }
         }
     }
-    store_.evict_to_budget();
+    renderer_->evict_to_budget();
 
     FetcherStats fs = fetcher_->stats();
     SessionFrameStats s;
@@ -219,7 +167,7 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
     s.bytes_fetched = prefix_bytes_ + fs.bytes_fetched;
     s.requests = fs.transfers;
     s.pending = frame.requests.size();
-    s.gpu_bytes = store_.gpu_bytes();
+    s.gpu_bytes = renderer_->gpu_bytes();
     s.cpu_bytes = frame.stats.cpu_bytes + compressed_->bytes();
     s.cut_ms = frame.stats.seconds * 1000.0;
     s.certified_error_px = frame.stats.certified_error_px;
@@ -252,13 +200,24 @@ uint8_t StreamingSession::limits(const CutFrame& frame, const SessionFrameStats&
 }
 
 RenderStats StreamingSession::draw(const Camera& camera, const RenderSettings& render) {
-    return renderer_->render(camera, index_->meta(), items_, render);
+    return renderer_->draw(camera, items_, render);
 }
 
-const DiamondFragments* StreamingSession::fragments(uint64_t key) const {
-    uint32_t node = hierarchy_.find(key);
+const DecodedNode* StreamingSession::decoded(uint64_t key) const {
+    uint32_t node = hierarchy().find(key);
     auto it = decoded_.find(node);
     return it == decoded_.end() ? nullptr : it->second.get();
+}
+
+DrawnGeometry StreamingSession::drawn_geometry(const std::array<double, 3>& eye) const {
+    std::vector<DecodedPart> parts;
+    parts.reserve(items_.size());
+    for (const DrawnPart& item : items_) {
+        uint32_t node = hierarchy().find(item.key);
+        auto it = decoded_.find(node);
+        if (it != decoded_.end()) parts.push_back({node, it->second.get(), item.part});
+    }
+    return format_->drawn_geometry(parts, eye);
 }
 
 }  // namespace catpaq

@@ -15,10 +15,8 @@
 #include <imgui.h>
 
 #include "base/error.h"
-#include "catp/lattice.h"
 #include "client/gl_context.h"
 #include "client/image.h"
-#include "common_codec/packed_vertex.h"
 
 namespace catpaq {
 
@@ -147,41 +145,18 @@ std::optional<double> intersect_triangle(const Ray& ray, const glm::dvec3& a, co
 }
 
 std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera& camera, const Ray& ray) {
-    const CatpMeta& meta = session.index().meta();
-    Camera cam = camera;
-    if (!cam.has_clip_planes())
-        cam.fit_clip_planes({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
-                            {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]});
-    FrameTransform transform = frame_transform(cam, meta);
-    // Work relative to the anchor (near the eye) so large coordinates keep their precision.
-    Ray local{ray.origin - transform.anchor_world, ray.direction};
+    // The drawn triangles relative to a point near the eye (the format's frame), so large
+    // coordinates keep their precision.
+    DrawnGeometry geometry = session.drawn_geometry({camera.eye.x, camera.eye.y, camera.eye.z});
+    const glm::dvec3 origin(geometry.origin[0], geometry.origin[1], geometry.origin[2]);
+    const Ray local{ray.origin - origin, ray.direction};
+    const Mesh& mesh = geometry.mesh;
     double best = std::numeric_limits<double>::infinity();
-    std::vector<glm::dvec3> positions;
-    std::vector<uint8_t> valid;
-    for (const DrawItem& item : session.items()) {
-        const DiamondFragments* f = session.fragments(item.diamond_key);
-        if (!f) continue;
-        const FragmentMesh& frag = f->slots[item.slot];
-        if (frag.indices.empty()) continue;
-        Tetrahedron tet =
-            canonical_tetrahedron(diamond_tetrahedron(diamond_info(DiamondId{item.diamond_key}), item.slot));
-        std::array<LatticePoint, 4> corners = {tet[0], tet[1], tet[2], tet[3]};
-        const VertexDecodeParams params = transform.params(corners);
-        positions.resize(frag.vertices.size());
-        valid.assign(frag.vertices.size(), 0);
-        for (size_t i = 0; i < frag.vertices.size(); ++i) {
-            DecodedVertex d;
-            if (!decode_packed_vertex(frag.vertices[i], params, d)) continue;
-            positions[i] = glm::dvec3(d.position[0], d.position[1], d.position[2]);
-            valid[i] = 1;
-        }
-        for (size_t i = 0; i + 2 < frag.indices.size(); i += 3) {
-            uint32_t a = frag.indices[i], b = frag.indices[i + 1], c = frag.indices[i + 2];
-            if (a >= positions.size() || b >= positions.size() || c >= positions.size()) continue;
-            if (!valid[a] || !valid[b] || !valid[c]) continue;
-            std::optional<double> t = intersect_triangle(local, positions[a], positions[b], positions[c]);
-            if (t && *t < best) best = *t;
-        }
+    auto position = [&](uint32_t v) { return glm::dvec3(mesh.positions[v][0], mesh.positions[v][1], mesh.positions[v][2]); };
+    for (size_t i = 0; i + 2 < mesh.indices.size(); i += 3) {
+        std::optional<double> t =
+            intersect_triangle(local, position(mesh.indices[i]), position(mesh.indices[i + 1]), position(mesh.indices[i + 2]));
+        if (t && *t < best) best = *t;
     }
     if (!std::isfinite(best)) return std::nullopt;
     return ray.origin + best * ray.direction;
@@ -371,13 +346,13 @@ void DesktopViewer::Impl::open() {
 
     session = std::make_unique<StreamingSession>(settings.location, settings.session);
     tolerance = float(settings.session.tolerance_px);
-    const CatpMeta& meta = session->index().meta();
+    const DatasetFormat& format = session->format();
     // The up axis: as asked, else the dataset's (z when it records none).
-    if (settings.up_axis == 0) controller = OrbitController(meta.up == UpAxis::PosY || meta.up == UpAxis::NegY ? 1 : 2);
+    if (settings.up_axis == 0) controller = OrbitController(format.up_axis() == 1 ? 1 : 2);
     int fbw, fbh;
     glfwGetFramebufferSize(window, &fbw, &fbh);
-    controller.frame_box({meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]},
-                         {meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]}, 45,
+    const Aabb bounds = format.world_bounds();
+    controller.frame_box({bounds.min[0], bounds.min[1], bounds.min[2]}, {bounds.max[0], bounds.max[1], bounds.max[2]}, 45,
                          double(std::max(fbw, 1)) / double(std::max(fbh, 1)));
     render.background = {0.12f, 0.13f, 0.15f, 1.0f};
 

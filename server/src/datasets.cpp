@@ -1,6 +1,7 @@
 #include "datasets.h"
 
 #include <algorithm>
+#include <cctype>
 #include <cerrno>
 #include <climits>
 #include <cstdlib>
@@ -11,7 +12,6 @@
 #include <nlohmann/json.hpp>
 
 #include "base/error.h"
-#include "catp/format.h"
 #include "http.h"
 
 namespace catpaq::serve {
@@ -43,7 +43,40 @@ static json bounds_json(const Dataset& d) {
 
 static std::string dump(const json& j) { return j.dump(-1, ' ', false, json::error_handler_t::replace); }
 
-void Registry::scan(const std::string& root, const Logger& log) {
+// The format's part of a dataset's details: bounds and the decoded metadata under the format's
+// name. A describer that fails (or throws) leaves the dataset served without them.
+static void describe(Dataset& d, const DatasetDescriber& describer, json& details, const Logger& log) {
+    const ArchiveHeader& h = d.reader->header();
+    DatasetDescription description;
+    std::string problem;
+    try {
+        problem = describer(h, d.reader->meta(), description);
+    } catch (const std::exception& e) {
+        problem = e.what();
+    }
+    json format_details;
+    if (problem.empty() && !description.details_json.empty()) {
+        format_details = json::parse(description.details_json, nullptr, false);
+        if (!format_details.is_object()) problem = "its description is not a JSON object";
+    }
+    if (!problem.empty()) {
+        std::string format = archive_kind_name(h.kind);
+        for (char& c : format) c = char(std::toupper(uint8_t(c)));
+        log.logf(LogLevel::Warn, "dataset '%s': cannot decode its %s metadata (%s); serving it without bounds",
+                 d.name.c_str(), format.c_str(), problem.c_str());
+        details["meta_error"] = problem;
+        return;
+    }
+    if (description.has_bounds) {
+        d.has_bounds = true;
+        std::copy(description.bounds_min.begin(), description.bounds_min.end(), d.bounds_min);
+        std::copy(description.bounds_max.begin(), description.bounds_max.end(), d.bounds_max);
+        details["bounds"] = bounds_json(d);
+    }
+    if (format_details.is_object()) details[archive_kind_name(h.kind)] = std::move(format_details);
+}
+
+void Registry::scan(const std::string& root, const DatasetDescribers& describers, const Logger& log) {
     if (root.empty()) fail("no dataset root given");
     if (!real_path(root, real_root_)) fail("dataset root '%s': %s", root.c_str(), std::strerror(errno));
     struct stat st{};
@@ -83,7 +116,7 @@ void Registry::scan(const std::string& root, const Logger& log) {
                      relative.c_str(), resolved.c_str(), real_root_.c_str());
             continue;
         }
-        add(relative, resolved, log);
+        add(relative, resolved, describers, log);
     }
 
     json catalog = json::array();
@@ -100,7 +133,8 @@ void Registry::scan(const std::string& root, const Logger& log) {
     catalog_json_ = dump(json{{"datasets", std::move(catalog)}});
 }
 
-void Registry::add(const std::string& relative, const std::string& resolved, const Logger& log) {
+void Registry::add(const std::string& relative, const std::string& resolved, const DatasetDescribers& describers,
+                   const Logger& log) {
     for (char c : relative) {
         if (uint8_t(c) < 0x20 || uint8_t(c) == 0x7f || c == '\\') {
             log.logf(LogLevel::Warn, "skipping dataset '%s': its path has a control byte or a backslash",
@@ -159,28 +193,7 @@ void Registry::add(const std::string& relative, const std::string& resolved, con
     for (const auto& [level, counts] : levels)
         level_list.push_back(json{{"level", level}, {"nodes", counts.first}, {"bytes", counts.second}});
     details["levels"] = std::move(level_list);
-    if (h.kind == ArchiveKind::Catp) {
-        CatpMeta meta;
-        std::string problem = decode_catp_meta(r.meta().data(), r.meta().size(), meta);
-        if (problem.empty()) {
-            d->has_bounds = true;
-            std::copy(meta.bounds_min, meta.bounds_min + 3, d->bounds_min);
-            std::copy(meta.bounds_max, meta.bounds_max + 3, d->bounds_max);
-            details["bounds"] = bounds_json(*d);
-            details["catp"] = json{{"lattice_bits", meta.lattice_bits},
-                                   {"origin", {meta.origin[0], meta.origin[1], meta.origin[2]}},
-                                   {"cell", meta.cell},
-                                   {"leaf_level", meta.leaf_level},
-                                   {"flags", meta.flags},
-                                   {"input_vertices", meta.input_vertices},
-                                   {"input_triangles", meta.input_triangles},
-                                   {"default_rgb", meta.default_rgb}};
-        } else {
-            log.logf(LogLevel::Warn, "dataset '%s': cannot decode its CATP metadata (%s); serving it without bounds",
-                     d->name.c_str(), problem.c_str());
-            details["meta_error"] = problem;
-        }
-    }
+    if (auto describer = describers.find(h.kind); describer != describers.end()) describe(*d, describer->second, details, log);
     details["urls"] = urls_json(*d);
     d->details_json = dump(details);
     log.logf(LogLevel::Info, "dataset '%s': %s, %u nodes, %llu bytes", d->name.c_str(), archive_kind_name(h.kind),

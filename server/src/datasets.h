@@ -12,6 +12,7 @@
 
 #include "common_codec/archive.h"
 #include "log.h"
+#include "server/describe.h"
 
 namespace catpaq::serve {
 
@@ -24,7 +25,7 @@ struct Dataset {
     uint64_t payload_bytes = 0;
     std::string etag;         // "\"<header checksum>\"": identifies the file's content
     std::string prefix_etag;  // "\"<header checksum>-prefix\""
-    bool has_bounds = false;
+    bool has_bounds = false;  // from the describer of its kind
     double bounds_min[3] = {0, 0, 0}, bounds_max[3] = {0, 0, 0};
     std::string details_json;  // GET /api/datasets/{name}
 };
@@ -32,9 +33,10 @@ struct Dataset {
 class Registry {
 public:
     // Scans `root` recursively. Files that are not valid datasets, symlinks resolving outside the
-    // real root and names that cannot be served are logged (warn) and skipped. Throws Error if the
-    // root is not a readable directory.
-    void scan(const std::string& root, const Logger& log);
+    // real root and names that cannot be served are logged (warn) and skipped. Each dataset is
+    // described by the describer of its kind, if any. Throws Error if the root is not a readable
+    // directory.
+    void scan(const std::string& root, const DatasetDescribers& describers, const Logger& log);
 
     const Dataset* by_name(std::string_view name) const;
     const Dataset* by_file(std::string_view file) const;
@@ -43,7 +45,8 @@ public:
     const std::string& real_root() const { return real_root_; }
 
 private:
-    void add(const std::string& relative, const std::string& real_path, const Logger& log);
+    void add(const std::string& relative, const std::string& real_path, const DatasetDescribers& describers,
+             const Logger& log);
 
     std::string real_root_;
     std::vector<std::unique_ptr<Dataset>> datasets_;  // sorted by name

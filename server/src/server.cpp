@@ -420,7 +420,7 @@ uint16_t StreamingServer::start() {
     m.shared.limits.max_header = s.max_header_bytes;
     m.shared.timeout = std::chrono::duration_cast<Clock::duration>(std::chrono::duration<double>(s.timeout_seconds));
 
-    m.shared.registry.scan(s.root, m.shared.log);
+    m.shared.registry.scan(s.root, s.describers, m.shared.log);
 
     int threads = s.threads > 0 ? s.threads : int(std::max(1u, std::thread::hardware_concurrency()));
     for (int i = 0; i < threads; ++i) {

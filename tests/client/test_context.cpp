@@ -7,6 +7,7 @@
 #include <cstdlib>
 
 #include "base/error.h"
+#include "catp_client/catp_gpu.h"
 #include "client/gl_context.h"
 #include "client/gl_program.h"
 #include "gl_support.h"
@@ -93,18 +94,18 @@ TEST(Framebuffer, RefusesBadSizes) {
 TEST(Shaders, EmbeddedSourcesCompile) {
     GL_TEST_CONTEXT();
     bool gles = current_context_is_gles();
-    std::string vs = shader_source(ShaderKind::CatpVertex, gles);
+    std::string vs = catp_shader_source(CatpShader::PackedVertex, gles);
     EXPECT_NE(vs.find("bary_unpack"), std::string::npos);  // catp_decode.glsl is included
     EXPECT_NE(vs.find("in uvec2 a_packed"), std::string::npos);
-    GlProgram packed(vs, shader_source(ShaderKind::Fragment, gles));
-    GlProgram floats(shader_source(ShaderKind::FloatVertex, gles), shader_source(ShaderKind::Fragment, gles));
+    GlProgram packed(vs, catp_shader_source(CatpShader::Fragment, gles));
+    GlProgram floats(catp_shader_source(CatpShader::FloatVertex, gles), catp_shader_source(CatpShader::Fragment, gles));
     EXPECT_GE(packed.uniform("corners"), 0);
     for (const char* name : {"vertex_layout", "grid", "scale", "default_color"}) EXPECT_GE(packed.uniform(name), 0) << name;
     EXPECT_GE(floats.uniform("mvp"), 0);
     // A broken shader reports the compiler's log.
     try {
-        GlProgram broken(shader_source(ShaderKind::FloatVertex, gles) + "\nthis is not glsl;\n",
-                         shader_source(ShaderKind::Fragment, gles));
+        GlProgram broken(catp_shader_source(CatpShader::FloatVertex, gles) + "\nthis is not glsl;\n",
+                         catp_shader_source(CatpShader::Fragment, gles));
         ADD_FAILURE() << "compiled garbage";
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("vertex shader does not compile"), std::string::npos) << e.what();

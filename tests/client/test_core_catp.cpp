@@ -7,6 +7,7 @@
 
 #include "catp/cut.h"
 #include "catp/dataset.h"
+#include "catp_client/catp_format.h"
 #include "client/cache.h"
 #include "client/cut_engine.h"
 #include "client/fetcher.h"
@@ -155,15 +156,18 @@ TEST(CatpHierarchy, ViewBoxesAreTheTetrahedraHoldingGeometryAndNest) {
 TEST(CatpCut, EveryEngineCutFedByTheFetcherIsConformingAndCrackFree) {
     CatpFile file(test::sphere_dataset());
     const CatpIndex& index = file.index();
-    Hierarchy h = build_catp_hierarchy(index);
+    std::unique_ptr<CatpFormat> format = test::open_catp_format(test::sphere_dataset());
+    const Hierarchy& h = format->hierarchy();
     const uint64_t cache_budget = 6u << 20;
-    CatpNodeStore store(h, cache_budget, 1u << 20);
+    NodeStore store(h, cache_budget, 1u << 20);
     CutBudgets budgets;
     budgets.max_cpu_bytes = cache_budget / 2;
     budgets.max_primitives = 30000;
     budgets.max_new_requests = 24;
     CutEngine engine(h, store.counter(), budgets);
-    Fetcher fetcher(std::make_unique<LocalFileSource>(test::sphere_dataset()));
+    FetcherSettings fetcher_settings;
+    fetcher_settings.decode = format_decoder(*format);
+    Fetcher fetcher(std::make_unique<LocalFileSource>(test::sphere_dataset()), fetcher_settings);
     Orbit orbit(index);
     std::unordered_map<uint64_t, DiamondFragments> decoded;
     size_t checked = 0, mixed = 0;
@@ -174,7 +178,7 @@ TEST(CatpCut, EveryEngineCutFedByTheFetcherIsConformingAndCrackFree) {
         fetcher.poll(arrived);
         for (FetchedNode& n : arrived) {
             ASSERT_TRUE(n.ok) << n.error;
-            store.add(n.node, n.fragments, n.compressed);
+            store.add(n.node, n.decoded, n.compressed);
         }
         const CutFrame& frame = engine.update(v, store);
         store.pin(engine.pinned());
@@ -185,7 +189,7 @@ TEST(CatpCut, EveryEngineCutFedByTheFetcherIsConformingAndCrackFree) {
         ASSERT_EQ(engine.check(store), "");
         ASSERT_LE(frame.stats.primitives, budgets.max_primitives);
         ASSERT_LE(frame.stats.cpu_bytes, budgets.max_cpu_bytes);
-        ASSERT_LE(store.fragment_cache().bytes(), cache_budget) << "memory must stay flat";
+        ASSERT_LE(store.decoded_cache().bytes(), cache_budget) << "memory must stay flat";
         RefinedSet r = as_refined_set(h, engine);
         ASSERT_EQ(r.size(), engine.refined_nodes().size()) << "R is not closed under parents";
         ASSERT_EQ(engine_slots(h, engine), reference_slots(index, r));
@@ -193,9 +197,9 @@ TEST(CatpCut, EveryEngineCutFedByTheFetcherIsConformingAndCrackFree) {
             // Primitives are exact once everything drawn is resident.
             uint64_t triangles = 0;
             for (const DrawnSlot& d : drawn_slots(index, r)) {
-                auto frag = store.fragments(h.find(d.entry->key));
-                ASSERT_TRUE(frag) << "a drawn node is not resident";
-                triangles += frag->slots[d.slot].triangle_count();
+                auto decoded = store.decoded(h.find(d.entry->key));
+                ASSERT_TRUE(decoded) << "a drawn node is not resident";
+                triangles += catp_fragments(*decoded).slots[d.slot].triangle_count();
             }
             EXPECT_EQ(frame.stats.primitives, triangles);
             if (f % 3 == 0) {
@@ -218,10 +222,11 @@ TEST(CatpCut, EveryEngineCutFedByTheFetcherIsConformingAndCrackFree) {
 TEST(CatpCut, TinyToleranceConvergesToTheFinestCutWhichIsCrackFree) {
     CatpFile file(test::sphere_dataset());
     const CatpIndex& index = file.index();
-    Hierarchy h = build_catp_hierarchy(index);
-    CatpNodeStore store(h, uint64_t(1) << 32);
+    std::unique_ptr<CatpFormat> format = test::open_catp_format(test::sphere_dataset());
+    const Hierarchy& h = format->hierarchy();
+    NodeStore store(h, uint64_t(1) << 32);
     for (const HierarchyNode& n : h.nodes())
-        if (n.has_data) store.add(n.index, std::make_shared<DiamondFragments>(file.decode(index.entries()[n.entry])));
+        if (n.has_data) store.add(n.index, test::decode_catp_node(*format, file, n.index));
     CutEngine engine(h, store.counter());
     Orbit orbit(index);
     ViewParams v = orbit.view(0, 1, 1e-9);
@@ -250,10 +255,11 @@ TEST(CatpCut, TinyToleranceConvergesToTheFinestCutWhichIsCrackFree) {
 TEST(CatpCut, LoweringTheToleranceOnlyRefinesDrawsMoreAndLowersTheCertifiedError) {
     CatpFile file(test::sphere_dataset());
     const CatpIndex& index = file.index();
-    Hierarchy h = build_catp_hierarchy(index);
-    CatpNodeStore store(h, uint64_t(1) << 32);
+    std::unique_ptr<CatpFormat> format = test::open_catp_format(test::sphere_dataset());
+    const Hierarchy& h = format->hierarchy();
+    NodeStore store(h, uint64_t(1) << 32);
     for (const HierarchyNode& n : h.nodes())
-        if (n.has_data) store.add(n.index, std::make_shared<DiamondFragments>(file.decode(index.entries()[n.entry])));
+        if (n.has_data) store.add(n.index, test::decode_catp_node(*format, file, n.index));
     CutEngine engine(h, store.counter());
     Orbit orbit(index);
     std::set<uint32_t> last;

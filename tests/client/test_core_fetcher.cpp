@@ -8,6 +8,7 @@
 #include "base/checksum.h"
 #include "base/error.h"
 #include "catp/dataset.h"
+#include "catp_client/catp_format.h"
 #include "client/fetcher.h"
 #include "client/hierarchy.h"
 #include "common_codec/archive.h"
@@ -29,8 +30,14 @@ bool eventually(F done, int seconds = 60) {
     return true;
 }
 
+struct Dataset;
+const Dataset& dataset();
+
+// The CATP decoder of the test dataset: the fetcher decodes what it verified.
+FetcherSettings decoding();
+
 FetcherSettings fast_retries() {
-    FetcherSettings s;
+    FetcherSettings s = decoding();
     s.backoff_initial = std::chrono::milliseconds(2);
     s.backoff_max = std::chrono::milliseconds(20);
     s.max_attempts = 4;
@@ -42,7 +49,8 @@ struct Dataset {
     std::string path = test::sphere_dataset();
     std::vector<uint8_t> bytes = test::read_file(path);
     CatpFile file{path};
-    Hierarchy h = build_catp_hierarchy(file.index());
+    std::unique_ptr<CatpFormat> format = test::open_catp_format(path);
+    const Hierarchy& h = format->hierarchy();
 
     std::vector<uint8_t> node_bytes(const ArchiveEntry& e) const {
         return std::vector<uint8_t>(bytes.begin() + long(e.offset), bytes.begin() + long(e.offset + e.size));
@@ -58,6 +66,12 @@ struct Dataset {
 const Dataset& dataset() {
     static Dataset d;
     return d;
+}
+
+FetcherSettings decoding() {
+    FetcherSettings s;
+    s.decode = format_decoder(*dataset().format);
+    return s;
 }
 
 // Fetches every node through a source with the non-blocking interface, all submitted at once.
@@ -99,8 +113,8 @@ TEST(LocalFileSource, ReturnsTheExactBytesOfNodesRangesAndThePrefix) {
     std::vector<uint8_t> range = source.fetch_range(100, 1000);
     EXPECT_EQ(range, std::vector<uint8_t>(d.bytes.begin() + 100, d.bytes.begin() + 1100));
     EXPECT_THROW(source.fetch_range(d.bytes.size() - 10, 11), Error);
-    CatpIndex index = load_catp_index(source);
-    EXPECT_EQ(index.entries().size(), d.file.index().entries().size());
+    DatasetPrefix prefix = load_prefix(source);
+    EXPECT_EQ(prefix.entries.size(), d.file.index().entries().size());
     EXPECT_THROW(LocalFileSource("/nonexistent/file.cpq"), Error);
 }
 
@@ -115,8 +129,8 @@ TEST(HttpSource, ServerRoutesAndRawRangesReturnTheExactBytesOverFewConnections) 
         HttpSource source(raw ? server.file_url() : server.base_url(), settings);
         EXPECT_EQ(source.raw_mode(), raw);
         size_t before = server.connections();
-        CatpIndex index = load_catp_index(source);
-        EXPECT_EQ(index.entries().size(), d.file.index().entries().size());
+        DatasetPrefix prefix = load_prefix(source);
+        EXPECT_EQ(prefix.entries.size(), d.file.index().entries().size());
         expect_exact_nodes(source, d);
         // Persistent connections: hundreds of requests over at most `parallel` connections.
         EXPECT_LE(server.connections() - before, settings.parallel);
@@ -143,7 +157,7 @@ TEST(HttpSource, RawModeRefusesAWholeFileAnswerToAPartialRange) {
     } catch (const Error& err) {
         EXPECT_NE(std::string(err.what()).find("Range"), std::string::npos) << err.what();
     }
-    EXPECT_THROW(load_catp_index(source, 1), Error);
+    EXPECT_THROW(load_prefix(source, 1), Error);
 
     // A file smaller than the prefix probe: the probe asked for the whole file, so a 200 with
     // the whole body is the right answer.
@@ -188,7 +202,7 @@ TEST(HttpSource, NodeRouteErrorsAreReportedNotThrownAndUnknownNodesAreNotRetryab
 
 TEST(Fetcher, DeliversEveryRequestedNodeVerifiedAndDecoded) {
     const Dataset& d = dataset();
-    Fetcher fetcher(std::make_unique<LocalFileSource>(d.path));
+    Fetcher fetcher(std::make_unique<LocalFileSource>(d.path), decoding());
     std::vector<FetchRequest> wanted = d.all_requests();
     fetcher.request(wanted);
     std::vector<FetchedNode> got;
@@ -204,8 +218,10 @@ TEST(Fetcher, DeliversEveryRequestedNodeVerifiedAndDecoded) {
         const ArchiveEntry& e = *d.file.index().find(DiamondId{n.key});
         EXPECT_EQ(*n.compressed, d.node_bytes(e));
         DiamondFragments ref = d.file.decode(e);
-        EXPECT_EQ(n.fragments->slot_mask, ref.slot_mask);
-        for (int s = 0; s < 8; ++s) EXPECT_EQ(n.fragments->slots[s].triangle_count(), ref.slots[s].triangle_count());
+        ASSERT_TRUE(n.decoded);
+        const DiamondFragments& fragments = catp_fragments(*n.decoded);
+        EXPECT_EQ(fragments.slot_mask, ref.slot_mask);
+        for (int s = 0; s < 8; ++s) EXPECT_EQ(fragments.slots[s].triangle_count(), ref.slots[s].triangle_count());
         EXPECT_EQ(d.h.node(n.node).key, n.key);
     }
     EXPECT_EQ(keys.size(), wanted.size());

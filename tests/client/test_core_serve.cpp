@@ -1,5 +1,6 @@
-// The same client code against `catpaq serve` (server/server.h, in-process): the node and prefix
-// routes, and raw Range requests on /files/, give the exact bytes through the Fetcher.
+// The same client code against `catpaq serve` (server/server.h, in-process, without any format's
+// describer: it serves bytes): the node and prefix routes, and raw Range requests on /files/,
+// give the exact bytes through the Fetcher.
 #include <gtest/gtest.h>
 
 #ifdef CATPAQ_HAVE_SERVER
@@ -8,6 +9,7 @@
 #include <set>
 
 #include "catp/dataset.h"
+#include "catp_client/catp_format.h"
 #include "client/fetcher.h"
 #include "client/hierarchy.h"
 #include "server/server.h"
@@ -36,8 +38,8 @@ TEST(CatpaqServe, ServerRoutesAndRawRangesServeTheFetcherExactBytes) {
     for (const std::string& url : {host + "/api/datasets/scans/sphere", host + "/files/scans/sphere.cpq"}) {
         SCOPED_TRACE(url);
         auto source = std::make_unique<HttpSource>(url);
-        CatpIndex index = load_catp_index(*source);
-        ASSERT_EQ(index.entries().size(), file.index().entries().size());
+        DatasetPrefix prefix = load_prefix(*source);
+        ASSERT_EQ(prefix.entries.size(), file.index().entries().size());
         Fetcher fetcher(std::move(source));
         std::vector<FetchRequest> wanted;
         for (const HierarchyNode& n : h.nodes())

@@ -61,6 +61,22 @@ std::vector<uint8_t> read_file(const std::string& path) {
     return std::vector<uint8_t>((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
 }
 
+std::unique_ptr<CatpFormat> open_catp_format(const std::string& path) {
+    std::vector<uint8_t> bytes = read_file(path);
+    return std::make_unique<CatpFormat>(DatasetPrefix::parse(bytes.data(), bytes.size(), path));
+}
+
+std::shared_ptr<const DecodedNode> decode_catp_node(const CatpFormat& format, const CatpFile& file, uint32_t node) {
+    const HierarchyNode& n = format.hierarchy().node(node);
+    std::string error;
+    const uint8_t* bytes = file.archive().node(n.entry, &error);
+    if (!bytes) throw std::runtime_error(error);
+    std::shared_ptr<const DecodedNode> out;
+    error = format.decode(node, bytes, n.payload_bytes, out);
+    if (!error.empty()) throw std::runtime_error(error);
+    return out;
+}
+
 // ---------------------------------------------------------------------------------------------
 
 FakeResidency::FakeResidency(const Hierarchy& h, bool all_resident) : h_(h), resident_(h.size(), all_resident ? 1 : 0) {}

@@ -8,12 +8,14 @@
 #include <condition_variable>
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <mutex>
 #include <set>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "catp_client/catp_format.h"
 #include "client/cut_engine.h"
 #include "client/hierarchy.h"
 
@@ -25,6 +27,10 @@ std::string scratch_dir();
 const std::string& sphere_dataset();
 // The bytes of a whole file.
 std::vector<uint8_t> read_file(const std::string& path);
+// A local dataset's CATP format, opened from its prefix as a streaming session opens it.
+std::unique_ptr<CatpFormat> open_catp_format(const std::string& path);
+// A node of a local CATP dataset decoded by its format (as the fetcher's workers decode it).
+std::shared_ptr<const DecodedNode> decode_catp_node(const CatpFormat& format, const CatpFile& file, uint32_t node);
 
 // Everything resident, or only the nodes set so; bytes from primitives (gpu 16, cpu 20 per
 // primitive), the same whether resident or not, so budgets are exact.

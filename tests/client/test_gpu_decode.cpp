@@ -16,12 +16,12 @@
 #include <random>
 #include <set>
 
-#include "catp/cut.h"
 #include "base/error.h"
+#include "catp/cut.h"
 #include "catp/dataset.h"
-#include "client/catp_gpu.h"
+#include "catp_client/catp_gpu.h"
+#include "catp_client/static_render.h"
 #include "client/gl_program.h"
-#include "client/static_render.h"
 #include "common_codec/octahedral.h"
 #include "common_codec/packed_vertex.h"
 #include "gl_support.h"
@@ -38,7 +38,7 @@ public:
     FeedbackDecoder() : target_(1, 1) {
         target_.bind();
         bool gles = current_context_is_gles();
-        program_ = GlProgram(shader_source(ShaderKind::CatpVertex, gles), shader_source(ShaderKind::Fragment, gles),
+        program_ = GlProgram(catp_shader_source(CatpShader::PackedVertex, gles), catp_shader_source(CatpShader::Fragment, gles),
                              {"v_position", "v_normal", "v_color"});
         glGenBuffers(1, &buffer_);
         glGenQueries(1, &query_);

@@ -19,9 +19,9 @@
 
 #include "catp/cut.h"
 #include "catp/dataset.h"
-#include "client/catp_gpu.h"
+#include "catp_client/catp_gpu.h"
+#include "catp_client/static_render.h"
 #include "client/gl_program.h"
-#include "client/static_render.h"
 #include "gl_support.h"
 
 using namespace catpaq;

@@ -6,7 +6,7 @@
 
 #include "base/error.h"
 #include "catp/lattice.h"
-#include "client/catp_gpu.h"
+#include "catp_client/catp_gpu.h"
 #include "gl_support.h"
 
 using namespace catpaq;

@@ -152,9 +152,9 @@ TEST(Picking, RayAgainstTheDrawnCut) {
     if (!HeadlessGlContext::available(&why)) GTEST_SKIP() << why;
     HeadlessGlContext context;
     StreamingSession session(sphere_dataset(), SessionSettings{});
-    const CatpMeta& meta = session.index().meta();
-    glm::dvec3 bmin(meta.bounds_min[0], meta.bounds_min[1], meta.bounds_min[2]);
-    glm::dvec3 bmax(meta.bounds_max[0], meta.bounds_max[1], meta.bounds_max[2]);
+    const Aabb bounds = session.format().world_bounds();
+    glm::dvec3 bmin(bounds.min[0], bounds.min[1], bounds.min[2]);
+    glm::dvec3 bmax(bounds.max[0], bounds.max[1], bounds.max[2]);
     OrbitController controller(2);
     controller.frame_box(bmin, bmax, 45, 320.0 / 240.0);
     Camera camera = controller.camera(320, 240);

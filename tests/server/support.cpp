@@ -16,6 +16,7 @@
 #include <unistd.h>
 
 #include "catp/format.h"
+#include "server_formats/describers.h"
 
 namespace catpaq::test {
 
@@ -151,11 +152,12 @@ bool LogCapture::contains(const std::string& a, const std::string& b) const {
     return false;
 }
 
-RunningServer::RunningServer(const std::string& root, ServerSettings settings) {
+RunningServer::RunningServer(const std::string& root, ServerSettings settings, bool describe) {
     settings.root = root;
     settings.port = 0;
     if (settings.threads == 0) settings.threads = 2;
     settings.log = [this](LogLevel level, std::string_view line) { log.add(level, line); };
+    if (describe && settings.describers.empty()) settings.describers = builtin_dataset_describers();
     server = std::make_unique<StreamingServer>(settings);
     port = server->start();
 }

@@ -83,9 +83,11 @@ private:
     std::vector<std::string> lines_;
 };
 
-// A started in-process server with captured logs.
+// A started in-process server with captured logs. With `describe`, the datasets are described as
+// `catpaq serve` describes them (builtin_dataset_describers) unless the settings give describers;
+// without, the server knows no format at all.
 struct RunningServer {
-    explicit RunningServer(const std::string& root, ServerSettings settings = {});
+    explicit RunningServer(const std::string& root, ServerSettings settings = {}, bool describe = true);
     ~RunningServer();
     LogCapture log;
     std::unique_ptr<StreamingServer> server;

@@ -51,6 +51,39 @@ TEST_F(Routes, CatalogListsValidDatasetsWithKindSizeNodeCountBoundsAndUrls) {
     EXPECT_EQ(beta.at("urls").at("file"), "/files/sub/beta.cpq");
 }
 
+// The server core knows no format: without any describer it serves every archive, CATP and AQP
+// alike, by its container alone. Catalog and details have no bounds or format part; prefix,
+// nodes and ranges are the file's bytes.
+TEST_F(Routes, WithoutDescribersEveryKindIsServedByItsContainerAlone) {
+    RunningServer bare(fixture->root(), ServerSettings{}, false);
+    RawClient client(bare.port);
+    json catalog = json::parse(client.get("/api/datasets").body);
+    EXPECT_EQ(catalog.at("datasets").size(), 4u);
+    for (const json& d : catalog.at("datasets")) EXPECT_FALSE(d.contains("bounds")) << d.dump();
+    json alpha = json::parse(client.get("/api/datasets/alpha").body);
+    EXPECT_EQ(alpha.at("kind"), "catp");
+    EXPECT_FALSE(alpha.contains("catp"));
+    EXPECT_FALSE(alpha.contains("meta_error"));
+    EXPECT_EQ(json::parse(client.get("/api/datasets/sub/beta").body).at("kind"), "aqp");
+    for (const std::string name : {"alpha", "sub/beta"}) {
+        SCOPED_TRACE(name);
+        const std::string path = fixture->root() + "/" + name + ".cpq";
+        const std::string file = read_whole_file(path);
+        ArchiveReader reader(path);
+        EXPECT_TRUE(client.get("/api/datasets/" + name + "/prefix").body == file.substr(0, reader.prefix_size()));
+        for (const ArchiveEntry& e : reader.entries()) {
+            HttpResponse node = client.get(node_path(name, e.key));
+            EXPECT_EQ(node.status, 200);
+            EXPECT_TRUE(node.body == file.substr(e.offset, e.size)) << e.key;
+            if (e.size == 0) continue;
+            HttpResponse range = client.get("/files/" + name + ".cpq", "Range: bytes=" + std::to_string(e.offset) + "-" +
+                                                                           std::to_string(e.offset + e.size - 1) + "\r\n");
+            EXPECT_EQ(range.status, 206);
+            EXPECT_TRUE(range.body == file.substr(e.offset, e.size)) << e.key;
+        }
+    }
+}
+
 TEST_F(Routes, CorruptHeaderDatasetIsSkippedAtStartupWithLoggedReason) {
     std::vector<std::string> names = running->server->dataset_names();
     EXPECT_EQ(std::count(names.begin(), names.end(), "corrupt_header"), 0);

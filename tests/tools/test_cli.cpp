@@ -14,6 +14,7 @@
 #include "base/atomic_file.h"
 #include "base/child_process.h"
 #include "client/image.h"
+#include "common_codec/archive.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
 
@@ -663,6 +664,38 @@ TEST(Cli, InfoDescribesADatasetLocalOrServed) {
     ToolRun served = run("info " + server.url() + "api/datasets/bunny");
     ASSERT_EQ(served.status, 0) << served.output;
     EXPECT_EQ(served.output.substr(served.output.find("format:")), local.output.substr(local.output.find("format:")));
+}
+
+// The same commands for every format: info describes any dataset's container, and a kind this
+// build has no client or verifier for is named, not misread as CATP.
+TEST(Cli, ADatasetOfAFormatThisBuildLacksIsNamedByEveryCommand) {
+    fs::path path = scratch() / "patches.cpq";
+    {
+        ArchiveWriter writer(path.string(), ArchiveKind::Aqp);
+        const uint8_t payload[5] = {1, 2, 3, 4, 5};
+        for (uint16_t level = 0; level < 2; ++level) {
+            ArchiveEntry entry;
+            entry.key = 10 + level;
+            entry.level = level;
+            entry.count = 7;
+            entry.error = 1.0f / float(level + 1);
+            writer.add_node(entry, payload, sizeof payload);
+        }
+        writer.finish({'m', 'e', 't', 'a'});
+    }
+    ToolRun info = run("info " + path.string());
+    EXPECT_EQ(info.status, 0) << info.output;
+    EXPECT_NE(info.output.find("format:    aqp (container version 1)"), std::string::npos) << info.output;
+    EXPECT_NE(info.output.find("nodes:     2 nodes in 2 levels\n"), std::string::npos) << info.output;
+    EXPECT_NE(info.output.find("client:    none in this build for aqp datasets"), std::string::npos) << info.output;
+    ToolRun verify = run("verify " + path.string());
+    EXPECT_EQ(verify.status, 1) << verify.output;
+    EXPECT_NE(verify.output.find("holds a dataset of kind aqp: this build has no verifier for it"), std::string::npos)
+        << verify.output;
+    ToolRun render = run("render " + path.string() + " --orbit 1");
+    EXPECT_EQ(render.status, 1) << render.output;
+    EXPECT_NE(render.output.find("holds a dataset of kind aqp, which this program cannot stream"), std::string::npos)
+        << render.output;
 }
 
 // Input the dataset cannot hold is said, not silently dropped: OBJ texture coordinates and

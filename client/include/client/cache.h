@@ -1,14 +1,15 @@
 #pragma once
 // LRU caches with byte budgets for the client's CPU side: compressed node bytes (optional) and
-// decoded fragments. The nodes of the current cut are pinned every frame (CutEngine::pinned())
-// and never evicted; everything else goes least recently used first, so memory stays flat over
-// any camera path: bytes() <= budget() unless the pinned entries alone exceed it (the cut
-// engine's CPU budget is meant to be below the cache budget, leaving room for prefetched nodes).
-// The GPU store (client_gl) follows the same policy.
+// decoded nodes (DecodedNode, client/format.h: of any format). The nodes of the current cut are
+// pinned every frame (CutEngine::pinned()) and never evicted; everything else goes least recently
+// used first, so memory stays flat over any camera path: bytes() <= budget() unless the pinned
+// entries alone exceed it (the cut engine's CPU budget is meant to be below the cache budget,
+// leaving room for prefetched nodes). The format's GPU store (client/node_renderer.h) follows the
+// same policy.
 //
-// CatpNodeStore glues them to the cut engine for CATP: it is the engine's Residency (a node is
-// resident while its fragments are cached), keeps the exact per-slot draw counts
-// (PartDrawCounter) and evicts under the same pins.
+// NodeStore glues them to the cut engine: it is the engine's Residency (a node is resident while
+// its decoded data is cached, with the data box the format gave it), keeps the exact per-part
+// draw counts (PartDrawCounter) and evicts under the same pins.
 #include <cstdint>
 #include <functional>
 #include <list>
@@ -17,8 +18,8 @@
 #include <unordered_set>
 #include <vector>
 
-#include "catp/format.h"
 #include "client/cut_engine.h"
+#include "client/format.h"
 #include "client/hierarchy.h"
 
 namespace catpaq {
@@ -169,48 +170,46 @@ private:
 };
 
 using CompressedCache = LruCache<std::shared_ptr<const std::vector<uint8_t>>>;
-using FragmentCache = LruCache<std::shared_ptr<const DiamondFragments>>;
+using DecodedCache = LruCache<std::shared_ptr<const DecodedNode>>;
 
-// Memory of decoded fragments (vertices, indices, container overhead).
-uint64_t decoded_bytes(const DiamondFragments& fragments);
-// What the engine counts for a decoded CATP node: GPU = vertices * 8 + indices * 4 of every slot,
-// CPU = decoded_bytes().
-NodeBytes catp_node_bytes(const DiamondFragments& fragments);
-// Triangles of each of the node's parts (its slots with geometry), in HierarchyNode::parts order.
-std::vector<uint32_t> catp_part_counts(const HierarchyNode& node, const DiamondFragments& fragments);
-
-class CatpNodeStore : public Residency {
+class NodeStore : public Residency {
 public:
-    // compressed_budget_bytes = 0: no compressed cache.
-    CatpNodeStore(const Hierarchy& hierarchy, uint64_t fragment_budget_bytes, uint64_t compressed_budget_bytes = 0);
-    CatpNodeStore(const CatpNodeStore&) = delete;
-    CatpNodeStore& operator=(const CatpNodeStore&) = delete;
+    // compressed_budget_bytes = 0: no compressed cache. Before a node is decoded its bytes are
+    // estimated at `bytes_per_primitive` times its primitives (GPU and CPU alike, as
+    // ResidencyTable does).
+    NodeStore(const Hierarchy& hierarchy, uint64_t decoded_budget_bytes, uint64_t compressed_budget_bytes = 0,
+              double bytes_per_primitive = 16.0);
+    NodeStore(const NodeStore&) = delete;
+    NodeStore& operator=(const NodeStore&) = delete;
 
     bool resident(uint32_t node) const override;
     NodeBytes bytes(uint32_t node) const override;
+    const Aabb* data_bounds(uint32_t node) const override;
     bool changes_since(uint64_t& cursor, std::vector<uint32_t>& out) const override { return log_.since(cursor, out); }
     const PartDrawCounter& counter() const { return counter_; }
 
-    // Stores a decoded node (exact part counts, fragments, and the compressed bytes when a
-    // compressed cache exists). Returns false if the fragment cache had no room for it.
-    bool add(uint32_t node, std::shared_ptr<const DiamondFragments> fragments,
+    // Stores a decoded node (its exact part counts, and the compressed bytes when a compressed
+    // cache exists). Returns false if the decoded cache had no room for it.
+    bool add(uint32_t node, std::shared_ptr<const DecodedNode> decoded,
              std::shared_ptr<const std::vector<uint8_t>> compressed = {});
-    // Fragments of a resident node (marked recently used), or nullptr.
-    std::shared_ptr<const DiamondFragments> fragments(uint32_t node);
-    // Compressed bytes of a node, if cached (for Fetcher::supply after a fragment eviction).
+    // The decoded data of a resident node (marked recently used), or nullptr.
+    std::shared_ptr<const DecodedNode> decoded(uint32_t node);
+    // Compressed bytes of a node, if cached (for Fetcher::supply after an eviction).
     std::shared_ptr<const std::vector<uint8_t>> compressed(uint32_t node);
     // Pins the cut (CutEngine::pinned()) in both caches and trims them.
     void pin(const std::vector<uint32_t>& nodes);
 
-    FragmentCache& fragment_cache() { return fragments_; }
+    DecodedCache& decoded_cache() { return decoded_; }
     CompressedCache* compressed_cache() { return compressed_.get(); }
 
 private:
     const Hierarchy& hierarchy_;
+    double bytes_per_primitive_;
     PartDrawCounter counter_;
-    FragmentCache fragments_;
+    DecodedCache decoded_;
     std::unique_ptr<CompressedCache> compressed_;
     std::vector<NodeBytes> bytes_;
+    std::vector<Aabb> data_bounds_;
     std::vector<uint8_t> resident_;
     ChangeLog log_;
 };

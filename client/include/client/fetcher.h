@@ -15,7 +15,8 @@
 //
 // Fetcher runs a fetch thread: a priority queue of node requests (the cut engine's order each
 // frame; stale requests cancelled), transfers on the source, every result checked against the
-// index checksum (XXH3), decoded on worker threads, and delivered through a completion queue the
+// index checksum (XXH3), decoded on worker threads by the dataset format's decoder (the fetcher
+// knows byte ranges and checksums, not formats), and delivered through a completion queue the
 // render thread polls without blocking. A failed or corrupt transfer is retried with exponential
 // backoff; after max_attempts the node is reported failed and retried later if still wanted.
 // Connection errors (the server went away) are just failures: backoff, then success when it is
@@ -35,8 +36,7 @@
 #include <unordered_set>
 #include <vector>
 
-#include "catp/dataset.h"
-#include "catp/format.h"
+#include "client/format.h"
 #include "client/hierarchy.h"
 
 namespace catpaq {
@@ -160,7 +160,8 @@ std::unique_ptr<NodeSource> open_node_source(const std::string& location, HttpSe
 // returned may extend past the prefix (raw mode: the coarsest nodes). `attempts` tries with a
 // short backoff between them; throws Error with the last problem.
 std::vector<uint8_t> fetch_prefix(NodeSource& source, int attempts = 3);
-CatpIndex load_catp_index(NodeSource& source, int attempts = 3);
+// fetch_prefix, parsed (DatasetPrefix::parse): what a format is opened from.
+DatasetPrefix load_prefix(NodeSource& source, int attempts = 3);
 
 // A node to fetch, from the hierarchy.
 struct FetchRequest {
@@ -180,8 +181,15 @@ struct FetchedNode {
     std::string error;  // !ok: the last problem; retried later if it is still requested
     uint32_t attempts = 0;
     std::shared_ptr<const std::vector<uint8_t>> compressed;  // the verified bytes
-    std::shared_ptr<const DiamondFragments> fragments;       // decoded
+    std::shared_ptr<const DecodedNode> decoded;              // null when the fetcher has no decoder
 };
+
+// Decodes a node's verified bytes: an empty string and `out` set, or what is wrong (it may also
+// throw). Called on the fetcher's worker threads, concurrently.
+using NodeDecoder = std::function<std::string(const FetchRequest&, const uint8_t* data, size_t size,
+                                              std::shared_ptr<const DecodedNode>& out)>;
+// The decoder of a dataset's format (DatasetFormat::decode); the format must outlive the fetcher.
+NodeDecoder format_decoder(const DatasetFormat& format);
 
 struct FetcherSettings {
     size_t decode_threads = 2;
@@ -190,9 +198,9 @@ struct FetcherSettings {
     uint32_t max_attempts = 6;                          // then reported failed
     std::chrono::milliseconds failed_retry_delay{5000};  // a failed node requested again waits this
     bool abort_stale_in_flight = false;  // stale transfers already running: finish (default) or abort
-    std::optional<VertexLayout> layout;  // the dataset's, checked by the default decoder when set
-    // Decodes verified bytes (default: decode_diamond_node with `layout`). Empty string on success.
-    std::function<std::string(const FetchRequest&, const uint8_t*, size_t, DiamondFragments&)> decode;
+    // Decodes verified bytes (format_decoder(format)); empty: nodes are delivered as verified
+    // bytes only.
+    NodeDecoder decode;
 };
 
 struct FetcherStats {

@@ -1,21 +1,16 @@
 #pragma once
-// GLSL programs built from the shaders embedded at build time (shaders/ in the source tree).
+// GLSL programs.
 // Needs a current GL context (client/gl_context.h). No GL header is included here.
 #include <string>
 #include <vector>
 
 namespace catpaq {
 
-enum class ShaderKind {
-    CatpVertex,   // shaders/catp_decode.glsl + shaders/catp.vert: decodes the 64-bit vertex
-    FloatVertex,  // shaders/float.vert: the float comparison path
-    Fragment,     // shaders/catp.frag: Lambert + ambient, or flat colour
-};
-
-// The complete source for the current context: a version preamble (#version 330 core, with
-// `precise` from ARB_gpu_shader5 when available; or #version 300 es with highp defaults), then
-// the embedded files.
-std::string shader_source(ShaderKind kind, bool gles);
+// The start of every shader source for the current context: the version line (#version 330
+// core, with `precise` from ARB_gpu_shader5 when available, defined as PRECISE; or #version 300
+// es with highp defaults). Formats append their shaders (CATP: catp_shader_source,
+// catp_client/catp_gpu.h, from the files in shaders/ embedded at build time).
+std::string shader_preamble(bool gles);
 // True if the current context is OpenGL ES.
 bool current_context_is_gles();
 

@@ -2,14 +2,16 @@
 // The format-agnostic multiresolution DAG the cut engine (client/cut_engine.h) works on.
 //
 // A node is one unit of streaming and of refinement: a CATP diamond, later an AQP patch or a
-// point-cloud node. Every node knows its parents and children (node indices), its object-space
-// error (monotone: a parent's error is >= each child's), a world-space box that bounds its
-// geometry and its descendants' (so projected errors are monotone too), where its bytes are in
-// the archive, and its *parts*: what it draws while unrefined, each part created by one parent
-// (CATP: slot s of a diamond is drawn only while slot_parent(s) is refined; the root draws all
-// its slots). A node without data (`has_data == false`) is *virtual*: a diamond absent from the
-// index, which holds no geometry but is needed in the refined set so that the set stays closed
-// under parents.
+// point-cloud node; each format builds the hierarchy from its archive index (its adapter:
+// DatasetFormat::hierarchy in client/format.h; CATP's is build_catp_hierarchy in
+// catp_client/catp_format.h). Every node knows its parents and children (node indices), its
+// object-space error (monotone: a parent's error is >= each child's), a world-space box that
+// bounds its geometry and its descendants' (so projected errors are monotone too), where its
+// bytes are in the archive, and its *parts*: what it draws while unrefined, each part created by
+// one parent (CATP: slot s of a diamond is drawn only while slot_parent(s) is refined; the root
+// draws all its slots). A node without data (`has_data == false`) is *virtual*: a diamond absent
+// from the index, which holds no geometry but is needed in the refined set so that the set stays
+// closed under parents.
 //
 // Invariants after finalize(): levels strictly increase from parent to child, parents and
 // children lists are mutually consistent and sorted, errors and boxes are monotone, every part's
@@ -25,8 +27,6 @@
 #include "common_codec/archive.h"
 
 namespace catpaq {
-
-class CatpIndex;
 
 constexpr uint32_t kNoNode = std::numeric_limits<uint32_t>::max();
 
@@ -116,18 +116,6 @@ private:
     std::vector<uint32_t> roots_;
     bool has_view_boxes_ = false;
 };
-
-// The CATP hierarchy of a dataset: every index entry is a node (has_data); every missing parent
-// (diamond_parents) of a node is added, recursively up to the root, as a virtual node. Bounds:
-// the box of the diamond's existing tetrahedra in world units (origin + lattice * cell), grown
-// to hold its children's; virtual nodes: the union of their children's boxes. View boxes: one
-// per tetrahedron of the diamond that holds geometry, its own or in a descendant tetrahedron
-// inside it (bisection nests a child's tetrahedron in the tetrahedron of its creating parent,
-// so these boxes nest along creating edges). Parts: one per slot
-// with geometry (the entry's slot mask), created by slot_parent(slot) (kNoNode for the root).
-// Part primitive counts are estimates (the diamond's count split evenly over its slots) until the
-// node is decoded.
-Hierarchy build_catp_hierarchy(const CatpIndex& index);
 
 // A random DAG for tests and benchmarks: a quadtree of cells over [0, size]^2 (thin in z), where
 // each child cell also gets, with probability `extra_parent`, the parent-level cells next to it

@@ -1,8 +1,13 @@
 #pragma once
-// A streaming session: one dataset (local path or URL), its hierarchy, the cut engine, the
-// asynchronous fetcher, the decoded-fragment cache and the GPU store, stepped once per frame.
-// Used by `catpaq render` (headless) and the desktop viewer. Only the thread that owns the GL
-// context calls step() and draw(); fetching and decoding run on the fetcher's threads.
+// A streaming session: one dataset (local path or URL) of any format, its hierarchy, the cut
+// engine, the asynchronous fetcher, the decoded nodes, the compressed cache and the format's GPU
+// store, stepped once per frame. Used by `catpaq render` (headless) and the desktop viewer. Only
+// the thread that owns the GL context calls step() and draw(); fetching and decoding run on the
+// fetcher's threads.
+//
+// The session knows nodes, keys, byte ranges, bounds, errors and dependencies; the dataset's
+// format (client/format.h), chosen by the archive kind from SessionSettings::formats, decodes,
+// measures and draws.
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -12,10 +17,11 @@
 
 #include "client/cache.h"
 #include "client/camera.h"
-#include "client/catp_gpu.h"
 #include "client/cut_engine.h"
 #include "client/fetcher.h"
+#include "client/format.h"
 #include "client/hierarchy.h"
+#include "client/node_renderer.h"
 
 namespace catpaq {
 
@@ -30,7 +36,10 @@ struct SessionSettings {
     uint64_t gpu_cache_bytes = 512ull << 20;         // GPU store budget (cut + recently used)
     uint64_t compressed_cache_bytes = 256ull << 20;  // compressed nodes kept for re-decoding
     HttpSettings http;
-    FetcherSettings fetcher;
+    FetcherSettings fetcher;  // its decoder is the dataset format's
+    // The formats the session can stream, by archive kind; nullptr: this build's
+    // (builtin_formats(), client/builtin_formats.h). Must outlive the session.
+    const FormatRegistry* formats = nullptr;
 };
 
 // A node the session could not get: its fetch or decode failed every attempt (the fetcher
@@ -81,8 +90,8 @@ public:
     StreamingSession(const std::string& location, const SessionSettings& settings);
     ~StreamingSession();
 
-    const CatpIndex& index() const { return *index_; }
-    const Hierarchy& hierarchy() const { return hierarchy_; }
+    const DatasetFormat& format() const { return *format_; }
+    const Hierarchy& hierarchy() const { return format_->hierarchy(); }
     const SessionSettings& settings() const { return settings_; }
     void set_tolerance(double px) { settings_.tolerance_px = px; }
 
@@ -95,32 +104,33 @@ public:
     const std::vector<NodeFailure>& failures() const { return failures_; }
     // Draws the current cut into the bound framebuffer.
     RenderStats draw(const Camera& camera, const RenderSettings& render);
-    // The (diamond, slot) fragments drawn by the current cut.
-    const std::vector<DrawItem>& items() const { return items_; }
-    // Decoded fragments of a drawn node (nullptr if not resident).
-    const DiamondFragments* fragments(uint64_t key) const;
+    // The (node, part) pairs drawn by the current cut (resident on the GPU).
+    const std::vector<DrawnPart>& items() const { return items_; }
+    // Decoded data of a resident node (nullptr if not resident).
+    const DecodedNode* decoded(uint64_t key) const;
+    // The geometry of items() as drawn, in a frame near `eye` (DatasetFormat::drawn_geometry):
+    // what picking and render --export-cut use.
+    DrawnGeometry drawn_geometry(const std::array<double, 3>& eye) const;
 
 private:
     void integrate(std::vector<FetchedNode>& arrived);
-    Aabb data_bounds(const HierarchyNode& node, const DiamondFragments& fragments) const;
     double data_distance(uint32_t node, const std::array<double, 3>& eye);
     uint8_t limits(const CutFrame& frame, const SessionFrameStats& s) const;
     void evict(uint32_t node);
 
     SessionSettings settings_;
-    std::unique_ptr<CatpIndex> index_;
-    Hierarchy hierarchy_;
+    std::unique_ptr<DatasetFormat> format_;
     std::unique_ptr<PartDrawCounter> counter_;
     std::unique_ptr<ResidencyTable> residency_;
     std::unique_ptr<CutEngine> engine_;
     std::unique_ptr<Fetcher> fetcher_;
-    FragmentStore store_;
-    std::unique_ptr<CatpRenderer> renderer_;
-    std::unordered_map<uint32_t, std::shared_ptr<const DiamondFragments>> decoded_;
+    // The format's GPU store and renderer: evicting a part there drops its node (evict()).
+    std::unique_ptr<NodeRenderer> renderer_;
+    std::unordered_map<uint32_t, std::shared_ptr<const DecodedNode>> decoded_;
     // Nodes evicted from the GPU and wanted again are decoded from here instead of refetched.
     std::unique_ptr<CompressedCache> compressed_;
     std::unordered_set<uint64_t> supplied_;  // handed to the fetcher, not arrived yet
-    std::vector<DrawItem> items_;
+    std::vector<DrawnPart> items_;
     uint64_t prefix_bytes_ = 0;
     bool settled_ = false;
     std::vector<NodeFailure> failures_;

@@ -3,7 +3,7 @@
 //
 // Controls: left drag orbits around the target, right drag (or shift + left drag) pans, the wheel
 // dollies towards the target, a double click flies to the point under the cursor (a ray cast on
-// the CPU against the triangles of the drawn cut, decoded exactly as the vertex shader does),
+// the CPU against the triangles of the drawn cut, as the dataset's format draws them),
 // F12 or P saves a screenshot (catpaq_view_NNNN.png in the working directory, the first free
 // number: earlier ones are never overwritten), Escape quits. A Dear ImGui overlay shows the
 // session's statistics (and nodes that failed to load: the coarser data stays on screen) and has
@@ -96,8 +96,9 @@ Ray pixel_ray(const Camera& camera, double px, double py);
 std::optional<double> intersect_triangle(const Ray& ray, const glm::dvec3& a, const glm::dvec3& b,
                                          const glm::dvec3& c, double t_min = 0);
 
-// The nearest hit of the ray with the triangles the session draws (every drawn fragment decoded
-// on the CPU with decode_packed_vertex, as the shader does), in world coordinates.
+// The nearest hit of the ray with the triangles the session draws (StreamingSession::
+// drawn_geometry: for CATP every drawn fragment decoded on the CPU as the shader does), in world
+// coordinates.
 std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera& camera, const Ray& ray);
 
 // The path of the next screenshot: DIRECTORY/catpaq_view_NNNN.png with the smallest number not

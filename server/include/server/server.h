@@ -3,7 +3,8 @@
 // common_codec/archive.h) under a root directory. It answers the JSON catalog, a dataset's prefix
 // (header + meta + index), single nodes by key (checksum-verified, immutable, ETag'd) and raw file
 // bytes with Range support, so the same client code runs against this server and a stock static
-// server. Routes, headers and status codes: docs/http-api.md.
+// server. It knows no dataset format: the catalog's per-format part comes from the describers
+// it is given (server/describe.h). Routes, headers and status codes: docs/http-api.md.
 //
 // The HTTP library stays out of this header: tests start the server in-process on port 0 and talk
 // to it over real sockets; `catpaq serve` calls run_server().
@@ -14,6 +15,8 @@
 #include <string>
 #include <string_view>
 #include <vector>
+
+#include "server/describe.h"
 
 namespace catpaq {
 
@@ -36,6 +39,9 @@ struct ServerSettings {
     // Receives each log line (no trailing newline). Called from the I/O threads, possibly
     // concurrently. Empty: lines go to stderr.
     std::function<void(LogLevel, std::string_view)> log;
+    // The catalog's per-format part (bounds, decoded metadata), by archive kind. Empty: every
+    // dataset is served with its container's facts only.
+    DatasetDescribers describers;
 };
 
 class StreamingServer {

@@ -12,12 +12,16 @@
 // fragment's canonical tetrahedron corners as uniforms; the vertex shader (shaders/catp.vert)
 // decodes positions relative to a per-frame integer anchor near the camera.
 //
+// Both are CATP's GPU side behind the format seam: create_catp_renderer() wraps them as the
+// NodeRenderer (client/node_renderer.h) the streaming session drives.
+//
 // Everything here needs a current GL context (client/gl_context.h).
 #include <array>
 #include <cstdint>
 #include <functional>
 #include <list>
 #include <memory>
+#include <string>
 #include <unordered_map>
 #include <vector>
 
@@ -26,9 +30,19 @@
 #include "catp/format.h"
 #include "client/camera.h"
 #include "client/gl_program.h"
+#include "client/node_renderer.h"
 #include "common_codec/fragment_codec.h"
 
 namespace catpaq {
+
+// The CATP shaders (shaders/, embedded at build time), each with the preamble of the current
+// context (shader_preamble, client/gl_program.h).
+enum class CatpShader {
+    PackedVertex,  // shaders/catp_decode.glsl + shaders/catp.vert: decodes the 64-bit vertex
+    FloatVertex,   // shaders/float.vert: the float comparison path
+    Fragment,      // shaders/catp.frag: Lambert + ambient, or flat colour
+};
+std::string catp_shader_source(CatpShader kind, bool gles);
 
 struct DrawItem {
     uint64_t diamond_key = 0;  // DiamondId bits
@@ -126,25 +140,6 @@ private:
     std::function<void(uint64_t, int)> on_evict_;
 };
 
-struct RenderSettings {
-    std::array<float, 4> background{1.0f, 1.0f, 1.0f, 1.0f};
-    // World-space direction towards the light; all zero: a headlight (from the eye).
-    std::array<float, 3> light_direction{0.0f, 0.0f, 0.0f};
-    float ambient = 0.25f;
-    bool flat = false;                                // one flat colour, no lighting
-    std::array<float, 3> flat_color{0.0f, 0.0f, 0.0f};
-    bool wireframe = false;                           // polygon mode lines (desktop GL only)
-    bool cull_back_faces = false;
-    bool clear = true;                                // clear colour and depth first
-};
-
-struct RenderStats {
-    size_t draws = 0;
-    size_t triangles = 0;
-    size_t vertices = 0;
-    size_t missing = 0;  // items that were not resident (skipped)
-};
-
 // The per-frame transform the renderer uses: the integer lattice anchor nearest the eye
 // (clamped to the lattice cube), the shader uniforms derived from it, and the matrices.
 struct FrameTransform {
@@ -190,5 +185,11 @@ private:
     GlProgram packed_, float_;
     Uniforms packed_u_, float_u_;
 };
+
+class DatasetFormat;
+// CATP's NodeRenderer for an opened CATP dataset (a CatpFormat, catp_client/catp_format.h): a
+// FragmentStore and a CatpRenderer. Throws Error if `format` is not CATP or the programs do not
+// build.
+std::unique_ptr<NodeRenderer> create_catp_renderer(const DatasetFormat& format);
 
 }  // namespace catpaq

@@ -1,5 +1,5 @@
 // Rendering a cut of a local CATP file offscreen.
-#include "client/static_render.h"
+#include "catp_client/static_render.h"
 
 #include "base/error.h"
 

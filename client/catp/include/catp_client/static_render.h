@@ -1,8 +1,8 @@
 #pragma once
 // Rendering a local CATP file: a given conforming cut (catp/cut.h RefinedSet) from a given
-// camera into an RGBA8 buffer, offscreen. Used by the tests and by `catpaq render`-style tools;
-// the adaptive client drives FragmentStore/CatpRenderer itself. Needs a current GL context
-// (client/gl_context.h: HeadlessGlContext).
+// camera into an RGBA8 buffer, offscreen. Used by the tests and benchmarks; the streaming
+// session drives FragmentStore/CatpRenderer through CATP's NodeRenderer (create_catp_renderer)
+// instead. Needs a current GL context (client/gl_context.h: HeadlessGlContext).
 #include <cstdint>
 #include <memory>
 #include <unordered_map>
@@ -10,8 +10,8 @@
 
 #include "catp/cut.h"
 #include "catp/dataset.h"
+#include "catp_client/catp_gpu.h"
 #include "client/camera.h"
-#include "client/catp_gpu.h"
 #include "client/gl_context.h"
 
 namespace catpaq {

@@ -1,0 +1,10 @@
+#pragma once
+// The dataset describers of this build (server/describe.h), one per format it knows: CATP now.
+// `catpaq serve` gives them to the server; a format without one is served all the same.
+#include "server/describe.h"
+
+namespace catpaq {
+
+DatasetDescribers builtin_dataset_describers();
+
+}  // namespace catpaq

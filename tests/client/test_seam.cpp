@@ -1,0 +1,184 @@
+// The format seam end to end: a second, test-only format (box_format.h, its GPU side in
+// box_renderer.h) registered in a FormatRegistry of the test, streamed by the unchanged
+// StreamingSession from a local file and from `catpaq serve` (which knows nothing of it), drawn
+// headless, and picked by the viewer's pick_cut.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <filesystem>
+
+#include "box_format.h"
+#include "box_renderer.h"
+#include "client/gl_context.h"
+#include "client/session.h"
+#include "client/viewer.h"
+#include "server/server.h"
+
+namespace fs = std::filesystem;
+using namespace catpaq;
+
+namespace {
+
+struct Scratch {
+    fs::path dir;
+    Scratch() {
+        dir = fs::temp_directory_path() / ("catpaq_seam_" + std::to_string(getpid()));
+        fs::create_directories(dir / "root");
+    }
+    ~Scratch() {
+        std::error_code ec;
+        fs::remove_all(dir, ec);
+    }
+};
+
+Scratch& scratch() {
+    static Scratch s;
+    return s;
+}
+
+// The box dataset, in a directory a server can serve.
+const std::string& box_dataset() {
+    static std::string path = [] {
+        std::string p = (scratch().dir / "root" / "boxes.cpq").string();
+        test::write_box_dataset(p, test::BoxDatasetSettings{});
+        return p;
+    }();
+    return path;
+}
+
+const FormatRegistry& box_registry() {
+    static const FormatRegistry registry = [] {
+        FormatRegistry r;
+        r.add(test::box_format_module_with_renderer());
+        return r;
+    }();
+    return registry;
+}
+
+// Above the square's centre, the whole square in view (its half width is 2/3 of the view's half
+// height): level 3 projects to about 2.4 px, the leaves to 1.3 px.
+Camera top_camera() {
+    Camera c;
+    c.eye = {50, 50, 180};
+    c.target = {50, 50, 0};
+    c.up = {0, 1, 0};
+    c.fov_y_degrees = 45;
+    c.width = 320;
+    c.height = 240;
+    return c;
+}
+
+SessionFrameStats settle(StreamingSession& session, const Camera& camera) {
+    SessionFrameStats s = session.step(camera);
+    for (int i = 0; i < 20000 && !session.settled(); ++i) {
+        usleep(1000);
+        s = session.step(camera);
+    }
+    EXPECT_TRUE(session.settled());
+    return s;
+}
+
+void expect_all_leaves_drawn(StreamingSession& session, const SessionFrameStats& s) {
+    EXPECT_TRUE(session.failures().empty());
+    EXPECT_TRUE(s.tolerance_met);
+    EXPECT_EQ(s.holes, 0u);
+    EXPECT_EQ(s.drawn_nodes, 256u);
+    EXPECT_EQ(s.triangles, 256u * 32);
+    EXPECT_EQ(s.fragments, 256u);
+    ASSERT_EQ(session.items().size(), 256u);
+    uint64_t triangles = 0;
+    const Hierarchy& h = session.hierarchy();
+    for (const DrawnPart& item : session.items()) {
+        const DecodedNode* decoded = session.decoded(item.key);
+        ASSERT_NE(decoded, nullptr);
+        const HierarchyNode& node = h.node(h.find(item.key));
+        for (size_t i = 0; i < node.parts.size(); ++i)  // part_primitives follow HierarchyNode::parts
+            if (node.parts[i].id == item.part) triangles += decoded->part_primitives.at(i);
+    }
+    EXPECT_EQ(triangles, s.triangles);
+    EXPECT_GE(s.gpu_bytes, s.triangles * 36);  // the box renderer's float vertices, and earlier levels
+}
+
+}  // namespace
+
+TEST(FormatSeam, AStreamingSessionStreamsDrawsAndPicksAnotherFormat) {
+    std::string why;
+    if (!HeadlessGlContext::available(&why)) GTEST_SKIP() << why;
+    HeadlessGlContext context;
+    SessionSettings settings;
+    settings.formats = &box_registry();
+    StreamingSession session(box_dataset(), settings);
+    EXPECT_EQ(session.hierarchy().size(), size_t(1 + 4 + 16 + 64 + 256));
+    const Camera camera = top_camera();
+    SessionFrameStats s = settle(session, camera);
+    expect_all_leaves_drawn(session, s);
+    EXPECT_GT(s.bytes_fetched, 0u);
+
+    // Drawn headless: every drawn part once, the square in the middle of the image.
+    Framebuffer framebuffer(camera.width, camera.height);
+    framebuffer.bind();
+    RenderStats r = session.draw(camera, RenderSettings{});
+    EXPECT_EQ(r.triangles, s.triangles);
+    EXPECT_EQ(r.draws, session.items().size());
+    EXPECT_EQ(r.missing, 0u);
+    std::vector<uint8_t> pixels = framebuffer.read_pixels();
+    auto pixel_is_box = [&](int x, int y) {
+        const uint8_t* p = &pixels[(size_t(y) * size_t(camera.width) + size_t(x)) * 4];
+        return p[0] == test::kBoxColor[0] && p[1] == test::kBoxColor[1] && p[2] == test::kBoxColor[2];
+    };
+    EXPECT_TRUE(pixel_is_box(160, 120));
+    EXPECT_FALSE(pixel_is_box(2, 2));
+    size_t covered = 0;
+    for (int y = 0; y < camera.height; ++y)
+        for (int x = 0; x < camera.width; ++x) covered += pixel_is_box(x, y);
+    // The square spans 2/3 of the image's height: 160 x 160 pixels.
+    EXPECT_NEAR(double(covered), 160.0 * 160.0, 160.0 * 4);
+
+    // The viewer's picking, through the format's drawn geometry.
+    DrawnGeometry geometry = session.drawn_geometry({camera.eye.x, camera.eye.y, camera.eye.z});
+    EXPECT_EQ(geometry.mesh.triangle_count(), s.triangles);
+    std::optional<glm::dvec3> hit = pick_cut(session, camera, pixel_ray(camera, 160, 120));
+    ASSERT_TRUE(hit.has_value());
+    EXPECT_NEAR(hit->x, 50, 0.5);
+    EXPECT_NEAR(hit->y, 50, 0.5);
+    EXPECT_NEAR(hit->z, 0, 1e-9);
+    EXPECT_FALSE(pick_cut(session, camera, pixel_ray(camera, 2, 2)).has_value());
+
+    // A loose tolerance: the cut coarsens back to the root.
+    session.set_tolerance(100);
+    s = settle(session, camera);
+    EXPECT_EQ(s.drawn_nodes, 1u);
+    EXPECT_EQ(s.triangles, 32u);
+    ASSERT_EQ(session.items().size(), 1u);
+    EXPECT_EQ(session.items()[0].key, session.hierarchy().node(session.hierarchy().roots()[0]).key);
+}
+
+// `catpaq serve` without any format's describer serves the box archive's prefix and nodes; the
+// session streams it over HTTP as it streams CATP.
+TEST(FormatSeam, AServerThatKnowsNoFormatServesItToTheSession) {
+    std::string why;
+    if (!HeadlessGlContext::available(&why)) GTEST_SKIP() << why;
+    box_dataset();
+    ServerSettings server_settings;
+    server_settings.root = (scratch().dir / "root").string();
+    server_settings.port = 0;
+    server_settings.threads = 1;
+    server_settings.log_level = LogLevel::Error;
+    server_settings.log = [](LogLevel, std::string_view) {};
+    StreamingServer server(server_settings);
+    uint16_t port = server.start();
+
+    HeadlessGlContext context;
+    SessionSettings settings;
+    settings.formats = &box_registry();
+    const std::string url = "http://127.0.0.1:" + std::to_string(port) + "/api/datasets/boxes";
+    for (const std::string& location : {url, "http://127.0.0.1:" + std::to_string(port) + "/files/boxes.cpq"}) {
+        SCOPED_TRACE(location);
+        StreamingSession session(location, settings);
+        SessionFrameStats s = settle(session, top_camera());
+        expect_all_leaves_drawn(session, s);
+        EXPECT_GT(s.requests, 0u);
+    }
+    server.stop();
+    server.wait();
+}
