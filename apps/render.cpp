@@ -39,6 +39,7 @@ static const char* kRenderUsage =
     "  --skip F               skip levels: nodes within F times the tolerance are not fetched\n"
     "                         when their descendants are drawn instead (default 8; 0: fetch\n"
     "                         every level)\n"
+    "  --fetch-whole-nodes    fetch nodes whole, not only the parts a refinement draws (to compare)\n"
     "  --max-triangles N      triangle budget per frame\n"
     "  --gpu-budget SIZE      GPU bytes of the cut (e.g. 256M)\n"
     "  --cpu-budget SIZE      CPU bytes of the cut\n"
@@ -129,7 +130,7 @@ static void report_failure(const StreamingSession& session) {
 }
 
 int cmd_render(int argc, char** argv) {
-    Options options(argc, argv, kRenderUsage, {"no-converge", "quiet"});
+    Options options(argc, argv, kRenderUsage, {"no-converge", "quiet", "fetch-whole-nodes"});
     if (options.help()) {
         std::printf("%s", kRenderUsage);
         return 0;
@@ -147,6 +148,7 @@ int cmd_render(int argc, char** argv) {
     SessionSettings settings;
     settings.tolerance_px = options.number("tolerance", 1.5, 0.05, 1000);
     settings.skip_factor = options.number("skip", 8, 0, 1e6);
+    settings.fetch_parts = !options.flag("fetch-whole-nodes");
     if (options.has("max-triangles"))
         settings.budgets.max_primitives = uint64_t(options.integer("max-triangles", 0, 1, int64_t(1) << 40));
     if (options.has("gpu-budget")) settings.budgets.max_gpu_bytes = options.bytes("gpu-budget", 0);

@@ -143,16 +143,95 @@ void PartDrawCounter::set_counts(uint32_t node, const uint32_t* counts, size_t n
     std::copy(counts, counts + m, counts_.begin() + offsets_[node]);
 }
 
-ResidencyTable::ResidencyTable(const Hierarchy& hierarchy, double bytes_per_primitive)
+PartResidency::PartResidency(const Hierarchy& hierarchy)
     : hierarchy_(hierarchy),
-      bytes_per_primitive_(bytes_per_primitive),
-      resident_(hierarchy.size(), 0),
+      mask_(hierarchy.size(), 0),
+      full_(hierarchy.size(), 0),
+      whole_(hierarchy.size(), 0),
+      part_off_(hierarchy.size() + 1, 0),
       bytes_(hierarchy.size()),
-      data_bounds_(hierarchy.size()),
-      failed_(hierarchy.size(), 0) {}
+      data_(hierarchy.size()) {
+    uint32_t total = 0;
+    for (uint32_t n = 0; n < hierarchy.size(); ++n) {
+        part_off_[n] = total;
+        const size_t parts = hierarchy.node(n).parts.size();
+        total += uint32_t(parts);
+        full_[n] = parts >= 32 ? ~0u : (1u << parts) - 1u;
+    }
+    part_off_[hierarchy.size()] = total;
+    part_bytes_.resize(total);
+    part_data_.resize(total);
+}
+
+void PartResidency::set_node(uint32_t node, NodeBytes bytes, const Aabb& data) {
+    if (!whole_[node]) ++count_;
+    mask_[node] = full_[node];
+    whole_[node] = 1;
+    for (uint32_t i = part_off_[node]; i < part_off_[node + 1]; ++i) {
+        part_bytes_[i] = {};
+        part_data_[i] = Aabb{};
+    }
+    bytes_[node] = bytes;
+    data_[node] = data;
+}
+
+void PartResidency::clear_node(uint32_t node) {
+    if (whole_[node]) --count_;
+    mask_[node] = 0;
+    whole_[node] = 0;
+    for (uint32_t i = part_off_[node]; i < part_off_[node + 1]; ++i) {
+        part_bytes_[i] = {};
+        part_data_[i] = Aabb{};
+    }
+    bytes_[node] = {};
+    data_[node] = Aabb{};
+}
+
+void PartResidency::set_part(uint32_t node, size_t part, NodeBytes bytes, const Aabb& data) {
+    assert(hierarchy_.node(node).fetch_parts && part < hierarchy_.node(node).parts.size());
+    mask_[node] |= 1u << part;
+    part_bytes_[part_off_[node] + part] = bytes;
+    part_data_[part_off_[node] + part] = data;
+    total(node);
+}
+
+void PartResidency::clear_part(uint32_t node, size_t part) {
+    mask_[node] &= ~(1u << part);
+    part_bytes_[part_off_[node] + part] = {};
+    part_data_[part_off_[node] + part] = Aabb{};
+    total(node);
+}
+
+// A node fetched by parts: its totals over the resident parts.
+void PartResidency::total(uint32_t node) {
+    const bool all = mask_[node] == full_[node];
+    if (all != bool(whole_[node])) count_ += all ? 1 : size_t(-1);
+    whole_[node] = all;
+    NodeBytes b;
+    Aabb box;
+    for (uint32_t i = part_off_[node], k = 0; i < part_off_[node + 1]; ++i, ++k) {
+        if (!((mask_[node] >> k) & 1u)) continue;
+        b.gpu += part_bytes_[i].gpu;
+        b.cpu += part_bytes_[i].cpu;
+        box.extend(part_data_[i]);
+    }
+    bytes_[node] = b;
+    data_[node] = box;
+}
+
+bool PartResidency::ready(uint32_t node, uint32_t parent) const {
+    const HierarchyNode& n = hierarchy_.node(node);
+    if (!n.fetch_parts || whole_[node]) return whole_[node] != 0;
+    for (size_t k = 0; k < n.parts.size(); ++k)
+        if (n.parts[k].parent == parent && !((mask_[node] >> k) & 1u)) return false;
+    return true;
+}
+
+ResidencyTable::ResidencyTable(const Hierarchy& hierarchy, double bytes_per_primitive)
+    : hierarchy_(hierarchy), bytes_per_primitive_(bytes_per_primitive), parts_(hierarchy), failed_(hierarchy.size(), 0) {}
 
 NodeBytes ResidencyTable::bytes(uint32_t node) const {
-    if (resident_[node]) return bytes_[node];
+    if (parts_.any(node)) return parts_.bytes(node);
     const HierarchyNode& n = hierarchy_.node(node);
     if (!n.has_data) return {};
     uint64_t estimate = uint64_t(std::ceil(double(n.primitives) * bytes_per_primitive_));
@@ -160,18 +239,22 @@ NodeBytes ResidencyTable::bytes(uint32_t node) const {
 }
 
 void ResidencyTable::set_resident(uint32_t node, NodeBytes bytes, const Aabb& data) {
-    if (!resident_[node]) resident_count_++;
-    resident_[node] = 1;
-    bytes_[node] = bytes;
-    data_bounds_[node] = data;
+    parts_.set_node(node, bytes, data);
     log_.add(node);
 }
 
 void ResidencyTable::set_evicted(uint32_t node) {
-    if (resident_[node]) resident_count_--;
-    resident_[node] = 0;
-    bytes_[node] = {};
-    data_bounds_[node] = Aabb{};
+    parts_.clear_node(node);
+    log_.add(node);
+}
+
+void ResidencyTable::set_part_resident(uint32_t node, size_t part, NodeBytes bytes, const Aabb& data) {
+    parts_.set_part(node, part, bytes, data);
+    log_.add(node);
+}
+
+void ResidencyTable::set_part_evicted(uint32_t node, size_t part) {
+    parts_.clear_part(node, part);
     log_.add(node);
 }
 
@@ -219,12 +302,23 @@ CutEngine::CutEngine(const Hierarchy& hierarchy, const DrawCounter& counter, Cut
             }
         box_width_[i] = all.empty() ? 0.0 : std::max({all.max[0] - all.min[0], all.max[1] - all.min[1], all.max[2] - all.min[2]});
         error_[i] = node.error;
-        flags_[i] = uint8_t((node.has_data ? 1 : 0) | (node.leaf ? 2 : 0));
+        flags_[i] = uint8_t((node.has_data ? 1 : 0) | (node.leaf ? 2 : 0) | (node.has_data && node.fetch_parts ? 4 : 0));
         level_[i] = node.level;
     }
     par_off_[n] = uint32_t(par_.size());
     ch_off_[n] = uint32_t(ch_.size());
     box_off_[n] = uint32_t(box_.size());
+    units_from_edges_ = uint32_t(par_.size());
+    unit_node_.resize(par_.size() + n);
+    unit_parent_.resize(par_.size() + n);
+    for (uint32_t i = 0; i < n; ++i) {
+        for (uint32_t e = par_off_[i]; e < par_off_[i + 1]; ++e) {
+            unit_node_[e] = i;
+            unit_parent_[e] = par_[e];
+        }
+        unit_node_[units_from_edges_ + i] = i;
+        unit_parent_[units_from_edges_ + i] = kNoNode;
+    }
     reset();
 }
 
@@ -248,10 +342,11 @@ void CutEngine::reset() {
     proj_frame_.assign(n, 0);
     mark_.assign(n, 0);
     stamp_ = 0;
-    want_.assign(n, {});
-    want_frame_.assign(n, 0);
+    const size_t units = unit_node_.size();
+    want_.assign(units, {});
+    want_frame_.assign(units, 0);
     wanted_.clear();
-    outstanding_.assign(n, 0);
+    outstanding_.assign(units, 0);
     outstanding_list_.clear();
     // The roots are drawn; their counts are filled by the first update's recount.
     for (uint32_t r : h_.roots()) active_.insert(r);
@@ -263,7 +358,20 @@ bool CutEngine::is_active(uint32_t n) const {
     return !refined_[n] && (par_off_[n] == par_off_[n + 1] || refined_parents_[n] > 0);
 }
 
-bool CutEngine::is_resident(uint32_t n) const { return !has_data(n) || residency_->resident(n); }
+bool CutEngine::drawable(uint32_t n) const {
+    if (!has_data(n)) return true;
+    if (par_off_[n] == par_off_[n + 1]) return ready(n, kNoNode);
+    for (uint32_t p : parents(n))
+        if (refined_[p] && !ready(n, p)) return false;
+    return true;
+}
+
+uint32_t CutEngine::unit_of(uint32_t n, uint32_t parent) const {
+    if ((flags_[n] & 4) && parent != kNoNode)
+        for (uint32_t e = par_off_[n]; e < par_off_[n + 1]; ++e)
+            if (par_[e] == parent) return e;
+    return units_from_edges_ + n;
+}
 
 bool CutEngine::drawn(uint32_t node) const { return active_.contains(node); }
 
@@ -449,15 +557,25 @@ void CutEngine::add_closure(uint32_t n, std::vector<uint32_t>& out) {
     }
 }
 
-void CutEngine::want(uint32_t n, RequestReason reason, double priority) {
-    if (want_frame_[n] != frame_number_) {
-        want_frame_[n] = frame_number_;
-        want_[n] = {reason, priority};
-        wanted_.push_back(n);
+void CutEngine::want(uint32_t n, uint32_t parent, RequestReason reason, double priority) {
+    const uint32_t u = unit_of(n, parent);
+    if (want_frame_[u] != frame_number_) {
+        want_frame_[u] = frame_number_;
+        want_[u] = {reason, priority};
+        wanted_.push_back(u);
         return;
     }
-    Want& w = want_[n];
+    Want& w = want_[u];
     if (reason < w.reason || (reason == w.reason && priority > w.priority)) w = {reason, priority};
+}
+
+void CutEngine::want_drawable(uint32_t n, RequestReason reason, double priority) {
+    if (par_off_[n] == par_off_[n + 1]) {
+        if (!ready(n, kNoNode)) want(n, kNoNode, reason, priority);
+        return;
+    }
+    for (uint32_t p : parents(n))
+        if (refined_[p] && !ready(n, p)) want(n, p, reason, priority);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -482,8 +600,8 @@ void CutEngine::coarsen_phase() {
 // Coarsens frontier node n if its data is resident (it is drawn again) and the budgets still
 // hold; a node that is not resident is requested instead (only if the viewer can see it).
 bool CutEngine::try_coarsen(uint32_t n, std::vector<Op>& log) {
-    if (!is_resident(n)) {
-        if (in_view(n)) want(n, RequestReason::Coarsen, proj(n));
+    if (!drawable(n)) {  // its parents are all refined: it would draw every part
+        if (in_view(n)) want_drawable(n, RequestReason::Coarsen, proj(n));
         return false;
     }
     Totals before = totals_;
@@ -539,7 +657,7 @@ bool CutEngine::make_room(double limit, std::vector<Op>& log, const Totals& befo
         room_heap_.pop_back();
         popped.push_back(top);
         uint32_t f = top.second;
-        if (!is_frontier(f) || !is_resident(f)) continue;
+        if (!is_frontier(f) || !drawable(f)) continue;
         Totals b = totals_;
         size_t mark = log.size();
         set_refined(f, false, &log);
@@ -592,7 +710,8 @@ void CutEngine::refine_phase() {
         if (e > tol) heap.push_back({e, level_[n], n});
     }
     std::make_heap(heap.begin(), heap.end(), less);
-    std::vector<uint32_t> closure_set, missing;
+    std::vector<uint32_t> closure_set;
+    std::vector<std::pair<uint32_t, uint32_t>> missing;  // (child, the refined parent it needs data for)
     std::vector<Op> log;
     while (!heap.empty()) {
         std::pop_heap(heap.begin(), heap.end(), less);
@@ -608,21 +727,26 @@ void CutEngine::refine_phase() {
             closure(n, closure_set);
             missing.clear();
             // The set grows while it is scanned: skipped children join it with their closures.
-            for (size_t i = 0; i < closure_set.size(); ++i)
-                for (uint32_t c : children(closure_set[i])) {
-                    if (mark_[c] == stamp_ || !has_data(c) || residency_->resident(c)) continue;
+            // Each refined node s needs, of each child c that will be drawn, what c draws under s
+            // (what c draws under parents refined earlier is resident: c was drawn).
+            for (size_t i = 0; i < closure_set.size(); ++i) {
+                const uint32_t s = closure_set[i];
+                for (uint32_t c : children(s)) {
+                    if (mark_[c] == stamp_ || ready(c, s)) continue;
                     const double e = leaf(c) ? 0.0 : proj(c);
                     if (e > tol && e <= limit)
                         add_closure(c, closure_set);
                     else
-                        missing.push_back(c);
+                        missing.push_back({c, s});
                 }
+            }
             // A missing child that joined the set later (a parent of a skipped node) is refined, not drawn.
-            missing.erase(std::remove_if(missing.begin(), missing.end(), [&](uint32_t c) { return mark_[c] == stamp_; }),
+            missing.erase(std::remove_if(missing.begin(), missing.end(), [&](const auto& m) { return mark_[m.first] == stamp_; }),
                           missing.end());
         };
         plan(skip_limit);
-        if (skip_limit > tol && std::any_of(missing.begin(), missing.end(), [&](uint32_t c) { return residency_->failed(c); }))
+        if (skip_limit > tol &&
+            std::any_of(missing.begin(), missing.end(), [&](const auto& m) { return residency_->failed(m.first); }))
             plan(tol);
         bool capped = uint64_t(frame_.stats.refinements) + closure_set.size() > budgets_.max_refinements;
         Totals before = totals_;
@@ -641,7 +765,7 @@ void CutEngine::refine_phase() {
                 frame_.stats.budget_blocked++;
             } else if (!missing.empty()) {
                 frame_.stats.waiting++;
-                for (uint32_t c : missing) want(c, RequestReason::Refine, cand.e);
+                for (const auto& [c, s] : missing) want(c, s, RequestReason::Refine, cand.e);
             } else {
                 frame_.stats.capped++;
             }
@@ -666,23 +790,29 @@ void CutEngine::refine_phase() {
 void CutEngine::emit_requests() {
     CutFrameStats& st = frame_.stats;
     for (uint32_t n : active_.items) {
-        if (is_resident(n)) continue;
+        if (drawable(n)) continue;
         st.holes++;
-        if (in_view(n)) want(n, RequestReason::Drawn, proj(n));
+        if (in_view(n)) want_drawable(n, RequestReason::Drawn, proj(n));
     }
+    // The request of a unit: the node, and the parent whose parts it names (kNoNode: the whole
+    // node, or a root's parts).
+    auto request_of = [&](uint32_t u, RequestReason reason, double priority) {
+        const HierarchyNode& node = h_.node(unit_node_[u]);
+        return CutRequest{unit_node_[u], node.key, node.level, reason, priority, unit_parent_[u]};
+    };
     // Retire finished and stale requests.
     size_t kept = 0;
-    for (uint32_t n : outstanding_list_) {
-        if (is_resident(n)) {
-            outstanding_[n] = 0;
+    for (uint32_t u : outstanding_list_) {
+        if (unit_ready(u)) {
+            outstanding_[u] = 0;
             continue;
         }
-        if (want_frame_[n] != frame_number_) {
-            outstanding_[n] = 0;
-            frame_.cancelled.push_back({n, h_.node(n).key, h_.node(n).level, RequestReason::Refine, 0});
+        if (want_frame_[u] != frame_number_) {
+            outstanding_[u] = 0;
+            frame_.cancelled.push_back(request_of(u, RequestReason::Refine, 0));
             continue;
         }
-        outstanding_list_[kept++] = n;
+        outstanding_list_[kept++] = u;
     }
     outstanding_list_.resize(kept);
     std::sort(wanted_.begin(), wanted_.end(), [&](uint32_t a, uint32_t b) {
@@ -690,22 +820,22 @@ void CutEngine::emit_requests() {
         const Want& wb = want_[b];
         if (wa.reason != wb.reason) return wa.reason < wb.reason;
         if (wa.priority != wb.priority) return wa.priority > wb.priority;
-        const HierarchyNode& na = h_.node(a);
-        const HierarchyNode& nb = h_.node(b);
+        const HierarchyNode& na = h_.node(unit_node_[a]);
+        const HierarchyNode& nb = h_.node(unit_node_[b]);
         if (na.level != nb.level) return na.level < nb.level;
-        return na.key < nb.key;
+        if (na.key != nb.key) return na.key < nb.key;
+        return a < b;
     });
-    for (uint32_t n : wanted_) {
-        const HierarchyNode& node = h_.node(n);
-        CutRequest r{n, node.key, node.level, want_[n].reason, want_[n].priority};
-        if (outstanding_[n]) {
+    for (uint32_t u : wanted_) {
+        const CutRequest r = request_of(u, want_[u].reason, want_[u].priority);
+        if (outstanding_[u]) {
             frame_.requests.push_back(r);
             continue;
         }
         if (st.new_requests >= budgets_.max_new_requests || outstanding_list_.size() >= budgets_.max_outstanding_requests)
             continue;
-        outstanding_[n] = 1;
-        outstanding_list_.push_back(n);
+        outstanding_[u] = 1;
+        outstanding_list_.push_back(u);
         st.new_requests++;
         frame_.requests.push_back(r);
     }

@@ -5,6 +5,7 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <map>
 #include <cerrno>
 #include <cstring>
 
@@ -179,6 +180,7 @@ DatasetPrefix load_prefix(NodeSource& source, int attempts) {
 
 NodeDecoder format_decoder(const DatasetFormat& format) {
     return [&format](const FetchRequest& request, const uint8_t* data, size_t size, std::shared_ptr<const DecodedNode>& out) {
+        if (request.part != kWholeNode) return format.decode_part(request.node, request.part, data, size, out);
         return format.decode(request.node, data, size, out);
     };
 }
@@ -193,6 +195,18 @@ FetchRequest FetchRequest::of(const HierarchyNode& node) {
     r.offset = node.payload_offset;
     r.size = node.payload_bytes;
     r.checksum = node.checksum;
+    r.id = node.key;
+    return r;
+}
+
+FetchRequest FetchRequest::of_part(const HierarchyNode& node, size_t part) {
+    FetchRequest r;
+    r.node = node.index;
+    r.key = node.key;
+    r.part = uint8_t(part);
+    r.id = part_fetch_id(node.index, part);
+    r.offset = node.parts[part].offset;
+    r.size = node.parts[part].size;
     return r;
 }
 
@@ -260,7 +274,7 @@ size_t Fetcher::poll(std::vector<FetchedNode>& out) {
         done.swap(done_);
         // Lists issued up to now may still name these nodes: they must not fetch them again.
         for (const FetchedNode& n : done)
-            if (n.ok) recent_[n.key] = seq;
+            if (n.ok) recent_[n.id] = seq;
     }
     for (FetchedNode& n : done) out.push_back(std::move(n));
     return done.size();
@@ -283,7 +297,7 @@ bool Fetcher::idle() const {
 
 void Fetcher::deliver(FetchedNode node) {
     std::lock_guard<std::mutex> lock(done_mutex_);
-    if (node.ok) recent_[node.key] = kUnpolled;
+    if (node.ok) recent_[node.id] = kUnpolled;
     done_.push_back(std::move(node));
 }
 
@@ -369,7 +383,9 @@ uint64_t Fetcher::apply_commands() {
                 entries_.erase(it);
                 return;
             case State::Running:
-                if (settings_.abort_stale_in_flight) {
+                // A transfer that carries other fetches too runs on.
+                if (settings_.abort_stale_in_flight && transfer_key_.count(e.transfer) &&
+                    transfer_key_[e.transfer].ids.size() == 1) {
                     source_->cancel(e.transfer);
                     transfer_key_.erase(e.transfer);
                     stats_cancelled_++;
@@ -400,13 +416,13 @@ uint64_t Fetcher::apply_commands() {
         for (auto& [key, e] : entries_) e.wanted = false;
         order_.clear();
         for (const FetchRequest& req : wanted) {
-            if (recent.count(req.key)) continue;
-            auto it = entries_.find(req.key);
+            if (recent.count(req.id)) continue;
+            auto it = entries_.find(req.id);
             if (it == entries_.end()) {
                 Entry e;
                 e.request = req;
                 e.state = State::Queued;
-                it = entries_.emplace(req.key, std::move(e)).first;
+                it = entries_.emplace(req.id, std::move(e)).first;
             } else if (it->second.wanted) {
                 continue;  // listed twice
             }
@@ -417,7 +433,7 @@ uint64_t Fetcher::apply_commands() {
                 e.state = State::Queued;
                 e.attempts = 0;
             }
-            order_.push_back(req.key);
+            order_.push_back(req.id);
         }
         for (auto it = entries_.begin(); it != entries_.end();) {
             auto next = std::next(it);
@@ -432,13 +448,13 @@ uint64_t Fetcher::apply_commands() {
         drop(it);
     }
     for (DecodeJob& job : supplied) {
-        auto it = entries_.find(job.request.key);
+        auto it = entries_.find(job.request.id);
         if (it != entries_.end() && (it->second.state == State::Running || it->second.state == State::Decoding)) continue;
         if (it == entries_.end()) {
             Entry e;
             e.request = job.request;
             e.wanted = false;  // not in the list: delivered, and forgotten if it has to be fetched
-            it = entries_.emplace(job.request.key, std::move(e)).first;
+            it = entries_.emplace(job.request.id, std::move(e)).first;
         }
         it->second.state = State::Decoding;
         job.attempts = it->second.attempts;
@@ -452,22 +468,62 @@ uint64_t Fetcher::apply_commands() {
 void Fetcher::dispatch() {
     size_t cap = source_->max_parallel();
     if (source_->in_flight() >= cap) return;
+    // Queued parts by file offset, for coalescing (built only when some are queued).
+    std::map<uint64_t, uint64_t> queued_parts;
+    if (settings_.coalesce_gap_bytes >= 0)
+        for (const auto& [id, e] : entries_)
+            if (e.state == State::Queued && e.request.part != kWholeNode) queued_parts.emplace(e.request.offset, id);
+    auto queued_at = [&](std::map<uint64_t, uint64_t>::iterator it) {
+        auto e = entries_.find(it->second);
+        return e != entries_.end() && e->second.state == State::Queued ? &e->second : nullptr;
+    };
     for (uint64_t key : order_) {
         if (source_->in_flight() >= cap) break;
         auto it = entries_.find(key);
         if (it == entries_.end() || it->second.state != State::Queued) continue;
         Entry& e = it->second;
+        Transfer t;
+        t.ids.push_back(key);
+        t.offset = e.request.offset;
+        uint64_t end = e.request.offset + e.request.size;
+        if (e.request.part != kWholeNode && !queued_parts.empty()) {
+            // Adjacent queued parts after and before it, while the gaps and the total stay small.
+            const uint64_t gap = uint64_t(settings_.coalesce_gap_bytes);
+            auto at = queued_parts.find(e.request.offset);
+            for (auto next = std::next(at); next != queued_parts.end(); ++next) {
+                Entry* n = queued_at(next);
+                if (!n || next->first < end || next->first - end > gap ||
+                    next->first + n->request.size - t.offset > settings_.max_coalesced_bytes)
+                    break;
+                t.ids.push_back(next->second);
+                end = next->first + n->request.size;
+            }
+            while (at != queued_parts.begin()) {
+                auto prev = std::prev(at);
+                Entry* p = queued_at(prev);
+                if (!p || prev->first + p->request.size > t.offset || t.offset - (prev->first + p->request.size) > gap ||
+                    end - prev->first > settings_.max_coalesced_bytes)
+                    break;
+                t.ids.insert(t.ids.begin(), prev->second);
+                t.offset = prev->first;
+                at = prev;
+            }
+        }
         SourceRequest sr;
         sr.id = next_transfer_++;
-        sr.kind = SourceRequest::Kind::Node;
-        sr.key = key;
-        sr.offset = e.request.offset;
-        sr.size = e.request.size;
-        e.state = State::Running;
-        e.transfer = sr.id;
-        transfer_key_[sr.id] = key;
+        // A part is a plain byte range (the server's node route serves whole nodes).
+        sr.kind = e.request.part == kWholeNode ? SourceRequest::Kind::Node : SourceRequest::Kind::Range;
+        sr.key = e.request.key;
+        sr.offset = t.offset;
+        sr.size = end - t.offset;
+        for (uint64_t id : t.ids) {
+            Entry& x = entries_.at(id);
+            x.state = State::Running;
+            x.transfer = sr.id;
+            if (x.attempts > 0) stats_retries_++;
+        }
+        transfer_key_[sr.id] = std::move(t);
         stats_transfers_++;
-        if (e.attempts > 0) stats_retries_++;
         source_->submit(sr);
     }
 }
@@ -489,7 +545,9 @@ void Fetcher::fail_attempt(uint64_t key, const std::string& error, bool permanen
         stats_failed_++;
         FetchedNode node;
         node.node = e.request.node;
-        node.key = key;
+        node.key = e.request.key;
+        node.part = e.request.part;
+        node.id = key;
         node.ok = false;
         node.error = error;
         node.attempts = e.attempts;
@@ -504,29 +562,40 @@ void Fetcher::fail_attempt(uint64_t key, const std::string& error, bool permanen
 void Fetcher::handle_result(SourceResult& r) {
     auto tk = transfer_key_.find(r.id);
     if (tk == transfer_key_.end()) return;  // cancelled
-    uint64_t key = tk->second;
+    const Transfer t = std::move(tk->second);
     transfer_key_.erase(tk);
-    auto it = entries_.find(key);
-    if (it == entries_.end() || it->second.state != State::Running || it->second.transfer != r.id) return;
-    Entry& e = it->second;
-    if (!r.ok) {
-        stats_transport_errors_++;
-        fail_attempt(key, r.error, !r.retryable);
-        return;
+    if (r.ok) stats_bytes_ += r.bytes.size();
+    auto bytes = std::make_shared<const std::vector<uint8_t>>(std::move(r.bytes));
+    for (uint64_t key : t.ids) {
+        auto it = entries_.find(key);
+        if (it == entries_.end() || it->second.state != State::Running || it->second.transfer != r.id) continue;
+        Entry& e = it->second;
+        if (!r.ok) {
+            stats_transport_errors_++;
+            fail_attempt(key, r.error, !r.retryable);
+            continue;
+        }
+        e.state = State::Decoding;
+        DecodeJob job;
+        job.request = e.request;
+        if (t.ids.size() == 1) {
+            job.bytes = bytes;
+        } else {
+            // This fetch's slice of the coalesced range (a short body gives a short slice: the
+            // size check on the workers reports it).
+            const uint64_t from = std::min<uint64_t>(e.request.offset - t.offset, bytes->size());
+            const uint64_t to = std::min<uint64_t>(from + e.request.size, bytes->size());
+            job.bytes = std::make_shared<const std::vector<uint8_t>>(bytes->begin() + from, bytes->begin() + to);
+        }
+        job.attempts = e.attempts + 1;
+        std::lock_guard<std::mutex> lock(decode_mutex_);
+        decode_queue_.push_back(std::move(job));
+        decode_cv_.notify_one();
     }
-    stats_bytes_ += r.bytes.size();
-    e.state = State::Decoding;
-    DecodeJob job;
-    job.request = e.request;
-    job.bytes = std::make_shared<const std::vector<uint8_t>>(std::move(r.bytes));
-    job.attempts = e.attempts + 1;
-    std::lock_guard<std::mutex> lock(decode_mutex_);
-    decode_queue_.push_back(std::move(job));
-    decode_cv_.notify_one();
 }
 
 void Fetcher::handle_decoded(DecodeDone& d) {
-    auto it = entries_.find(d.node.key);
+    auto it = entries_.find(d.node.id);
     if (d.checksum_failed) stats_checksum_failures_++;
     else if (d.corrupt) stats_decode_failures_++;
     if (d.corrupt) {
@@ -534,7 +603,7 @@ void Fetcher::handle_decoded(DecodeDone& d) {
             if (d.supplied && it->second.wanted) {
                 it->second.state = State::Queued;  // the cached bytes were bad: fetch them
             } else {
-                fail_attempt(d.node.key, d.node.error, false);
+                fail_attempt(d.node.id, d.node.error, false);
             }
         }
         return;
@@ -559,13 +628,18 @@ void Fetcher::decode_loop() {
         d.supplied = job.supplied;
         d.node.node = job.request.node;
         d.node.key = job.request.key;
+        d.node.part = job.request.part;
+        d.node.id = job.request.id;
         d.node.attempts = job.attempts;
         const std::vector<uint8_t>& bytes = *job.bytes;
-        if (bytes.size() != job.request.size || checksum64(bytes.data(), bytes.size()) != job.request.checksum) {
+        const bool whole = job.request.part == kWholeNode;
+        if (bytes.size() != job.request.size || (whole && checksum64(bytes.data(), bytes.size()) != job.request.checksum)) {
             d.corrupt = true;
             d.checksum_failed = true;
-            d.node.error = strprintf("node %llu: %zu bytes that do not match the index checksum",
-                                     (unsigned long long)job.request.key, bytes.size());
+            d.node.error = whole ? strprintf("node %llu: %zu bytes that do not match the index checksum",
+                                             (unsigned long long)job.request.key, bytes.size())
+                                 : strprintf("node %llu: %zu bytes for a part of %u", (unsigned long long)job.request.key,
+                                             bytes.size(), job.request.size);
         } else {
             std::shared_ptr<const DecodedNode> decoded;
             std::string problem;

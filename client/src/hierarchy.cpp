@@ -139,6 +139,15 @@ std::string Hierarchy::check() const {
             }
         }
         if (!n.has_data && !n.parts.empty()) return strprintf("virtual node %llu has parts", (unsigned long long)n.key);
+        if (n.fetch_parts) {
+            if (n.key >> 63) return strprintf("node %llu: a node fetched by parts needs a key below 2^63", (unsigned long long)n.key);
+            if (n.parts.size() > kMaxFetchedParts)
+                return strprintf("node %llu: too many parts to fetch alone", (unsigned long long)n.key);
+            for (const HierarchyPart& part : n.parts)
+                if (part.size == 0 || part.offset < n.payload_offset ||
+                    part.offset + part.size > n.payload_offset + n.payload_bytes)
+                    return strprintf("node %llu: a part's byte range is outside the node's", (unsigned long long)n.key);
+        }
     }
     return {};
 }
@@ -251,6 +260,20 @@ Hierarchy build_synthetic_hierarchy(const SyntheticHierarchySettings& settings) 
             drawn_for[data_parents[i]] += share;
         }
     }
+    if (settings.fetch_parts)
+        for (uint32_t n = 0; n < h.size(); ++n) {
+            // Each part its own range: 6 bytes per primitive, one after another (at least 1).
+            HierarchyNode& node = h.mutable_node(n);
+            if (!node.has_data) continue;
+            uint64_t at = node.payload_offset + 16;
+            for (HierarchyPart& part : node.parts) {
+                part.offset = at;
+                part.size = std::max<uint32_t>(1, part.primitives * 6);
+                at += part.size;
+            }
+            node.payload_bytes = uint32_t(std::max<uint64_t>(node.payload_bytes, at - node.payload_offset));
+            node.fetch_parts = true;
+        }
     h.finalize();
     return h;
 }

@@ -27,9 +27,17 @@ StreamingSession::StreamingSession(const std::string& location, const SessionSet
     fetcher_ = std::make_unique<Fetcher>(std::move(source), fetcher_settings);
     renderer_ = module.create_renderer(*format_);
     renderer_->set_budget(settings.gpu_cache_bytes);
-    renderer_->set_eviction_callback([this](uint64_t key, uint8_t) {
+    renderer_->set_eviction_callback([this](uint64_t key, uint8_t part_id) {
         uint32_t node = format_->hierarchy().find(key);
-        if (node != kNoNode) evict(node);
+        if (node == kNoNode) return;
+        auto it = decoded_.find(node);
+        if (it == decoded_.end() || it->second.whole) {
+            evict(node);
+            return;
+        }
+        const std::vector<HierarchyPart>& parts = format_->hierarchy().node(node).parts;
+        for (size_t i = 0; i < parts.size(); ++i)
+            if (parts[i].id == part_id) evict_part(node, i);
     });
     compressed_ = std::make_unique<CompressedCache>(settings.compressed_cache_bytes);
 }
@@ -39,13 +47,34 @@ StreamingSession::~StreamingSession() {
 }
 
 void StreamingSession::evict(uint32_t node) {
-    if (!residency_->resident(node)) return;
+    if (!residency_->any_resident(node)) return;
     residency_->set_evicted(node);
     decoded_.erase(node);
     distances_.erase(node);
     const HierarchyNode& n = hierarchy().node(node);
     for (const HierarchyPart& part : n.parts)
         if (renderer_->resident(n.key, part.id)) renderer_->release(n.key, part.id);
+}
+
+// One part of a node fetched by parts (the others stay).
+void StreamingSession::evict_part(uint32_t node, size_t part) {
+    if (!residency_->part_resident(node, part)) return;
+    residency_->set_part_evicted(node, part);
+    distances_.erase(node);
+    auto it = decoded_.find(node);
+    if (it != decoded_.end() && part < it->second.parts.size()) {
+        it->second.parts[part].reset();
+        if (!residency_->any_resident(node)) decoded_.erase(it);
+    }
+    const HierarchyNode& n = hierarchy().node(node);
+    if (renderer_->resident(n.key, n.parts[part].id)) renderer_->release(n.key, n.parts[part].id);
+}
+
+const DecodedNode* StreamingSession::decoded_part(uint32_t node, size_t part) const {
+    auto it = decoded_.find(node);
+    if (it == decoded_.end()) return nullptr;
+    if (it->second.whole) return it->second.whole.get();
+    return part < it->second.parts.size() ? it->second.parts[part].get() : nullptr;
 }
 
 std::vector<const char*> session_limit_names(uint8_t limits) {
@@ -72,7 +101,15 @@ double StreamingSession::data_distance(uint32_t node, const std::array<double, 3
         return cached->second.distance - moved(cached->second.eye);
     auto it = decoded_.find(node);
     if (it == decoded_.end()) return 0;
-    std::optional<double> distance = format_->data_distance(node, *it->second, eye);
+    // The nearest of its resident parts' geometry (or of the whole node's).
+    std::optional<double> distance;
+    auto measure = [&](const DecodedNode& d) {
+        std::optional<double> m = format_->data_distance(node, d, eye);
+        if (m && (!distance || *m < *distance)) distance = m;
+    };
+    if (it->second.whole) measure(*it->second.whole);
+    for (const auto& part : it->second.parts)
+        if (part) measure(*part);
     if (!distance) return 0;
     distances_[node] = {eye, *distance};
     return *distance;
@@ -80,7 +117,7 @@ double StreamingSession::data_distance(uint32_t node, const std::array<double, 3
 
 void StreamingSession::integrate(std::vector<FetchedNode>& arrived) {
     for (FetchedNode& f : arrived) {
-        supplied_.erase(f.key);
+        supplied_.erase(f.id);
         if (!f.ok || !f.decoded || f.node == kNoNode) {
             // Failed every attempt: recorded once (the fetcher retries it later if still wanted).
             if (!f.ok && f.node != kNoNode) residency_->set_failed(f.node, true);
@@ -94,12 +131,24 @@ void StreamingSession::integrate(std::vector<FetchedNode>& arrived) {
         failed_keys_.erase(f.key);
         residency_->set_failed(f.node, false);
         const HierarchyNode& n = hierarchy().node(f.node);
-        if (f.compressed) compressed_->insert(n.key, f.compressed, f.compressed->size());
+        if (f.compressed) compressed_->insert(f.id, f.compressed, f.compressed->size());
         const DecodedNode& decoded = *f.decoded;
+        if (f.part == kWholeNode) {
+            renderer_->upload(n, decoded);
+            counter_->set_counts(f.node, decoded.part_primitives.data(), decoded.part_primitives.size());
+            residency_->set_resident(f.node, decoded.bytes, decoded.data_bounds);
+            decoded_[f.node] = NodeData{f.decoded, {}};
+            continue;
+        }
+        if (f.part >= n.parts.size() || decoded.part_primitives.size() != n.parts.size()) continue;
+        NodeData& data = decoded_[f.node];
+        if (data.whole) continue;  // the whole node arrived meanwhile
         renderer_->upload(n, decoded);
-        counter_->set_counts(f.node, decoded.part_primitives.data(), decoded.part_primitives.size());
-        residency_->set_resident(f.node, decoded.bytes, decoded.data_bounds);
-        decoded_[f.node] = f.decoded;
+        counter_->set_part_count(f.node, f.part, decoded.part_primitives[f.part]);
+        residency_->set_part_resident(f.node, f.part, decoded.bytes, decoded.data_bounds);
+        data.parts.resize(n.parts.size());
+        data.parts[f.part] = f.decoded;
+        distances_.erase(f.node);
     }
 }
 
@@ -124,15 +173,24 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
     std::vector<FetchRequest> wanted;
     wanted.reserve(frame.requests.size());
     const Hierarchy& h = hierarchy();
+    auto want = [&](const FetchRequest& fetch) {
+        if (supplied_.count(fetch.id)) return;
+        if (const auto* bytes = compressed_->get(fetch.id)) {  // evicted earlier: decode again, no fetch
+            fetcher_->supply(fetch, *bytes);
+            supplied_.insert(fetch.id);
+            return;
+        }
+        wanted.push_back(fetch);
+    };
     for (const CutRequest& r : frame.requests) {
         const HierarchyNode& n = h.node(r.node);
-        if (supplied_.count(n.key)) continue;
-        if (const auto* bytes = compressed_->get(n.key)) {  // evicted earlier: decode again, no fetch
-            fetcher_->supply(FetchRequest::of(n), *bytes);
-            supplied_.insert(n.key);
+        if (!n.fetch_parts || !settings_.fetch_parts) {
+            want(FetchRequest::of(n));
             continue;
         }
-        wanted.push_back(FetchRequest::of(n));
+        // The parts the request's parent creates (a root's: those of no parent).
+        for (size_t i = 0; i < n.parts.size(); ++i)
+            if (n.parts[i].parent == r.parent && !residency_->part_resident(r.node, i)) want(FetchRequest::of_part(n, i));
     }
     fetcher_->request(wanted);
 
@@ -203,20 +261,20 @@ RenderStats StreamingSession::draw(const Camera& camera, const RenderSettings& r
     return renderer_->draw(camera, items_, render);
 }
 
-const DecodedNode* StreamingSession::decoded(uint64_t key) const {
-    uint32_t node = hierarchy().find(key);
-    auto it = decoded_.find(node);
-    return it == decoded_.end() ? nullptr : it->second.get();
+const DecodedNode* StreamingSession::decoded(uint64_t key, uint8_t part) const {
+    const uint32_t node = hierarchy().find(key);
+    if (node == kNoNode) return nullptr;
+    const std::vector<HierarchyPart>& parts = hierarchy().node(node).parts;
+    for (size_t i = 0; i < parts.size(); ++i)
+        if (parts[i].id == part) return decoded_part(node, i);
+    return nullptr;
 }
 
 DrawnGeometry StreamingSession::drawn_geometry(const std::array<double, 3>& eye) const {
     std::vector<DecodedPart> parts;
     parts.reserve(items_.size());
-    for (const DrawnPart& item : items_) {
-        uint32_t node = hierarchy().find(item.key);
-        auto it = decoded_.find(node);
-        if (it != decoded_.end()) parts.push_back({node, it->second.get(), item.part});
-    }
+    for (const DrawnPart& item : items_)
+        if (const DecodedNode* d = decoded(item.key, item.part)) parts.push_back({hierarchy().find(item.key), d, item.part});
     return format_->drawn_geometry(parts, eye);
 }
 

@@ -424,3 +424,84 @@ TEST(CutEngine, RequestsAreOrderedByPriorityAndStaleOnesAreReportedCancelled) {
     for (const CutRequest& c : f3.cancelled) cancelled.insert(c.key);
     EXPECT_EQ(cancelled, asked);
 }
+
+// Nodes fetched by parts: a refinement waits only for the parts it makes drawn (those its node
+// creates in each child), so a cold start on a still view converges to the same cut as with
+// whole nodes, and every part it fetched is drawn by that cut or was on the way (its creating
+// parent is refined); no part of an unrefined parent is ever fetched.
+TEST(CutEngine, FetchingPartsConvergesToTheSameCutFetchingOnlyPartsOfRefinedParents) {
+    SyntheticHierarchySettings s;
+    s.levels = 7;
+    s.keep = 0.9;
+    s.extra_parent = 0.35;
+    s.virtual_fraction = 0.1;
+    s.size = kSize;
+    s.seed = 73;
+    Hierarchy whole_h = build_synthetic_hierarchy(s);
+    s.fetch_parts = true;
+    Hierarchy parts_h = build_synthetic_hierarchy(s);
+    PartDrawCounter whole_counter(whole_h), parts_counter(parts_h);
+    std::mt19937_64 rng(5);
+    size_t views = 0, fewer = 0;
+    for (int trial = 0; trial < 10; ++trial) {
+        ViewParams v = random_view(rng, 1.0);
+        v.skip_factor = trial % 2 ? 8.0 : 0.0;
+
+        FakeResidency whole(whole_h, false);
+        DelayedDelivery delivery(whole, 1);
+        CutEngine whole_engine(whole_h, whole_counter);
+        for (int f = 0; f < 400; ++f) {
+            const CutFrame& frame = whole_engine.update(v, whole);
+            delivery.frame(frame);
+            if (frame.requests.empty() && frame.stats.refinements == 0 && f > 3) break;
+        }
+        uint64_t whole_bytes = 0;
+        for (uint32_t n = 0; n < whole_h.size(); ++n)
+            if (whole_h.node(n).has_data && whole.resident(n)) whole_bytes += whole_h.node(n).payload_bytes;
+
+        ResidencyTable parts(parts_h);
+        CutEngine parts_engine(parts_h, parts_counter);
+        for (int f = 0; f < 400; ++f) {
+            const CutFrame& frame = parts_engine.update(v, parts);
+            ASSERT_EQ(parts_engine.check(parts), "");
+            for (const CutRequest& r : frame.requests) {
+                const HierarchyNode& n = parts_h.node(r.node);
+                ASSERT_TRUE(n.fetch_parts);
+                bool any = false;
+                for (size_t i = 0; i < n.parts.size(); ++i) {
+                    if (n.parts[i].parent != r.parent) continue;
+                    const uint64_t p = n.parts[i].primitives;
+                    parts.set_part_resident(r.node, i, NodeBytes{16 * p, 20 * p});
+                    any = true;
+                }
+                EXPECT_TRUE(any) << "a request names parts that exist";
+            }
+            if (frame.requests.empty() && frame.stats.refinements == 0 && f > 3) break;
+        }
+        EXPECT_EQ(refined_set(parts_engine), refined_set(whole_engine)) << "trial " << trial;
+        uint64_t parts_bytes = 0;
+        for (uint32_t n = 0; n < parts_h.size(); ++n) {
+            const HierarchyNode& node = parts_h.node(n);
+            for (size_t i = 0; i < node.parts.size(); ++i) {
+                if (!parts.part_resident(n, i)) continue;
+                parts_bytes += node.parts[i].size;
+                const uint32_t parent = node.parts[i].parent;
+                EXPECT_TRUE(parent == kNoNode || parts_engine.refined(parent))
+                    << "trial " << trial << ": a part fetched for a parent that is not refined";
+            }
+        }
+        for (uint32_t n : parts_engine.drawn_nodes())
+            for (size_t i = 0; i < parts_h.node(n).parts.size(); ++i) {
+                const uint32_t parent = parts_h.node(n).parts[i].parent;
+                if (parent == kNoNode || parts_engine.refined(parent)) {
+                    EXPECT_TRUE(parts.part_resident(n, i)) << "trial " << trial << ": a drawn part is not resident";
+                }
+            }
+        EXPECT_LE(parts_bytes, whole_bytes) << "trial " << trial;
+        std::printf("view %d: fetched %llu bytes by parts, %llu whole\n", trial, (unsigned long long)parts_bytes,
+                    (unsigned long long)whole_bytes);
+        views++;
+        fewer += parts_bytes < whole_bytes;
+    }
+    EXPECT_GE(fewer, views / 2) << "parts save bytes on most views";
+}

@@ -412,3 +412,56 @@ TEST(HttpSource, APrefixLongerThanTheFirstProbeIsCompletedWithASecondRange) {
         }
     }
 }
+
+// Parts fetched alone (the slot table's byte ranges) arrive decoded as their own slot only; parts
+// queued together whose ranges are adjacent (a diamond's slots, 4 bytes apart) share transfers,
+// over a local file and over HTTP ranges, and each gets exactly its bytes; without coalescing,
+// one transfer per part.
+TEST(Fetcher, PartsArriveAloneAndAdjacentOnesShareTransfers) {
+    const Dataset& d = dataset();
+    std::vector<FetchRequest> wanted;
+    size_t nodes = 0;
+    for (const HierarchyNode& n : d.h.nodes()) {
+        if (!n.has_data || n.parts.size() < 2) continue;
+        ASSERT_TRUE(n.fetch_parts);
+        for (size_t i = 0; i < n.parts.size(); ++i) wanted.push_back(FetchRequest::of_part(n, i));
+        if (++nodes == 6) break;
+    }
+    ASSERT_EQ(nodes, 6u);
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    for (int mode = 0; mode < 3; ++mode) {
+        FetcherSettings settings = decoding();
+        if (mode == 2) settings.coalesce_gap_bytes = -1;
+        std::unique_ptr<NodeSource> source;
+        if (mode == 1) source = std::make_unique<HttpSource>(server.base_url());
+        else source = std::make_unique<LocalFileSource>(d.path);
+        Fetcher fetcher(std::move(source), settings);
+        fetcher.request(wanted);
+        std::vector<FetchedNode> got;
+        ASSERT_TRUE(eventually([&] {
+            fetcher.poll(got);
+            return got.size() >= wanted.size();
+        }));
+        ASSERT_EQ(got.size(), wanted.size());
+        std::set<uint64_t> ids;
+        for (const FetchedNode& f : got) {
+            ASSERT_TRUE(f.ok) << f.error;
+            ASSERT_NE(f.part, kWholeNode);
+            ids.insert(f.id);
+            const HierarchyNode& n = d.h.node(f.node);
+            const HierarchyPart& part = n.parts[f.part];
+            EXPECT_EQ(*f.compressed, std::vector<uint8_t>(d.bytes.begin() + long(part.offset),
+                                                          d.bytes.begin() + long(part.offset + part.size)));
+            const DiamondFragments& fragments = catp_fragments(*f.decoded);
+            EXPECT_EQ(fragments.slot_mask, 1u << part.id);
+            DiamondFragments ref = d.file.decode(d.file.index().entries()[n.entry]);
+            EXPECT_EQ(fragments.slots[part.id].indices, ref.slots[part.id].indices);
+            EXPECT_EQ(f.decoded->part_primitives.at(f.part), ref.slots[part.id].triangle_count());
+        }
+        EXPECT_EQ(ids.size(), wanted.size());
+        const FetcherStats s = fetcher.stats();
+        if (mode == 2) EXPECT_EQ(s.transfers, wanted.size());
+        else EXPECT_LE(s.transfers, nodes + 2) << "mode " << mode;  // about one per diamond
+    }
+}

@@ -89,7 +89,7 @@ void expect_all_leaves_drawn(StreamingSession& session, const SessionFrameStats&
     uint64_t triangles = 0;
     const Hierarchy& h = session.hierarchy();
     for (const DrawnPart& item : session.items()) {
-        const DecodedNode* decoded = session.decoded(item.key);
+        const DecodedNode* decoded = session.decoded(item.key, item.part);
         ASSERT_NE(decoded, nullptr);
         const HierarchyNode& node = h.node(h.find(item.key));
         for (size_t i = 0; i < node.parts.size(); ++i)  // part_primitives follow HierarchyNode::parts

@@ -448,10 +448,27 @@ const fs::path& bunny_dataset() {
 }
 
 // A copy of the bunny dataset with one byte of its last node flipped.
+// The bunny dataset with one finest-level diamond (the largest) corrupt in every slot's
+// fragment: whichever of its slots a close view needs fails its checksum (slots are fetched
+// alone, so a byte in one slot would go unnoticed by views that do not draw that slot).
 fs::path corrupt_bunny(const fs::path& dir) {
     fs::create_directories(dir);
     std::string bytes = read_file(bunny_dataset().string());
-    bytes[bytes.size() - 100] ^= 0x40;
+    const ArchiveEntry* largest = nullptr;
+    {
+        ArchiveReader archive(bunny_dataset().string());
+        for (const ArchiveEntry& e : archive.entries())
+            if (!largest || e.level > largest->level || (e.level == largest->level && e.size > largest->size)) largest = &e;
+        // The node: u8 slot mask, then per slot a u32 size and the fragment (docs/formats/catp.md).
+        uint64_t at = largest->offset + 1;
+        for (int s = 0; s < 8; ++s) {
+            if (!(uint8_t(bytes[largest->offset]) & (1 << s))) continue;
+            uint32_t size = 0;
+            std::memcpy(&size, bytes.data() + at, 4);
+            bytes[at + 4 + size / 2] ^= 0x40;
+            at += 4 + size;
+        }
+    }
     fs::path p = dir / "bunny.cpq";
     write_text(p, bytes);
     return p;
@@ -515,19 +532,24 @@ TEST(Cli, RenderStopsAtANodeThatFailsItsChecksumAndNamesIt) {
     EXPECT_NE(rows.back().find("\"tolerance_met\":false"), std::string::npos) << rows.back();
 }
 
-// The same over HTTP: our server answers 500 for a node that fails its checksum.
+// The same over HTTP. Whole nodes come from the node route, where our server checks the
+// node's checksum and answers 500; parts come as byte ranges of the file, which the client's
+// decoder checks (the fragment's own checksum).
 TEST(Cli, RenderStopsAtANodeTheServerCannotSend) {
     fs::path dir = scratch() / "corrupt_served";
     corrupt_bunny(dir);
     ServerProcess server(dir);
     ASSERT_FALSE(server.url().empty()) << "server did not start";
-    ChildRun r = run_measured({std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq", "render", server.url() + "api/datasets/bunny",
-                               "--orbit", "4", "--size", "200x150", "--tolerance", "0.2", "--timeout", "120"},
-                              (scratch() / "corrupt_served.txt").string());
-    EXPECT_EQ(r.status, 1) << r.output;
-    EXPECT_LT(r.seconds, 60.0) << "waited out the timeout";
-    EXPECT_NE(r.output.find("HTTP 500"), std::string::npos) << r.output;
-    EXPECT_NE(r.output.find("cannot be loaded"), std::string::npos) << r.output;
+    for (bool whole : {true, false}) {
+        std::vector<std::string> args = {std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq", "render", server.url() + "api/datasets/bunny",
+                                         "--orbit", "4", "--size", "200x150", "--tolerance", "0.2", "--timeout", "120"};
+        if (whole) args.push_back("--fetch-whole-nodes");
+        ChildRun r = run_measured(args, (scratch() / "corrupt_served.txt").string());
+        EXPECT_EQ(r.status, 1) << r.output;
+        EXPECT_LT(r.seconds, 60.0) << "waited out the timeout";
+        EXPECT_NE(r.output.find(whole ? "HTTP 500" : "fragment checksum mismatch"), std::string::npos) << r.output;
+        EXPECT_NE(r.output.find("cannot be loaded"), std::string::npos) << r.output;
+    }
 }
 
 TEST(Cli, RenderRefusesATruncatedDatasetAtOnce) {

@@ -37,18 +37,39 @@ std::string CatpFormat::decode(uint32_t node, const uint8_t* data, size_t size,
     auto decoded = std::make_shared<CatpNode>();
     std::string problem = decode_diamond_node(data, size, meta().layout, decoded->fragments);
     if (!problem.empty()) return problem;
-    const HierarchyNode& n = hierarchy_.node(node);
-    for (const HierarchyPart& part : n.parts) {
-        const FragmentMesh& fragment = decoded->fragments.slots[part.id];
-        decoded->part_primitives.push_back(uint32_t(fragment.triangle_count()));
-        decoded->bytes.cpu += fragment.vertices.size() * sizeof(PackedVertex) + fragment.indices.size() * 4;
-        if (fragment.indices.empty()) continue;  // FragmentStore::upload is not called for it
-        decoded->bytes.gpu += fragment.vertices.size() * sizeof(PackedVertex) +
-                              fragment.indices.size() * (fragment.vertices.size() < 65536 ? 2 : 4);
-    }
-    decoded->data_bounds = data_bounds(n, decoded->fragments);
+    account(hierarchy_.node(node), *decoded);
     out = std::move(decoded);
     return "";
+}
+
+std::string CatpFormat::decode_part(uint32_t node, size_t part, const uint8_t* data, size_t size,
+                                    std::shared_ptr<const DecodedNode>& out) const {
+    const HierarchyNode& n = hierarchy_.node(node);
+    if (!n.fetch_parts || part >= n.parts.size()) return "no such part";
+    const int slot = n.parts[part].id;
+    auto decoded = std::make_shared<CatpNode>();
+    FragmentMesh& fragment = decoded->fragments.slots[size_t(slot)];
+    const FragmentStatus status = fragment_decode(data, size, fragment);
+    if (status != FragmentStatus::Ok) return strprintf("slot %d: fragment %s", slot, fragment_status_name(status));
+    if (fragment.layout != meta().layout)
+        return strprintf("slot %d: fragment in the %s layout with grid %d, the dataset's is %s with grid %d", slot,
+                         fragment.layout.name(), fragment.layout.grid, meta().layout.name(), meta().layout.grid);
+    decoded->fragments.slot_mask = uint8_t(1u << slot);
+    account(n, *decoded);
+    out = std::move(decoded);
+    return "";
+}
+
+void CatpFormat::account(const HierarchyNode& n, CatpNode& decoded) const {
+    for (const HierarchyPart& part : n.parts) {
+        const FragmentMesh& fragment = decoded.fragments.slots[part.id];
+        decoded.part_primitives.push_back(uint32_t(fragment.triangle_count()));
+        decoded.bytes.cpu += fragment.vertices.size() * sizeof(PackedVertex) + fragment.indices.size() * 4;
+        if (fragment.indices.empty()) continue;  // FragmentStore::upload is not called for it
+        decoded.bytes.gpu += fragment.vertices.size() * sizeof(PackedVertex) +
+                             fragment.indices.size() * (fragment.vertices.size() < 65536 ? 2 : 4);
+    }
+    decoded.data_bounds = data_bounds(n, decoded.fragments);
 }
 
 // The box of a node's decoded vertices (world): where its geometry really is, for the cut

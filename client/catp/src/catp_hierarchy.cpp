@@ -126,8 +126,11 @@ Hierarchy build_catp_hierarchy(const CatpIndex& index) {
                 if (part.parent == kNoNode)
                     fail("diamond %llu: the parent of slot %d is not a parent", (unsigned long long)node.key, s);
             }
+            if (index.slot_range(node.entry, s, part.offset, part.size) && part.size == 0)
+                fail("diamond %llu: slot %d has an empty byte range", (unsigned long long)node.key, s);
             node.parts.push_back(part);
         }
+        node.fetch_parts = index.has_slot_ranges();
     }
     set_view_boxes(index, h);
     h.set_has_view_boxes(true);

@@ -131,6 +131,8 @@ public:
     uint64_t count(uint32_t node, const RefinedView& refined) const override;
     // Exact primitives of each part of `node`, in the order of HierarchyNode::parts.
     void set_counts(uint32_t node, const uint32_t* counts, size_t n);
+    // Exact primitives of one part (index in HierarchyNode::parts).
+    void set_part_count(uint32_t node, size_t part, uint32_t count) { counts_[offsets_[node] + part] = count; }
     uint32_t part_count(uint32_t node, size_t part) const { return counts_[offsets_[node] + part]; }
 
 private:
@@ -143,8 +145,16 @@ private:
 class Residency {
 public:
     virtual ~Residency() = default;
-    // Virtual nodes (no data) are treated as resident whatever this says.
+    // Virtual nodes (no data) are treated as resident whatever this says. For a node fetched by
+    // parts (HierarchyNode::fetch_parts): every part resident.
     virtual bool resident(uint32_t node) const = 0;
+    // What `node` draws while `parent` is refined is resident: the parts `parent` creates
+    // (kNoNode: a root's parts). The engine asks only this; for nodes fetched whole it is
+    // resident(node).
+    virtual bool ready(uint32_t node, uint32_t parent) const {
+        (void)parent;
+        return resident(node);
+    }
     // Exact when resident, an estimate otherwise.
     virtual NodeBytes bytes(uint32_t node) const = 0;
     // The box of a resident node's own data (world), or nullptr: where the node's geometry
@@ -190,20 +200,58 @@ private:
     uint64_t seq_ = 0;
 };
 
+// Which parts of each node are resident, with their bytes and data boxes: the bookkeeping of
+// nodes fetched by parts (HierarchyNode::fetch_parts), shared by ResidencyTable and NodeStore.
+// A node fetched whole is all its parts at once. Bytes and box of a node: the sums and union
+// over its resident parts (a node fetched by parts that is drawn has the parts it draws).
+class PartResidency {
+public:
+    explicit PartResidency(const Hierarchy& hierarchy);
+    // Every part (the whole node) resident, or evicted.
+    void set_node(uint32_t node, NodeBytes bytes, const Aabb& data);
+    void clear_node(uint32_t node);
+    // One part (index in HierarchyNode::parts) of a node fetched by parts.
+    void set_part(uint32_t node, size_t part, NodeBytes bytes, const Aabb& data);
+    void clear_part(uint32_t node, size_t part);
+
+    bool any(uint32_t node) const { return mask_[node] != 0 || whole_[node]; }
+    bool all(uint32_t node) const { return whole_[node] != 0; }
+    bool part(uint32_t node, size_t part) const { return (mask_[node] >> part) & 1u; }
+    // The parts `parent` creates are resident (true when it creates none).
+    bool ready(uint32_t node, uint32_t parent) const;
+    NodeBytes bytes(uint32_t node) const { return bytes_[node]; }
+    const Aabb& data(uint32_t node) const { return data_[node]; }
+    size_t resident_count() const { return count_; }
+
+private:
+    void total(uint32_t node);
+    const Hierarchy& hierarchy_;
+    std::vector<uint32_t> mask_, full_;  // resident parts, all parts (bit per part)
+    std::vector<uint8_t> whole_;         // every part resident (also for a node without parts)
+    std::vector<uint32_t> part_off_;
+    std::vector<NodeBytes> part_bytes_;
+    std::vector<Aabb> part_data_;
+    std::vector<NodeBytes> bytes_;
+    std::vector<Aabb> data_;
+    size_t count_ = 0;  // nodes with every part resident
+};
+
 // A plain table: set_resident() on arrival, set_evicted() when a cache drops the node (exact
-// draw counts given to a PartDrawCounter should come with set_resident()).
+// draw counts given to a PartDrawCounter should come with set_resident()); for nodes fetched by
+// parts, set_part_resident() and set_part_evicted().
 // Non-resident estimate: `bytes_per_primitive` times the node's primitives, for GPU and CPU.
 class ResidencyTable : public Residency {
 public:
     explicit ResidencyTable(const Hierarchy& hierarchy, double bytes_per_primitive = 16.0);
-    bool resident(uint32_t node) const override { return resident_[node] != 0; }
+    bool resident(uint32_t node) const override { return parts_.all(node); }
+    bool ready(uint32_t node, uint32_t parent) const override { return parts_.ready(node, parent); }
     NodeBytes bytes(uint32_t node) const override;
     bool changes_since(uint64_t& cursor, std::vector<uint32_t>& out) const override { return log_.since(cursor, out); }
     const Aabb* data_bounds(uint32_t node) const override {
-        return resident_[node] && !data_bounds_[node].empty() ? &data_bounds_[node] : nullptr;
+        return parts_.any(node) && !parts_.data(node).empty() ? &parts_.data(node) : nullptr;
     }
     double data_distance(uint32_t node, const std::array<double, 3>& eye) const override {
-        return resident_[node] && distance_ ? distance_(node, eye) : 0.0;
+        return parts_.any(node) && distance_ ? distance_(node, eye) : 0.0;
     }
     // Measures data_distance (the owner knows the nodes' geometry).
     void set_distance_function(std::function<double(uint32_t, const std::array<double, 3>&)> f) {
@@ -212,19 +260,21 @@ public:
     // `data`: the box of the node's decoded geometry, if known (empty: unknown).
     void set_resident(uint32_t node, NodeBytes bytes, const Aabb& data = Aabb{});
     void set_evicted(uint32_t node);
+    // `part`: index in HierarchyNode::parts.
+    void set_part_resident(uint32_t node, size_t part, NodeBytes bytes, const Aabb& data = Aabb{});
+    void set_part_evicted(uint32_t node, size_t part);
+    bool part_resident(uint32_t node, size_t part) const { return parts_.part(node, part); }
+    bool any_resident(uint32_t node) const { return parts_.any(node); }
     bool failed(uint32_t node) const override { return failed_[node] != 0; }
     void set_failed(uint32_t node, bool failed) { failed_[node] = failed; }
-    size_t resident_count() const { return resident_count_; }
+    size_t resident_count() const { return parts_.resident_count(); }
 
 private:
     const Hierarchy& hierarchy_;
     double bytes_per_primitive_;
-    std::vector<uint8_t> resident_;
-    std::vector<NodeBytes> bytes_;
-    std::vector<Aabb> data_bounds_;
+    PartResidency parts_;
     std::vector<uint8_t> failed_;
     std::function<double(uint32_t, const std::array<double, 3>&)> distance_;
-    size_t resident_count_ = 0;
     ChangeLog log_;
 };
 
@@ -240,12 +290,15 @@ struct CutBudgets {
 
 enum class RequestReason : uint8_t { Drawn = 0, Refine = 1, Coarsen = 2 };
 
+// A wanted fetch: a node, or for a node fetched by parts (HierarchyNode::fetch_parts) the parts
+// of it that `parent` creates (kNoNode: a root's parts, or the whole node).
 struct CutRequest {
     uint32_t node = kNoNode;
     uint64_t key = 0;
     uint16_t level = 0;
     RequestReason reason = RequestReason::Refine;
     double priority = 0;  // projected error (pixels) of the node that needs it
+    uint32_t parent = kNoNode;
 };
 
 // Budgets, as bits of CutFrameStats::budgets_binding.
@@ -336,7 +389,15 @@ private:
 
     bool is_active(uint32_t n) const;
     bool is_frontier(uint32_t n) const { return refined_[n] && refined_children_[n] == 0; }
-    bool is_resident(uint32_t n) const;
+    // What n draws while `parent` is refined is resident (always for virtual nodes).
+    bool ready(uint32_t n, uint32_t parent) const { return !has_data(n) || residency_->ready(n, parent); }
+    // What n draws under its refined parents (a root: its parts) is resident.
+    bool drawable(uint32_t n) const;
+    // Fetch units: what one request names. For a node fetched by parts, one per parent edge
+    // (the parts that parent creates: unit par_off_[n] + the parent's position in parents(n))
+    // and one for a root's parts; for a node fetched whole, one (units_from_edges_ + n).
+    uint32_t unit_of(uint32_t n, uint32_t parent) const;
+    bool unit_ready(uint32_t u) const { return ready(unit_node_[u], unit_parent_[u]); }
     double proj(uint32_t n);       // 0 outside the frustum
     double keep_proj(uint32_t n);  // for coarsening: 0 only outside the grown frustum
     bool in_view(uint32_t n);
@@ -347,7 +408,9 @@ private:
     bool exceeds() const;
     void closure(uint32_t n, std::vector<uint32_t>& out);
     void add_closure(uint32_t n, std::vector<uint32_t>& out);  // to a set started by closure()
-    void want(uint32_t n, RequestReason reason, double priority);
+    void want(uint32_t n, uint32_t parent, RequestReason reason, double priority);
+    // Wants every unit n needs to be drawn under its refined parents that is not resident.
+    void want_drawable(uint32_t n, RequestReason reason, double priority);
     void coarsen_phase();
     bool try_coarsen(uint32_t n, std::vector<Op>& log);
     void enforce_budgets();
@@ -362,7 +425,9 @@ private:
     std::vector<double> box_width_;           // the largest extent of their union
     std::vector<std::array<double, 6>> box_;  // min xyz, max xyz
     std::vector<double> error_;
-    std::vector<uint8_t> flags_;  // bit 0 has data, bit 1 leaf
+    std::vector<uint8_t> flags_;  // bit 0 has data, bit 1 leaf, bit 2 fetched by parts
+    std::vector<uint32_t> unit_node_, unit_parent_;  // per fetch unit (unit_of)
+    uint32_t units_from_edges_ = 0;                  // units below this are parent edges
     std::vector<uint16_t> level_;
     const DrawCounter& counter_;
     CutBudgets budgets_;
@@ -389,8 +454,9 @@ private:
     bool full_refresh_ = true;
     std::vector<uint32_t> changed_;
 
+    // Requests, by fetch unit.
     std::vector<Want> want_;
-    std::vector<uint32_t> wanted_;       // nodes with a want this frame
+    std::vector<uint32_t> wanted_;       // units with a want this frame
     std::vector<uint8_t> outstanding_;
     std::vector<uint32_t> outstanding_list_;
     std::vector<uint64_t> want_frame_;

@@ -163,20 +163,35 @@ std::vector<uint8_t> fetch_prefix(NodeSource& source, int attempts = 3);
 // fetch_prefix, parsed (DatasetPrefix::parse): what a format is opened from.
 DatasetPrefix load_prefix(NodeSource& source, int attempts = 3);
 
-// A node to fetch, from the hierarchy.
+// What one fetch brings: a whole node, or one part of a node fetched by parts
+// (HierarchyNode::fetch_parts).
+constexpr uint8_t kWholeNode = 0xff;
+
+// A node, or one of its parts, to fetch, from the hierarchy. `id` names the fetch (the
+// fetcher's queue, cancel() and the caches go by it): the node key for a whole node, else
+// part_fetch_id(). A part has no index checksum: its format's decoder verifies it (CATP: the
+// fragment's own checksum).
 struct FetchRequest {
     uint32_t node = kNoNode;
-    uint64_t key = 0;
+    uint64_t key = 0;  // the node's key
+    uint8_t part = kWholeNode;  // index in HierarchyNode::parts
+    uint64_t id = 0;
     uint64_t offset = 0;
     uint32_t size = 0;
-    uint64_t checksum = 0;
+    uint64_t checksum = 0;  // whole nodes: XXH3-64 from the index
 
     static FetchRequest of(const HierarchyNode& node);
+    static FetchRequest of_part(const HierarchyNode& node, size_t part);
 };
+// The fetch id of a part: bit 63 set (node keys of a hierarchy that fetches parts have it
+// clear, Hierarchy::check), the node index and the part.
+inline uint64_t part_fetch_id(uint32_t node, size_t part) { return (uint64_t(1) << 63) | (uint64_t(node) << 8) | part; }
 
 struct FetchedNode {
     uint32_t node = kNoNode;
     uint64_t key = 0;
+    uint8_t part = kWholeNode;
+    uint64_t id = 0;  // FetchRequest::id
     bool ok = false;
     std::string error;  // !ok: the last problem; retried later if it is still requested
     uint32_t attempts = 0;
@@ -198,6 +213,12 @@ struct FetcherSettings {
     uint32_t max_attempts = 6;                          // then reported failed
     std::chrono::milliseconds failed_retry_delay{5000};  // a failed node requested again waits this
     bool abort_stale_in_flight = false;  // stale transfers already running: finish (default) or abort
+    // Parts (FetchRequest::part) queued at once whose byte ranges lie within this many bytes
+    // of each other go in one transfer, up to max_coalesced_bytes (fewer requests: a diamond's
+    // slots that one parent creates are usually adjacent, 4 bytes apart). 0 gap: only
+    // touching ranges; negative: never.
+    int64_t coalesce_gap_bytes = 64;
+    uint64_t max_coalesced_bytes = uint64_t(1) << 20;
     // Decodes verified bytes (format_decoder(format)); empty: nodes are delivered as verified
     // bytes only.
     NodeDecoder decode;
@@ -228,8 +249,9 @@ public:
     // take the new order, new ones are queued, queued (or backing-off) nodes missing from the
     // list are cancelled as stale. Never blocks on I/O.
     void request(const std::vector<FetchRequest>& wanted);
-    // Cancels these nodes (queued ones; running ones too when abort_stale_in_flight).
-    void cancel(const std::vector<uint64_t>& keys);
+    // Cancels these fetches, by FetchRequest::id (queued ones; running ones too when
+    // abort_stale_in_flight).
+    void cancel(const std::vector<uint64_t>& ids);
     // Bytes already at hand (a compressed cache): verified and decoded on the workers, delivered
     // like a fetched node.
     void supply(const FetchRequest& request, std::shared_ptr<const std::vector<uint8_t>> bytes);
@@ -290,7 +312,13 @@ private:
     // Fetch-thread state.
     std::unordered_map<uint64_t, Entry> entries_;  // by key
     std::vector<uint64_t> order_;                  // keys, best first
-    std::unordered_map<uint64_t, uint64_t> transfer_key_;
+    // A transfer's fetches: their ids in file order, and where the transfer's bytes start (a
+    // transfer may carry several adjacent parts, see dispatch()).
+    struct Transfer {
+        std::vector<uint64_t> ids;
+        uint64_t offset = 0;
+    };
+    std::unordered_map<uint64_t, Transfer> transfer_key_;
     uint64_t next_transfer_ = 1;
     uint64_t stats_transfers_ = 0, stats_bytes_ = 0, stats_delivered_ = 0, stats_transport_errors_ = 0,
              stats_checksum_failures_ = 0, stats_decode_failures_ = 0, stats_retries_ = 0, stats_failed_ = 0,

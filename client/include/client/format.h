@@ -97,6 +97,15 @@ public:
     // wrong with the bytes (it may also throw Error).
     virtual std::string decode(uint32_t node, const uint8_t* data, size_t size,
                                std::shared_ptr<const DecodedNode>& out) const = 0;
+    // Decodes one part's bytes (HierarchyPart::offset, size) of a node fetched by parts
+    // (HierarchyNode::fetch_parts; `part`: index in HierarchyNode::parts) into a DecodedNode that
+    // holds only that part: its bytes and data box are the part's, part_primitives has the
+    // part's count at `part`. Formats whose hierarchy fetches no parts need not override it.
+    virtual std::string decode_part(uint32_t node, size_t part, const uint8_t* data, size_t size,
+                                    std::shared_ptr<const DecodedNode>& out) const {
+        (void)node, (void)part, (void)data, (void)size, (void)out;
+        return "this format fetches whole nodes only";
+    }
     // A lower bound of the distance from `eye` to the node's own geometry (world units), or
     // nothing when it has none to measure (Residency::data_distance). Asked for close views only.
     virtual std::optional<double> data_distance(uint32_t node, const DecodedNode& decoded,

@@ -50,11 +50,19 @@ struct Aabb {
 // `primitives` is the count known from the index alone: exact for formats whose index says it,
 // an estimate for CATP (the index gives a diamond's total only; the exact per-slot counts are
 // known once the node is decoded, see PartDrawCounter in client/cut_engine.h).
+// When the format can fetch a part alone (HierarchyNode::fetch_parts), `offset` and `size` are
+// its own byte range in the dataset file (CATP: the slot's fragment, from the slot table): a
+// refinement then fetches only the parts it creates, not the whole node (what other parents
+// create is drawn only once they are refined).
 struct HierarchyPart {
     uint32_t parent = kNoNode;
     uint8_t id = 0;
     uint32_t primitives = 0;
+    uint64_t offset = 0;
+    uint32_t size = 0;
 };
+// Parts can be fetched alone only up to this many per node (residency keeps a bit per part).
+constexpr size_t kMaxFetchedParts = 32;
 
 struct HierarchyNode {
     uint32_t index = 0;
@@ -79,6 +87,9 @@ struct HierarchyNode {
     uint16_t flags = 0;      // the archive entry's flags (CATP: slot mask | leaf bit)
     uint32_t primitives = 0;  // total triangles / points of the node
     std::vector<HierarchyPart> parts;
+    // True when every part has its own byte range (inside the node's payload) and is fetched
+    // and decoded alone; false: the node is fetched whole.
+    bool fetch_parts = false;
 };
 
 class Hierarchy {
@@ -124,7 +135,7 @@ private:
 // with probability `virtual_fraction`. Errors shrink with the cell size; primitives: leaves 50 to
 // 150, interior nodes about as many as one child (1.5 / children of what their children draw for
 // them, at most all of it); one part per data parent (a node's primitives split among them), so
-// refining never lowers the primitives drawn.
+// refining never lowers the primitives drawn. With fetch_parts, each part has its own byte range.
 struct SyntheticHierarchySettings {
     int levels = 7;  // level 0 is the root cell
     double keep = 1.0;
@@ -132,6 +143,7 @@ struct SyntheticHierarchySettings {
     double virtual_fraction = 0.0;
     double size = 1000.0;
     uint64_t seed = 1;
+    bool fetch_parts = false;  // every part with its own byte range (HierarchyNode::fetch_parts)
 };
 Hierarchy build_synthetic_hierarchy(const SyntheticHierarchySettings& settings);
 

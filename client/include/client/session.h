@@ -37,6 +37,10 @@ struct SessionSettings {
     uint64_t compressed_cache_bytes = 256ull << 20;  // compressed nodes kept for re-decoding
     HttpSettings http;
     FetcherSettings fetcher;  // its decoder is the dataset format's
+    // Fetch a node's parts one by one where the format can (HierarchyNode::fetch_parts): a
+    // refinement fetches only what it draws. false: whole nodes (to compare; `render
+    // --fetch-whole-nodes`).
+    bool fetch_parts = true;
     // The formats the session can stream, by archive kind; nullptr: this build's
     // (builtin_formats(), client/builtin_formats.h). Must outlive the session.
     const FormatRegistry* formats = nullptr;
@@ -106,8 +110,9 @@ public:
     RenderStats draw(const Camera& camera, const RenderSettings& render);
     // The (node, part) pairs drawn by the current cut (resident on the GPU).
     const std::vector<DrawnPart>& items() const { return items_; }
-    // Decoded data of a resident node (nullptr if not resident).
-    const DecodedNode* decoded(uint64_t key) const;
+    // Decoded data holding part `part` (HierarchyPart::id) of a node, or nullptr if that part is
+    // not resident.
+    const DecodedNode* decoded(uint64_t key, uint8_t part) const;
     // The geometry of items() as drawn, in a frame near `eye` (DatasetFormat::drawn_geometry):
     // what picking and render --export-cut use.
     DrawnGeometry drawn_geometry(const std::array<double, 3>& eye) const;
@@ -117,6 +122,9 @@ private:
     double data_distance(uint32_t node, const std::array<double, 3>& eye);
     uint8_t limits(const CutFrame& frame, const SessionFrameStats& s) const;
     void evict(uint32_t node);
+    void evict_part(uint32_t node, size_t part);
+    // The decoded data holding part index `part` of a resident node, or nullptr.
+    const DecodedNode* decoded_part(uint32_t node, size_t part) const;
 
     SessionSettings settings_;
     std::unique_ptr<DatasetFormat> format_;
@@ -126,10 +134,15 @@ private:
     std::unique_ptr<Fetcher> fetcher_;
     // The format's GPU store and renderer: evicting a part there drops its node (evict()).
     std::unique_ptr<NodeRenderer> renderer_;
-    std::unordered_map<uint32_t, std::shared_ptr<const DecodedNode>> decoded_;
+    // A resident node's decoded data: the whole node, or (fetched by parts) one per part index.
+    struct NodeData {
+        std::shared_ptr<const DecodedNode> whole;
+        std::vector<std::shared_ptr<const DecodedNode>> parts;
+    };
+    std::unordered_map<uint32_t, NodeData> decoded_;
     // Nodes evicted from the GPU and wanted again are decoded from here instead of refetched.
     std::unique_ptr<CompressedCache> compressed_;
-    std::unordered_set<uint64_t> supplied_;  // handed to the fetcher, not arrived yet
+    std::unordered_set<uint64_t> supplied_;  // fetch ids handed to the fetcher, not arrived yet
     std::vector<DrawnPart> items_;
     uint64_t prefix_bytes_ = 0;
     bool settled_ = false;

@@ -53,6 +53,9 @@ public:
     // decode_diamond_node with the dataset's vertex layout, into a CatpNode.
     std::string decode(uint32_t node, const uint8_t* data, size_t size,
                        std::shared_ptr<const DecodedNode>& out) const override;
+    // One slot's fragment (its range from the slot table), into a CatpNode holding that slot.
+    std::string decode_part(uint32_t node, size_t part, const uint8_t* data, size_t size,
+                            std::shared_ptr<const DecodedNode>& out) const override;
     // The distance to the triangles of all its parts (a superset of what it draws), from the
     // exact integer positions, a hair less than measured (decoding rounds).
     std::optional<double> data_distance(uint32_t node, const DecodedNode& decoded,
@@ -66,6 +69,8 @@ public:
 
 private:
     Aabb data_bounds(const HierarchyNode& node, const DiamondFragments& fragments) const;
+    // DecodedNode's fields from the fragments of `node`'s parts that hold geometry.
+    void account(const HierarchyNode& node, CatpNode& decoded) const;
 
     CatpIndex index_;
     Hierarchy hierarchy_;
