@@ -16,8 +16,10 @@
 //     fits;
 //  4. refines active nodes in order of decreasing projected error (a priority queue), while their
 //     projected error exceeds the tolerance: a node P is refined together with the ancestors it
-//     needs (closure under parents), only if every child that would become drawn is resident —
-//     otherwise P stays coarse and its missing children are requested (never waits); with
+//     needs (closure under parents), only if what every child that would become drawn draws for
+//     P is resident (Residency::ready(child, P): for a node fetched by parts, the parts P
+//     creates; else the whole child) — otherwise P stays coarse and the missing data is
+//     requested (never waits); with
 //     skip_factor, a missing child close enough to the tolerance is refined with P instead, its
 //     own children then needed in its place — and only if
 //     the budgets still hold; when they do not, frontier nodes whose projected error is below
@@ -25,7 +27,8 @@
 //     converges to the best one by projected error without thrashing. Virtual nodes (no data)
 //     are refined only as ancestors a refinement needs, and coarsened as soon as they have no
 //     refined child;
-//  5. requests: drawn nodes that are not resident first, then children needed by refinements
+//  5. requests, each a fetch unit (CutRequest: a node, or the parts of it one parent creates):
+//     what drawn nodes draw that is not resident first, then children needed by refinements
 //     (priority: the projected error of the node that needs them), then nodes wanted for a
 //     coarsening; ties coarse levels first. Nodes outside the frustum have projected error 0:
 //     never refined for their own sake, and they request nothing. At most max_new_requests new

@@ -17,7 +17,10 @@
 // frame; stale requests cancelled), transfers on the source, every result checked against the
 // index checksum (XXH3), decoded on worker threads by the dataset format's decoder (the fetcher
 // knows byte ranges and checksums, not formats), and delivered through a completion queue the
-// render thread polls without blocking. A failed or corrupt transfer is retried with exponential
+// render thread polls without blocking. A request may name one part of a node (a byte range its
+// format decodes and verifies alone, FetchRequest::part): parts queued at once whose ranges are
+// adjacent share one range transfer (FetcherSettings::coalesce_gap_bytes); in server mode they
+// come from the raw file route. A failed or corrupt transfer is retried with exponential
 // backoff; after max_attempts the node is reported failed and retried later if still wanted.
 // Connection errors (the server went away) are just failures: backoff, then success when it is
 // back.
