@@ -768,6 +768,9 @@ def write_report(raw, work, docs):
             cold = read_jsonl(os.path.join(raw, "cold_scan_%s_%s_noskip.jsonl" % (p, view)))
             require(len(cold) == 1, "cold_scan_%s_%s_noskip.jsonl: expected one frame" % (p, view))
             scan_cold[p, view + ", no skip"] = dict(cold[0], size=scan_size)
+            cold = read_jsonl(os.path.join(raw, "cold_scan_%s_%s_whole.jsonl" % (p, view)))
+            require(len(cold) == 1, "cold_scan_%s_%s_whole.jsonl: expected one frame" % (p, view))
+            scan_cold[p, view + ", whole"] = dict(cold[0], size=scan_size)
         scan_imgerr[p] = read_jsonl(os.path.join(raw, "imgerr_scan_%s.jsonl" % p))
         require(len(scan_imgerr[p]) == len(scan_streams[p]), "imgerr_scan_%s.jsonl: one row per frame expected" % p)
     fetch_views = {}
@@ -1157,28 +1160,32 @@ def write_report(raw, work, docs):
     frows = []
     for p in SCAN_PATHS:
         for view in ("first", "last"):
-            c, n, fb = scan_cold[p, view], scan_cold[p, view + ", no skip"], fetch_views[p, view]
+            c, n, wh, fb = scan_cold[p, view], scan_cold[p, view + ", no skip"], scan_cold[p, view + ", whole"], fetch_views[p, view]
             drawn = fb["total"]["cut"]["drawn"]
-            frows.append(["%s, %s view" % (p, view), fmt_bytes(n["bytes_fetched"]), fmt_bytes(c["bytes_fetched"]),
-                          fmt_bytes(drawn), "%.2f" % (c["bytes_fetched"] / drawn),
+            frows.append(["%s, %s view" % (p, view), fmt_bytes(n["bytes_fetched"]), fmt_bytes(wh["bytes_fetched"]),
+                          fmt_bytes(c["bytes_fetched"]),
+                          fmt_bytes(drawn), "%.2f" % (wh["bytes_fetched"] / drawn), "**%.2f**" % (c["bytes_fetched"] / drawn),
                           "%.1f%%" % (100 * c["bytes_fetched"] / scan_size),
                           "%.1f%%" % (100 * fb["finest_vertices_in_frustum"]),
                           "%.2f" % ((c["bytes_fetched"] / scan_size) / max(1e-9, fb["finest_vertices_in_frustum"])),
                           "%.3g" % c["certified_error_px"]])
     w("**Fetched against drawn and against the view (cold start, converged, over HTTP):**")
     w("")
-    w(md_table(["view", "fetched, every level", "fetched, skipping levels (default)", "drawn (the cut's fragments)",
-                "fetched / drawn", "fetched, of dataset", "finest level in the frustum", "fetched share / frustum share",
-                "certified error (px)"], frows))
+    w(md_table(["view", "fetched, every level, whole diamonds", "fetched, skipping levels, whole diamonds",
+                "fetched, skipping levels, slots (default)", "drawn (the cut's fragments)",
+                "fetched / drawn, whole diamonds", "fetched / drawn, slots", "fetched, of dataset",
+                "finest level in the frustum", "fetched share / frustum share", "certified error (px)"], frows))
     w("")
-    w("*Fetched*: the client's bytes to converge from a cold start, prefix included, with `--skip 0` "
-      "(every level on the way is fetched, each drawn for a moment) and with the default `--skip 8` (a "
-      "node within 8 times the tolerance that the view refines at once is not fetched). *Drawn*: the "
+    w("*Fetched*: the client's bytes to converge from a cold start, prefix included: with `--skip 0 "
+      "--fetch-whole-nodes` (every level on the way is fetched, each drawn for a moment, diamonds whole), "
+      "with skipping (`--skip 8`: a node within 8 times the tolerance that the view refines at once is "
+      "not fetched) and whole diamonds (`--fetch-whole-nodes`, the client before slots were fetched "
+      "alone), and with the defaults (skipping, and only the slots a refinement draws: a diamond's slot "
+      "is drawn only while its creating parent is refined, so the slots its other, unrefined parents "
+      "create are not fetched; the slot table gives each slot's byte range, and adjacent slots go in one "
+      "range request). All converge to the same cut (the same triangles and image). *Drawn*: the "
       "compressed bytes of the fragments the converged cut shows (`bench/client/fetch_bench` on the "
-      "same view). The engine projects each node's error from its tetrahedra that hold geometry, not "
-      "from a box grown by its descendants (which made close views refine diamonds for their "
-      "neighbours' sake). What remains above the drawn bytes: the preview levels, and the slots of "
-      "drawn diamonds that other, unrefined parents create (a node is fetched whole).")
+      "same view). What remains above the drawn bytes: the prefix and the coarse preview levels.")
     w("")
     srows = []
     for p in SCAN_PATHS:

@@ -247,9 +247,12 @@ for p in $SCAN_PATHS; do
     cold_start scan "$p" first
     cold_start scan "$p" last
     cold_start scanfine "$p" last
-    # The same views fetching every level (no skipping): what skipping saves.
-    cold_start scan "$p" first _noskip --skip 0
-    cold_start scan "$p" last _noskip --skip 0
+    # The same views fetching every level (no skipping) of whole diamonds: the first client.
+    cold_start scan "$p" first _noskip --skip 0 --fetch-whole-nodes
+    cold_start scan "$p" last _noskip --skip 0 --fetch-whole-nodes
+    # And fetching whole diamonds instead of the slots a refinement draws: what parts save.
+    cold_start scan "$p" first _whole --fetch-whole-nodes
+    cold_start scan "$p" last _whole --fetch-whole-nodes
     required "image error scan $p" "$RAW/imgerr_scan_$p.txt" "$PYTHON" "$REPORT_PY" compare \
         --ref "$WORK/ref_scan_$p" --frames "$WORK/frames_scan_$p" --out "$RAW/imgerr_scan_$p.jsonl"
 done
