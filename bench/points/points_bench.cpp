@@ -1,0 +1,263 @@
+// points_bench: the point converter and its node codec on scan-like clouds (random samples of
+// the generated scan-like surface, mesh/generators.h, with colours; normals and radii estimated
+// by the converter unless --with-normals), three parts:
+//
+//   conversion   input points/s (wall, both cores), CPU seconds, peak resident memory (of a
+//                child process holding the cloud and converting it), bytes per point, and as a
+//                baseline in the same process meshoptimizer's meshopt_simplifyPoints halving the
+//                same cloud (one pass, one thread): the ratio says how many "simplification
+//                passes" the whole conversion costs
+//   rate/error   bytes per point against the position error (as a fraction of the splat radius)
+//                and the colour precision, on the smallest size
+//   decode       decode_point_node over every node of the dataset, one thread, points per second
+//                of thread CPU time; baseline: meshoptimizer's vertex codec decoding the same
+//                decoded points as 24-byte vertices (float position, octahedral normal, RGB,
+//                float radius), and its size
+//
+// usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split midpoint|balanced]
+//                     [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]
+#include <cinttypes>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
+#include <meshoptimizer.h>
+
+#include "base/error.h"
+#include "base/options.h"
+#include "base/sysinfo.h"
+#include "mesh/generators.h"
+#include "points/builder.h"
+#include "points/dataset.h"
+#include "points/sampling.h"
+
+using namespace catpaq;
+namespace fs = std::filesystem;
+
+namespace {
+
+PointCloud make_cloud(size_t points, bool with_normals) {
+    // About 4 surface samples per mesh vertex: the mesh is a smooth carrier, not the sampling.
+    Mesh mesh = make_scan_like(std::max<size_t>(points / 2, 20000), 7);
+    return sample_surface(mesh, points, 11, with_normals, true);
+}
+
+struct Conversion {
+    double seconds = 0, cpu_seconds = 0, peak_mib = 0, bytes_per_point = 0, points_per_second = 0;
+    double stored_bytes_per_point = 0;  // file bytes / points stored in all nodes
+    size_t nodes = 0, depth = 0;
+    double baseline_points_per_second = 0;
+    double worst_error_to_radius = 0;
+    double share[5] = {};  // position, normal, colour, radius, header: fractions of the payload
+};
+
+// Converts in a child process (forked: it inherits the cloud) so the peak memory is the
+// conversion's; the child writes its figures to a pipe.
+Conversion convert_in_child(const PointCloud& cloud, const std::string& output, const PointsBuildSettings& settings) {
+    int fds[2];
+    if (pipe(fds) != 0) fail("pipe failed");
+    pid_t pid = fork();
+    if (pid == 0) {
+        close(fds[0]);
+        Conversion c;
+        try {
+            double cpu0 = cpu_seconds();
+            PointsBuildReport r = build_points(cloud, output, settings);
+            c.cpu_seconds = cpu_seconds() - cpu0;
+            c.seconds = r.seconds;
+            c.points_per_second = double(r.input_points) / r.seconds;
+            c.bytes_per_point = double(r.file_bytes) / double(r.input_points);
+            c.stored_bytes_per_point = double(r.file_bytes) / double(r.stored_points);
+            c.nodes = r.nodes;
+            c.depth = size_t(r.depth);
+            c.worst_error_to_radius = r.worst_error_to_radius;
+            double payload = double(r.payload_bytes);
+            c.share[0] = double(r.bytes_position) / payload;
+            c.share[1] = double(r.bytes_normal) / payload;
+            c.share[2] = double(r.bytes_color) / payload;
+            c.share[3] = double(r.bytes_radius) / payload;
+            c.share[4] = double(r.bytes_header) / payload;
+        } catch (const std::exception& e) {
+            std::fprintf(stderr, "conversion failed: %s\n", e.what());
+            _exit(1);
+        }
+        if (write(fds[1], &c, sizeof c) != ssize_t(sizeof c)) _exit(1);
+        _exit(0);
+    }
+    close(fds[1]);
+    Conversion c;
+    ssize_t got = read(fds[0], &c, sizeof c);
+    close(fds[0]);
+    int status = 0;
+    struct rusage usage {};
+    wait4(pid, &status, 0, &usage);
+    if (got != ssize_t(sizeof c) || !WIFEXITED(status) || WEXITSTATUS(status) != 0) fail("the conversion child failed");
+    c.peak_mib = double(usage.ru_maxrss) / 1024.0;
+    return c;
+}
+
+double simplify_points_baseline(const PointCloud& cloud) {
+    std::vector<float> xyz(3 * cloud.size());
+    for (size_t i = 0; i < cloud.size(); ++i)
+        for (int a = 0; a < 3; ++a) xyz[3 * i + a] = float(cloud.positions[i][a]);
+    std::vector<unsigned> kept(cloud.size());
+    double t = best_of(1, [&] { meshopt_simplifyPoints(kept.data(), xyz.data(), cloud.size(), 12, cloud.size() / 2); });
+    return double(cloud.size()) / t;
+}
+
+struct DecodeResult {
+    double points_per_second = 0, meshopt_points_per_second = 0;
+    double bytes_per_point = 0, meshopt_bytes_per_point = 0;
+    size_t points = 0;
+};
+
+DecodeResult measure_decode(const std::string& path, int runs) {
+    PointDataset dataset(path);
+    std::vector<std::vector<uint8_t>> payloads;
+    std::vector<std::vector<uint8_t>> meshopt;
+    std::vector<size_t> counts;
+    DecodeResult result;
+    DecodedPoints decoded;
+    uint64_t payload_bytes = 0, meshopt_bytes = 0;
+    struct Vertex {
+        float p[3];
+        uint16_t normal;
+        uint8_t rgb[3], pad;
+        float radius;
+    };
+    static_assert(sizeof(Vertex) == 24);  // 3 bytes of zero padding, which its codec removes
+    for (size_t i = 0; i < dataset.node_count(); ++i) {
+        std::string error;
+        const uint8_t* bytes = dataset.node_bytes(i, &error);
+        if (!bytes) fail("%s", error.c_str());
+        payloads.emplace_back(bytes, bytes + dataset.entries()[i].size);
+        payload_bytes += payloads.back().size();
+        std::string problem = decode_point_node(bytes, payloads.back().size(), decoded);
+        if (!problem.empty()) fail("%s", problem.c_str());
+        std::vector<Vertex> vertices(decoded.count);
+        for (size_t k = 0; k < decoded.count; ++k) {
+            Vertex& v = vertices[k];
+            std::memcpy(v.p, &decoded.positions[3 * k], 12);
+            v.normal = decoded.normals.empty() ? 0 : decoded.normals[k];
+            for (int c = 0; c < 3; ++c) v.rgb[c] = decoded.colors.empty() ? 0 : decoded.colors[3 * k + c];
+            v.pad = 0;
+            v.radius = decoded.radii[k];
+        }
+        std::vector<uint8_t> encoded(meshopt_encodeVertexBufferBound(decoded.count, sizeof(Vertex)));
+        encoded.resize(meshopt_encodeVertexBuffer(encoded.data(), encoded.size(), vertices.data(), decoded.count, sizeof(Vertex)));
+        meshopt_bytes += encoded.size();
+        meshopt.push_back(std::move(encoded));
+        counts.push_back(decoded.count);
+        result.points += decoded.count;
+    }
+    double ours = best_of(runs, [&] {
+        for (const std::vector<uint8_t>& p : payloads)
+            if (!decode_point_node(p.data(), p.size(), decoded).empty()) fail("decode failed");
+    }, thread_cpu_seconds);
+    std::vector<Vertex> vertices;
+    double theirs = best_of(runs, [&] {
+        for (size_t i = 0; i < meshopt.size(); ++i) {
+            vertices.resize(counts[i]);
+            if (meshopt_decodeVertexBuffer(vertices.data(), counts[i], sizeof(Vertex), meshopt[i].data(), meshopt[i].size()) != 0)
+                fail("meshopt decode failed");
+        }
+    }, thread_cpu_seconds);
+    result.points_per_second = double(result.points) / ours;
+    result.meshopt_points_per_second = double(result.points) / theirs;
+    result.bytes_per_point = double(payload_bytes) / double(result.points);
+    result.meshopt_bytes_per_point = double(meshopt_bytes) / double(result.points);
+    return result;
+}
+
+std::vector<size_t> parse_sizes(const std::string& text) {
+    std::vector<size_t> sizes;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ',')) sizes.push_back(size_t(std::stod(item)));
+    return sizes;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    try {
+        Options options(argc, argv,
+                        "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split midpoint|balanced]\n"
+                        "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n",
+                        {"with-normals", "skip-rate"});
+        if (options.help()) {
+            std::printf("%s", options.usage().c_str());
+            return 0;
+        }
+        std::vector<size_t> sizes = parse_sizes(options.get("sizes", "1000000,10000000"));
+        const bool with_normals = options.flag("with-normals");
+        const bool skip_rate = options.flag("skip-rate");
+        PointsBuildSettings settings;
+        settings.progress = false;
+        settings.node_points = size_t(options.integer("node-points", 4096, 16, 1 << 20));
+        std::string split = options.get("split", "midpoint");
+        if (split == "balanced") settings.split = PointSplitRule::Balanced;
+        else if (split != "midpoint") usage_error("--split: midpoint or balanced");
+        const int runs = int(options.integer("decode-runs", 5, 1, 100));
+        std::string keep = options.get("keep", "");
+        options.finish();
+        fs::path dir = keep.empty() ? fs::temp_directory_path() / ("points_bench_" + std::to_string(getpid())) : fs::path(keep);
+        fs::create_directories(dir);
+
+        std::printf("points_bench on %s, %u threads; clouds: random samples of the scan-like surface with colours, normals %s\n",
+                    cpu_model().c_str(), std::thread::hardware_concurrency(), with_normals ? "given" : "estimated");
+        std::printf("\n== conversion (%s split, %zu points per node)\n", point_split_rule_name(settings.split), settings.node_points);
+        std::printf("%10s %8s %8s %10s %9s %7s %6s %9s %9s %10s %8s  %s\n", "points", "wall s", "cpu s", "Mpt/s", "peak MiB",
+                    "B/pt", "nodes", "B/stored", "err/r", "simpl Mpt/s", "ratio", "payload: pos/nrm/col/rad/hdr");
+        std::string last_dataset;
+        for (size_t n : sizes) {
+            PointCloud cloud = make_cloud(n, with_normals);
+            double baseline = simplify_points_baseline(cloud);
+            std::string output = (dir / ("scan_" + std::to_string(n) + ".cpq")).string();
+            Conversion c = convert_in_child(cloud, output, settings);
+            std::printf("%10zu %8.2f %8.2f %10.3f %9.0f %7.3f %6zu %9.3f %9.3f %10.3f %8.2f  %.0f%%/%.0f%%/%.0f%%/%.0f%%/%.0f%%\n", n,
+                        c.seconds, c.cpu_seconds, c.points_per_second / 1e6, c.peak_mib, c.bytes_per_point, c.nodes,
+                        c.stored_bytes_per_point, c.worst_error_to_radius, baseline / 1e6, c.points_per_second / baseline,
+                        100 * c.share[0], 100 * c.share[1], 100 * c.share[2], 100 * c.share[3], 100 * c.share[4]);
+            std::fflush(stdout);
+            if (last_dataset.empty()) last_dataset = output;
+        }
+
+        std::printf("\n== decode, one thread (%s)\n", last_dataset.c_str());
+        DecodeResult d = measure_decode(last_dataset, runs);
+        std::printf("ours:      %8.1f M points/s  %6.3f B/point\n", d.points_per_second / 1e6, d.bytes_per_point);
+        std::printf("meshopt:   %8.1f M points/s  %6.3f B/point (vertex codec on the same decoded points)\n",
+                    d.meshopt_points_per_second / 1e6, d.meshopt_bytes_per_point);
+        std::printf("ratio:     %8.2f x speed     %6.3f x size\n", d.points_per_second / d.meshopt_points_per_second,
+                    d.bytes_per_point / d.meshopt_bytes_per_point);
+
+        if (!skip_rate) {
+            std::printf("\n== bytes per point against error (%zu points)\n", sizes.front());
+            PointCloud cloud = make_cloud(sizes.front(), with_normals);
+            std::printf("%-24s %8s %9s\n", "colour (luma/chroma bits)", "B/pt", "err/r");
+            const ColorBits variants[] = {{8, 9}, {6, 7}, {5, 6}};
+            for (const ColorBits& bits : variants) {
+                PointsBuildSettings s = settings;
+                s.color_bits = bits;
+                std::string output = (dir / "rate.cpq").string();
+                Conversion c = convert_in_child(cloud, output, s);
+                std::printf("%2u/%-21u %8.3f %9.3f\n", bits.luma, bits.chroma, c.bytes_per_point, c.worst_error_to_radius);
+            }
+        }
+        if (keep.empty()) fs::remove_all(dir);
+        return 0;
+    } catch (const UsageError& e) {
+        std::fprintf(stderr, "points_bench: %s\n", e.what());
+        return 2;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "points_bench: %s\n", e.what());
+        return 1;
+    }
+}

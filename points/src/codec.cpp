@@ -1,0 +1,522 @@
+// The node codec (points/codec.h): quantization, Morton order, delta + zigzag residuals, and
+// block-adaptive Rice codes on four lanes (rice.h). Byte layout: docs/formats/points.md.
+#include "points/codec.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+#include <cstring>
+
+#include "base/bytes.h"
+#include "base/checksum.h"
+#include "base/error.h"
+#include "common_codec/octahedral.h"
+#include "rice.h"
+
+namespace catpaq {
+
+using namespace points_detail;
+
+namespace {
+
+constexpr size_t kHeaderSize = 40;
+constexpr size_t kChecksumSize = 8;
+constexpr size_t kMaxPoints = size_t(1) << 24;
+constexpr uint32_t kMaxGridBits = 24;   // per axis: q < 2^24 is exact in float
+constexpr uint32_t kMortonBits = 21;    // per axis in the 63-bit sort key
+
+// ---------------------------------------------------------------------------------------------
+// Shared by both sides
+
+// The decoded position of grid coordinate q: the decoder's exact float operations.
+inline float grid_position(float origin, float step, uint32_t q) { return origin + float(q) * step; }
+
+inline float radius_value(float base, float step, float pad, uint32_t q) { return (base + float(q) * step) + pad; }
+
+// YCoCg-R (lossless for 8-bit RGB) with Co and Cg offset to be non-negative (0..510).
+struct Ycocg {
+    int y, co, cg;
+};
+inline Ycocg to_ycocg(int r, int g, int b) {
+    int co = r - b;
+    int t = b + (co >> 1);
+    int cg = g - t;
+    return {t + (cg >> 1), co + 255, cg + 255};
+}
+inline uint8_t clamp_byte(int v) { return uint8_t(v < 0 ? 0 : v > 255 ? 255 : v); }
+inline void from_ycocg(int y, int co, int cg, uint8_t* rgb) {
+    co -= 255;
+    cg -= 255;
+    int t = y - (cg >> 1);
+    int g = cg + t;
+    int b = t - (co >> 1);
+    int r = b + co;
+    rgb[0] = clamp_byte(r);
+    rgb[1] = clamp_byte(g);
+    rgb[2] = clamp_byte(b);
+}
+// Quantized colour components back to full range (the decoder's operations).
+inline void dequantize_color(uint32_t yq, uint32_t coq, uint32_t cgq, int luma_shift, int chroma_shift, uint8_t* rgb) {
+    int y = std::min(int(yq << luma_shift), 255);
+    int co = std::min(int(coq << chroma_shift), 510);
+    int cg = std::min(int(cgq << chroma_shift), 510);
+    from_ycocg(y, co, cg, rgb);
+}
+
+float round_down(double v) {
+    float f = float(v);
+    return double(f) > v ? std::nextafter(f, -INFINITY) : f;
+}
+float round_up(double v) {
+    float f = float(v);
+    return double(f) < v ? std::nextafter(f, INFINITY) : f;
+}
+
+uint64_t spread_bits21(uint64_t x) {  // 21 bits -> every third bit of 63
+    x &= 0x1fffff;
+    x = (x | x << 32) & 0x1f00000000ffffULL;
+    x = (x | x << 16) & 0x1f0000ff0000ffULL;
+    x = (x | x << 8) & 0x100f00f00f00f00fULL;
+    x = (x | x << 4) & 0x10c30c30c30c30c3ULL;
+    x = (x | x << 2) & 0x1249249249249249ULL;
+    return x;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Encoder
+
+// Chooses the block's Rice parameter: the cheapest k among those near log2 of the mean.
+uint32_t choose_k(const uint32_t* values, size_t n, uint32_t escape_bits) {
+    uint64_t sum = 0;
+    for (size_t i = 0; i < n; ++i) sum += values[i];
+    uint32_t guess = n ? bit_width32(uint32_t(std::min<uint64_t>(sum / n, UINT32_MAX))) : 0;
+    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(std::min(guess + 1, escape_bits), kRiceMaxK);
+    uint32_t best_k = lo;
+    uint64_t best = UINT64_MAX;
+    for (uint32_t k = lo; k <= std::max(lo, hi); ++k) {
+        uint64_t cost = 0;
+        for (size_t i = 0; i < n; ++i) cost += rice_cost(values[i], k, escape_bits);
+        if (cost < best) best = cost, best_k = k;
+    }
+    return best_k;
+}
+
+// Writes one stream: escape width, the blocks' k (5 bits each), four lane sizes, the lanes.
+void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, BitWriter lanes[kRiceLanes]) {
+    const size_t n = values.size();
+    uint32_t largest = 0;
+    for (uint32_t v : values) largest = std::max(largest, v);
+    const uint32_t escape_bits = bit_width32(largest);
+    out.u8(uint8_t(escape_bits));
+    const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
+    BitWriter ks;
+    for (int l = 0; l < kRiceLanes; ++l) lanes[l].clear();
+    for (size_t b = 0; b < blocks; ++b) {
+        size_t first = b * kRiceBlock, end = std::min(n, first + kRiceBlock);
+        uint32_t k = choose_k(values.data() + first, end - first, escape_bits);
+        ks.put(k, 5);
+        for (size_t i = first; i < end; ++i) rice_put(lanes[i % kRiceLanes], values[i], k, escape_bits);
+    }
+    std::vector<uint8_t>& k_bytes = ks.finish();
+    out.raw(k_bytes.data(), k_bytes.size());
+    for (int l = 0; l < kRiceLanes; ++l) out.varint(lanes[l].finish().size());
+    for (int l = 0; l < kRiceLanes; ++l) {
+        std::vector<uint8_t>& bytes = lanes[l].finish();
+        out.raw(bytes.data(), bytes.size());
+    }
+}
+
+struct Grid {
+    float origin[3];
+    float step;
+    uint32_t bits[3];
+};
+
+Grid choose_grid(const PointSamplesView& points, double min_radius) {
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = 0; i < points.count; ++i)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], points.positions[3 * i + a]);
+            hi[a] = std::max(hi[a], points.positions[3 * i + a]);
+        }
+    Grid grid;
+    double extent = 0;
+    for (int a = 0; a < 3; ++a) {
+        grid.origin[a] = round_down(lo[a]);
+        extent = std::max(extent, hi[a] - double(grid.origin[a]));
+    }
+    // Rounding to the nearest grid point moves a point by at most step * sqrt(3) / 2.
+    double step = min_radius / (2.0 * std::sqrt(3.0));
+    step = std::max(step, extent / double((1u << kMaxGridBits) - 2));
+    if (!(step > 0)) step = std::max(min_radius, 1e-30);
+    grid.step = round_down(step);
+    if (!(grid.step > 0)) grid.step = std::numeric_limits<float>::denorm_min();
+    for (int a = 0; a < 3; ++a) grid.bits[a] = 0;
+    return grid;
+}
+
+}  // namespace
+
+std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const ColorBits& color_bits,
+                                       std::vector<uint32_t>* order_out, DecodedPoints* decoded_out,
+                                       PointEncodeStats* stats_out) {
+    const size_t n = points.count;
+    assert(n >= 1 && n < kMaxPoints);
+    assert(points.positions && points.radii);
+    assert(color_bits.luma >= 1 && color_bits.luma <= 8 && color_bits.chroma >= 1 && color_bits.chroma <= 9);
+    double min_radius = INFINITY;
+    for (size_t i = 0; i < n; ++i) {
+        assert(std::isfinite(points.radii[i]) && points.radii[i] > 0);
+        min_radius = std::min(min_radius, double(points.radii[i]));
+    }
+    const Grid grid = choose_grid(points, min_radius);
+
+    // Grid coordinates and the Morton order of their cells.
+    std::vector<uint32_t> q(3 * n);
+    uint32_t largest = 0;
+    for (size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) {
+            double t = std::nearbyint((points.positions[3 * i + a] - double(grid.origin[a])) / double(grid.step));
+            uint32_t v = uint32_t(std::clamp(t, 0.0, double((1u << kMaxGridBits) - 1)));
+            q[3 * i + a] = v;
+            largest = std::max(largest, v);
+        }
+    const uint32_t shift = bit_width32(largest) > kMortonBits ? bit_width32(largest) - kMortonBits : 0;
+    std::vector<std::pair<uint64_t, uint32_t>> keys(n);
+    for (size_t i = 0; i < n; ++i) {
+        uint64_t key = spread_bits21(q[3 * i] >> shift) | spread_bits21(q[3 * i + 1] >> shift) << 1 |
+                       spread_bits21(q[3 * i + 2] >> shift) << 2;
+        keys[i] = {key, uint32_t(i)};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<uint32_t> local_order;
+    std::vector<uint32_t>& order = order_out ? *order_out : local_order;
+    order.resize(n);
+    for (size_t i = 0; i < n; ++i) order[i] = keys[i].second;
+
+    const bool has_normals = points.normals != nullptr, has_colors = points.colors != nullptr;
+    const uint8_t flags = uint8_t((has_normals ? kPointHasNormals : 0) | (has_colors ? kPointHasColors : 0));
+    const float radius_base = round_down(min_radius);
+    float radius_step = round_down(min_radius / 4.0);
+    if (!(radius_step > 0)) radius_step = std::numeric_limits<float>::denorm_min();
+
+    // Header; the position error (radius pad) is patched once measured.
+    ByteWriter out;
+    out.raw(kPointNodeMagic, 4);
+    out.u8(kPointNodeVersion);
+    out.u8(flags);
+    out.u8(color_bits.luma);
+    out.u8(color_bits.chroma);
+    out.u32(uint32_t(n));
+    for (int a = 0; a < 3; ++a) out.f32(grid.origin[a]);
+    out.f32(grid.step);
+    out.f32(radius_base);
+    out.f32(radius_step);
+    const size_t pad_at = out.size();
+    out.f32(0.0f);
+    assert(out.size() == kHeaderSize);
+
+    PointEncodeStats stats;
+    stats.min_radius = min_radius;
+    stats.bytes_header = kHeaderSize + kChecksumSize;
+    BitWriter lanes[kRiceLanes];
+    std::vector<uint32_t> residuals(n);
+    auto put = [&](size_t& bytes) {
+        size_t before = out.size();
+        put_stream(out, residuals, lanes);
+        bytes += out.size() - before;
+    };
+    for (int a = 0; a < 3; ++a) {
+        int32_t previous = 0;
+        for (size_t i = 0; i < n; ++i) {
+            int32_t v = int32_t(q[3 * order[i] + a]);
+            residuals[i] = zigzag(v - previous);
+            previous = v;
+        }
+        put(stats.bytes_position);
+    }
+    if (has_normals) {
+        std::vector<uint16_t> codes(n);
+        for (size_t i = 0; i < n; ++i) {
+            const float* nv = points.normals + 3 * order[i];
+            codes[i] = oct_encode_precise(nv[0], nv[1], nv[2]);
+        }
+        for (int c = 0; c < 2; ++c) {
+            int previous = 0;
+            for (size_t i = 0; i < n; ++i) {
+                int v = (codes[i] >> (8 * c)) & 0xff;
+                residuals[i] = zigzag(int8_t(uint8_t(v - previous)));
+                previous = v;
+            }
+            put(stats.bytes_normal);
+        }
+    }
+    if (has_colors) {
+        const int luma_shift = 8 - color_bits.luma, chroma_shift = 9 - color_bits.chroma;
+        std::vector<uint32_t> quantized(3 * n);
+        for (size_t i = 0; i < n; ++i) {
+            const uint8_t* rgb = points.colors + 3 * order[i];
+            Ycocg c = to_ycocg(rgb[0], rgb[1], rgb[2]);
+            auto nearest = [](int v, int shift, int top) {
+                return uint32_t(std::min((v + (shift ? 1 << (shift - 1) : 0)) >> shift, top >> shift));
+            };
+            uint32_t co = nearest(c.co, chroma_shift, 510), cg = nearest(c.cg, chroma_shift, 510);
+            // Luma last: the one (of the nearest and its neighbours) that best restores RGB given
+            // the quantized chroma.
+            uint32_t y0 = nearest(c.y, luma_shift, 255), best_y = y0;
+            int best_error = INT32_MAX;
+            for (int dy = -1; dy <= 1; ++dy) {
+                int y = int(y0) + dy;
+                if (y < 0 || y > (255 >> luma_shift) + 1) continue;
+                uint8_t back[3];
+                dequantize_color(uint32_t(y), co, cg, luma_shift, chroma_shift, back);
+                int error = 0;
+                for (int k = 0; k < 3; ++k) error = std::max(error, std::abs(int(back[k]) - int(rgb[k])));
+                if (error < best_error) best_error = error, best_y = uint32_t(y);
+            }
+            quantized[3 * i] = best_y;
+            quantized[3 * i + 1] = co;
+            quantized[3 * i + 2] = cg;
+        }
+        for (int c = 0; c < 3; ++c) {
+            int32_t previous = 0;
+            for (size_t i = 0; i < n; ++i) {
+                int32_t v = int32_t(quantized[3 * i + c]);
+                residuals[i] = zigzag(v - previous);
+                previous = v;
+            }
+            put(stats.bytes_color);
+        }
+    }
+    {
+        int32_t previous = 0;
+        for (size_t i = 0; i < n; ++i) {
+            double r = points.radii[order[i]];
+            double t = std::ceil((r - double(radius_base)) / double(radius_step));
+            int32_t v = int32_t(std::clamp(t, 0.0, double(1 << 30)));
+            // The decoder's float arithmetic may round below r: step up until it does not.
+            while (radius_value(radius_base, radius_step, 0.0f, uint32_t(v)) < float(r) && v < (1 << 30)) ++v;
+            residuals[i] = zigzag(v - previous);
+            previous = v;
+        }
+        put(stats.bytes_radius);
+    }
+    const size_t body_end = out.size();
+    out.u64(0);
+
+    // Measure the decoded positions, set the radius pad so that every decoded splat covers its
+    // input splat, and seal with the checksum.
+    DecodedPoints local_decoded;
+    DecodedPoints& decoded = decoded_out ? *decoded_out : local_decoded;
+    std::vector<double> error(n);
+    float pad = 0.0f;
+    for (int attempt = 0;; ++attempt) {
+        std::vector<uint8_t>& bytes = out.bytes();
+        uint32_t pad_bits;
+        std::memcpy(&pad_bits, &pad, 4);
+        out.patch_u32(pad_at, pad_bits);
+        out.patch_u64(body_end, checksum64(bytes.data(), body_end));
+        std::string problem = decode_point_node(bytes.data(), bytes.size(), decoded);
+        assert(problem.empty() && "the encoder's own output must decode");
+        (void)problem;
+        if (attempt == 0) {
+            double worst = 0;
+            for (size_t i = 0; i < n; ++i) {
+                const double* p = points.positions + 3 * order[i];
+                double dx = double(decoded.positions[3 * i]) - p[0], dy = double(decoded.positions[3 * i + 1]) - p[1],
+                       dz = double(decoded.positions[3 * i + 2]) - p[2];
+                error[i] = std::sqrt(dx * dx + dy * dy + dz * dz);
+                worst = std::max(worst, error[i]);
+            }
+            stats.position_error = worst;
+            pad = round_up(worst);
+            continue;
+        }
+        double deficit = 0;
+        for (size_t i = 0; i < n; ++i)
+            deficit = std::max(deficit, double(points.radii[order[i]]) + error[i] - double(decoded.radii[i]));
+        if (deficit <= 0) break;
+        assert(attempt < 8);
+        pad = round_up(double(pad) + deficit * (1.0 + 1e-6));
+    }
+    if (stats_out) *stats_out = stats;
+    return std::move(out.bytes());
+}
+
+// ---------------------------------------------------------------------------------------------
+// Decoder
+
+namespace {
+
+// Decodes one stream of `n` values into `out` from [cursor, end) (end: the unpadded end of the
+// node's streams; 8 + kRicePadding readable bytes follow it). Advances cursor past the stream.
+const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uint32_t* out) {
+    ByteReader r(cursor, size_t(end - cursor));
+    const uint32_t escape_bits = r.u8();
+    if (escape_bits > 32) return "bad escape width";
+    const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
+    const uint8_t* k_bytes = r.take((blocks * 5 + 7) / 8);
+    uint64_t lane_size[kRiceLanes];
+    uint64_t total = 0;
+    for (int l = 0; l < kRiceLanes; ++l) {
+        lane_size[l] = r.varint();
+        total += lane_size[l];
+    }
+    if (!r.ok() || total > r.remaining()) return "truncated stream";
+    RiceLane lanes[kRiceLanes];
+    const uint8_t* lane_begin[kRiceLanes];
+    const uint8_t* lane_end[kRiceLanes];
+    const uint8_t* at = r.cursor();
+    for (int l = 0; l < kRiceLanes; ++l) {
+        lane_begin[l] = at;
+        lanes[l].p = at;
+        at += lane_size[l];
+        lane_end[l] = at;
+    }
+    const size_t k_size = (blocks * 5 + 7) / 8;
+    for (size_t b = 0; b < blocks; ++b) {
+        // k: 5 bits at bit 5b of k_bytes (read bytewise: the k array is not padded).
+        size_t bit = 5 * b;
+        uint32_t two = k_bytes[bit >> 3] | ((bit >> 3) + 1 < k_size ? uint32_t(k_bytes[(bit >> 3) + 1]) << 8 : 0u);
+        const uint32_t k = (two >> (bit & 7)) & 31;
+        const uint64_t k_mask = (uint64_t(1) << k) - 1;
+        for (int l = 0; l < kRiceLanes; ++l)
+            if (lanes[l].p > lane_end[l] + 8) return "stream overrun";
+        const size_t first = b * kRiceBlock;
+        uint32_t* o = out + first;
+        if (first + kRiceBlock <= n) {
+            RiceLane l0 = lanes[0], l1 = lanes[1], l2 = lanes[2], l3 = lanes[3];
+            for (size_t i = 0; i < kRiceBlock; i += 4) {
+                l0.refill();
+                l1.refill();
+                l2.refill();
+                l3.refill();
+                o[i] = l0.get(k, k_mask, escape_bits);
+                o[i + 1] = l1.get(k, k_mask, escape_bits);
+                o[i + 2] = l2.get(k, k_mask, escape_bits);
+                o[i + 3] = l3.get(k, k_mask, escape_bits);
+            }
+            lanes[0] = l0;
+            lanes[1] = l1;
+            lanes[2] = l2;
+            lanes[3] = l3;
+        } else {
+            for (size_t i = first; i < n; ++i) {
+                RiceLane& lane = lanes[i % kRiceLanes];
+                lane.refill();
+                out[i] = lane.get(k, k_mask, escape_bits);
+            }
+        }
+    }
+    // Every lane must end exactly where its size says (the encoder pads to a byte with zeros).
+    for (int l = 0; l < kRiceLanes; ++l) {
+        uint64_t used = lanes[l].consumed_bits(lane_begin[l]);
+        if ((used + 7) / 8 != lane_size[l]) return "stream length mismatch";
+    }
+    cursor = lane_end[kRiceLanes - 1];
+    return nullptr;
+}
+
+}  // namespace
+
+std::string peek_point_node(const uint8_t* data, size_t size, size_t& count, uint8_t& flags) {
+    if (size < kHeaderSize + kChecksumSize) return "node too short";
+    if (std::memcmp(data, kPointNodeMagic, 4) != 0) return "not a point node (bad magic)";
+    if (data[4] != kPointNodeVersion)
+        return strprintf("unsupported point node version %u (this build reads %u)", data[4], kPointNodeVersion);
+    flags = data[5];
+    if (flags & ~(kPointHasNormals | kPointHasColors)) return "unknown point node flags";
+    ByteReader r(data + 8, 4);
+    count = r.u32();
+    if (count == 0 || count >= kMaxPoints) return "bad point count";
+    return "";
+}
+
+std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& out) {
+    size_t n = 0;
+    uint8_t flags = 0;
+    std::string problem = peek_point_node(data, size, n, flags);
+    if (!problem.empty()) return problem;
+    ByteReader trailer(data + size - kChecksumSize, kChecksumSize);
+    if (trailer.u64() != checksum64(data, size - kChecksumSize)) return "point node checksum mismatch (corrupt data)";
+    ByteReader h(data + 6, kHeaderSize - 6);
+    const int luma_bits = h.u8(), chroma_bits = h.u8();
+    h.u32();
+    float origin[3];
+    for (float& o : origin) o = h.f32();
+    const float step = h.f32(), radius_base = h.f32(), radius_step = h.f32(), pad = h.f32();
+    if (luma_bits < 1 || luma_bits > 8 || chroma_bits < 1 || chroma_bits > 9) return "bad colour precision";
+    for (float v : {origin[0], origin[1], origin[2], step, radius_base, radius_step, pad})
+        if (!std::isfinite(v)) return "non-finite header value";
+    if (!(step > 0) || !(radius_step > 0) || !(pad >= 0) || !(radius_base >= 0)) return "bad quantization header";
+
+    const bool has_normals = flags & kPointHasNormals, has_colors = flags & kPointHasColors;
+    const size_t streams = 3 + (has_normals ? 2 : 0) + (has_colors ? 3 : 0) + 1;
+    // Every value takes at least one bit: a count the bytes cannot hold is refused before
+    // anything is allocated for it.
+    const size_t body = size - kChecksumSize - kHeaderSize;
+    if (streams * n > 8 * body) return "point count too large for the node size";
+
+    // A padded copy of the streams, so that lane refills may read 8 bytes anywhere.
+    std::vector<uint32_t>& values = out.scratch;
+    const size_t padded_words = (body + kRicePadding + 8 + 3) / 4;
+    values.resize(streams * n + padded_words);
+    uint8_t* copy = reinterpret_cast<uint8_t*>(values.data() + streams * n);
+    std::memcpy(copy, data + kHeaderSize, body);
+    std::memset(copy + body, 0, padded_words * 4 - body);
+    const uint8_t* cursor = copy;
+    const uint8_t* end = copy + body;
+    for (size_t s = 0; s < streams; ++s)
+        if (const char* why = get_stream(cursor, end, n, values.data() + s * n)) return std::string("point node: ") + why;
+    if (cursor != end) return "point node: bytes left after the last stream";
+
+    out.count = n;
+    out.flags = flags;
+    out.position_error = pad;
+    out.grid_step = step;
+    out.positions.resize(3 * n);
+    const uint32_t* v = values.data();
+    for (int a = 0; a < 3; ++a, v += n) {
+        uint32_t q = 0;
+        float* p = out.positions.data() + a;
+        for (size_t i = 0; i < n; ++i) {
+            q += uint32_t(unzigzag(v[i]));
+            p[3 * i] = grid_position(origin[a], step, q & ((1u << kMaxGridBits) - 1));
+        }
+    }
+    if (has_normals) {
+        out.normals.resize(n);
+        uint32_t u = 0, w = 0;
+        for (size_t i = 0; i < n; ++i) {
+            u += uint32_t(unzigzag(v[i]));
+            w += uint32_t(unzigzag(v[n + i]));
+            out.normals[i] = uint16_t((u & 0xff) | (w & 0xff) << 8);
+        }
+        v += 2 * n;
+    } else {
+        out.normals.clear();
+    }
+    if (has_colors) {
+        out.colors.resize(3 * n);
+        const int luma_shift = 8 - luma_bits, chroma_shift = 9 - chroma_bits;
+        uint32_t y = 0, co = 0, cg = 0;
+        for (size_t i = 0; i < n; ++i) {
+            y += uint32_t(unzigzag(v[i]));
+            co += uint32_t(unzigzag(v[n + i]));
+            cg += uint32_t(unzigzag(v[2 * n + i]));
+            dequantize_color(y & 0x1ff, co & 0x3ff, cg & 0x3ff, luma_shift, chroma_shift, &out.colors[3 * i]);
+        }
+        v += 3 * n;
+    } else {
+        out.colors.clear();
+    }
+    out.radii.resize(n);
+    uint32_t r = 0;
+    for (size_t i = 0; i < n; ++i) {
+        r += uint32_t(unzigzag(v[i]));
+        out.radii[i] = radius_value(radius_base, radius_step, pad, r & ((1u << 30) - 1));
+    }
+    return "";
+}
+
+}  // namespace catpaq

@@ -1,0 +1,42 @@
+#pragma once
+// Private to the points module: a static kd-tree over float points for k-nearest-neighbour
+// queries (normal and radius estimation, the simplifier's proximity graph). Median splits on
+// the longest axis of each node's tight box, leaves of at most kLeafSize points; node slots are
+// computed from the subtree sizes, so the two halves build in parallel into disjoint slots.
+// Queries are read-only and thread-safe.
+#include <cstddef>
+#include <cstdint>
+#include <vector>
+
+namespace catpaq::points_detail {
+
+class KdTree {
+public:
+    static constexpr uint32_t kLeafSize = 12;
+    static constexpr size_t kMaxK = 64;
+
+    // Builds over n points (xyz interleaved; the array must outlive the tree). Uses TBB for large
+    // inputs when `parallel`.
+    void build(const float* xyz, size_t n, bool parallel = true);
+
+    // The min(k, n) points nearest to q (which may be one of the points: it is then found first,
+    // at distance 0), nearest first. k <= kMaxK. Returns how many were found.
+    size_t nearest(const float q[3], size_t k, uint32_t* index, float* distance2) const;
+
+    size_t size() const { return index_.size(); }
+
+private:
+    struct Node {
+        float lo[3], hi[3];
+        uint32_t begin, end;  // range in index_
+        uint32_t right;       // slot of the right child (the left is the next slot); 0 for a leaf
+    };
+    void build_node(uint32_t slot, uint32_t begin, uint32_t end, bool parallel);
+    static uint32_t subtree_nodes(uint32_t count);
+
+    const float* xyz_ = nullptr;
+    std::vector<uint32_t> index_;
+    std::vector<Node> nodes_;
+};
+
+}  // namespace catpaq::points_detail
