@@ -30,7 +30,9 @@
 
 #include <meshoptimizer.h>
 
+#include "base/child_process.h"
 #include "base/error.h"
+#include "mesh/io.h"
 #include "base/options.h"
 #include "base/sysinfo.h"
 #include "mesh/generators.h"
@@ -52,55 +54,67 @@ PointCloud make_cloud(size_t points, bool with_normals) {
 struct Conversion {
     double seconds = 0, cpu_seconds = 0, peak_mib = 0, bytes_per_point = 0, points_per_second = 0;
     double stored_bytes_per_point = 0;  // file bytes / points stored in all nodes
-    size_t nodes = 0, depth = 0;
+    double nodes = 0, depth = 0;
     double baseline_points_per_second = 0;
     double worst_error_to_radius = 0;
     double share[5] = {};  // position, normal, colour, radius, header: fractions of the payload
+    double phases[4] = {};  // partition, search tree, nodes, write: seconds
 };
 
-// Converts in a child process (forked: it inherits the cloud) so the peak memory is the
-// conversion's; the child writes its figures to a pipe.
-Conversion convert_in_child(const PointCloud& cloud, const std::string& output, const PointsBuildSettings& settings) {
-    int fds[2];
-    if (pipe(fds) != 0) fail("pipe failed");
-    pid_t pid = fork();
-    if (pid == 0) {
-        close(fds[0]);
-        Conversion c;
-        try {
-            double cpu0 = cpu_seconds();
-            PointsBuildReport r = build_points(cloud, output, settings);
-            c.cpu_seconds = cpu_seconds() - cpu0;
-            c.seconds = r.seconds;
-            c.points_per_second = double(r.input_points) / r.seconds;
-            c.bytes_per_point = double(r.file_bytes) / double(r.input_points);
-            c.stored_bytes_per_point = double(r.file_bytes) / double(r.stored_points);
-            c.nodes = r.nodes;
-            c.depth = size_t(r.depth);
-            c.worst_error_to_radius = r.worst_error_to_radius;
-            double payload = double(r.payload_bytes);
-            c.share[0] = double(r.bytes_position) / payload;
-            c.share[1] = double(r.bytes_normal) / payload;
-            c.share[2] = double(r.bytes_color) / payload;
-            c.share[3] = double(r.bytes_radius) / payload;
-            c.share[4] = double(r.bytes_header) / payload;
-        } catch (const std::exception& e) {
-            std::fprintf(stderr, "conversion failed: %s\n", e.what());
-            _exit(1);
-        }
-        if (write(fds[1], &c, sizeof c) != ssize_t(sizeof c)) _exit(1);
-        _exit(0);
-    }
-    close(fds[1]);
+// The child's side: reads the cloud written by the parent, converts it, prints its figures.
+int child_convert(const std::string& input, const std::string& output, const PointsBuildSettings& settings) {
+    PointCloud cloud = read_point_cloud(input);
+    double cpu0 = cpu_seconds();
+    PointsBuildReport r = build_points(std::move(cloud), output, settings);
     Conversion c;
-    ssize_t got = read(fds[0], &c, sizeof c);
-    close(fds[0]);
-    int status = 0;
-    struct rusage usage {};
-    wait4(pid, &status, 0, &usage);
-    if (got != ssize_t(sizeof c) || !WIFEXITED(status) || WEXITSTATUS(status) != 0) fail("the conversion child failed");
-    c.peak_mib = double(usage.ru_maxrss) / 1024.0;
+    c.cpu_seconds = cpu_seconds() - cpu0;
+    c.seconds = r.seconds;
+    c.points_per_second = double(r.input_points) / r.seconds;
+    c.bytes_per_point = double(r.file_bytes) / double(r.input_points);
+    c.stored_bytes_per_point = double(r.file_bytes) / double(r.stored_points);
+    c.nodes = double(r.nodes);
+    c.depth = double(r.depth);
+    c.worst_error_to_radius = r.worst_error_to_radius;
+    double payload = double(r.payload_bytes);
+    const double share[5] = {double(r.bytes_position), double(r.bytes_normal), double(r.bytes_color),
+                             double(r.bytes_radius), double(r.bytes_header)};
+    for (int i = 0; i < 5; ++i) c.share[i] = share[i] / payload;
+    const double phases[4] = {r.seconds_partition, r.seconds_search_tree, r.seconds_nodes, r.seconds_write};
+    std::copy(phases, phases + 4, c.phases);
+    std::printf("RESULT");
+    const double* fields = &c.seconds;
+    for (size_t i = 0; i < sizeof(Conversion) / sizeof(double); ++i) std::printf(" %.17g", fields[i]);
+    std::printf("\n");
+    return 0;
+}
+
+// Converts in a child process (a fresh one: TBB's thread pool does not survive a fork) so the
+// peak memory is the conversion's (with the cloud it reads); the cloud goes through a PLY file.
+Conversion convert_in_child(const std::string& self, const std::string& cloud_path, const std::string& output,
+                            const PointsBuildSettings& settings) {
+    std::vector<std::string> argv = {self, "--child", cloud_path, "--out", output, "--node-points",
+                                     std::to_string(settings.node_points), "--split", point_split_rule_name(settings.split),
+                                     "--luma", std::to_string(settings.color_bits.luma), "--chroma",
+                                     std::to_string(settings.color_bits.chroma)};
+    ChildRun run = run_measured(argv, output + ".log");
+    size_t at = run.output.find("RESULT");
+    if (run.status != 0 || at == std::string::npos) fail("the conversion child failed: %s", run.output.c_str());
+    Conversion c;
+    std::stringstream in(run.output.substr(at + 6));
+    double* fields = &c.seconds;
+    for (size_t i = 0; i < sizeof(Conversion) / sizeof(double); ++i) in >> fields[i];
+    c.peak_mib = double(run.peak_bytes) / (1 << 20);
     return c;
+}
+
+std::string write_cloud(const PointCloud& cloud, const fs::path& dir, const std::string& name) {
+    Mesh mesh;
+    mesh.positions = cloud.positions;
+    mesh.normals = cloud.normals;
+    mesh.colors = cloud.colors;
+    std::string path = (dir / name).string();
+    write_ply(path, mesh, true);
+    return path;
 }
 
 double simplify_points_baseline(const PointCloud& cloud) {
@@ -196,6 +210,18 @@ int main(int argc, char** argv) {
             std::printf("%s", options.usage().c_str());
             return 0;
         }
+        if (options.has("child")) {  // internal: one conversion in a fresh process
+            PointsBuildSettings settings;
+            settings.progress = false;
+            std::string input = options.require("child"), output = options.require("out");
+            settings.node_points = size_t(options.integer("node-points", 4096, 16, 1 << 20));
+            settings.split = options.get("split", "midpoint") == "balanced" ? PointSplitRule::Balanced : PointSplitRule::Midpoint;
+            settings.color_bits.luma = uint8_t(options.integer("luma", 8, 1, 8));
+            settings.color_bits.chroma = uint8_t(options.integer("chroma", 9, 1, 9));
+            options.finish();
+            return child_convert(input, output, settings);
+        }
+        const std::string self = fs::canonical("/proc/self/exe").string();
         std::vector<size_t> sizes = parse_sizes(options.get("sizes", "1000000,10000000"));
         const bool with_normals = options.flag("with-normals");
         const bool skip_rate = options.flag("skip-rate");
@@ -220,12 +246,16 @@ int main(int argc, char** argv) {
         for (size_t n : sizes) {
             PointCloud cloud = make_cloud(n, with_normals);
             double baseline = simplify_points_baseline(cloud);
+            std::string cloud_path = write_cloud(cloud, dir, "scan_" + std::to_string(n) + ".ply");
+            PointCloud().positions.swap(cloud.positions);
             std::string output = (dir / ("scan_" + std::to_string(n) + ".cpq")).string();
-            Conversion c = convert_in_child(cloud, output, settings);
-            std::printf("%10zu %8.2f %8.2f %10.3f %9.0f %7.3f %6zu %9.3f %9.3f %10.3f %8.2f  %.0f%%/%.0f%%/%.0f%%/%.0f%%/%.0f%%\n", n,
+            Conversion c = convert_in_child(self, cloud_path, output, settings);
+            std::printf("%10zu %8.2f %8.2f %10.3f %9.0f %7.3f %6.0f %9.3f %9.3f %10.3f %8.2f  %.0f%%/%.0f%%/%.0f%%/%.0f%%/%.0f%%\n", n,
                         c.seconds, c.cpu_seconds, c.points_per_second / 1e6, c.peak_mib, c.bytes_per_point, c.nodes,
                         c.stored_bytes_per_point, c.worst_error_to_radius, baseline / 1e6, c.points_per_second / baseline,
                         100 * c.share[0], 100 * c.share[1], 100 * c.share[2], 100 * c.share[3], 100 * c.share[4]);
+            std::printf("%10s phases (wall s): partition %.2f, search tree %.2f, nodes %.2f, write %.2f\n", "", c.phases[0],
+                        c.phases[1], c.phases[2], c.phases[3]);
             std::fflush(stdout);
             if (last_dataset.empty()) last_dataset = output;
         }
@@ -240,14 +270,14 @@ int main(int argc, char** argv) {
 
         if (!skip_rate) {
             std::printf("\n== bytes per point against error (%zu points)\n", sizes.front());
-            PointCloud cloud = make_cloud(sizes.front(), with_normals);
+            std::string cloud_path = write_cloud(make_cloud(sizes.front(), with_normals), dir, "rate.ply");
             std::printf("%-24s %8s %9s\n", "colour (luma/chroma bits)", "B/pt", "err/r");
             const ColorBits variants[] = {{8, 9}, {6, 7}, {5, 6}};
             for (const ColorBits& bits : variants) {
                 PointsBuildSettings s = settings;
                 s.color_bits = bits;
                 std::string output = (dir / "rate.cpq").string();
-                Conversion c = convert_in_child(cloud, output, s);
+                Conversion c = convert_in_child(self, cloud_path, output, s);
                 std::printf("%2u/%-21u %8.3f %9.3f\n", bits.luma, bits.chroma, c.bytes_per_point, c.worst_error_to_radius);
             }
         }

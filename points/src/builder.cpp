@@ -49,6 +49,13 @@ struct NodeRecord {
     PointEncodeStats stats;
 };
 
+// A parent keeps half its children's splats, up to node_points: every level then halves the
+// density (the error grows steadily level by level), also above leaves the midpoint rule left
+// partly filled, whose parent would otherwise keep nearly all of them.
+size_t parent_points_for(size_t children_points, size_t node_points) {
+    return std::min(node_points, (children_points + 1) / 2);
+}
+
 float round_up(double v) {
     float f = float(v);
     return double(f) < v ? std::nextafter(f, INFINITY) : f;
@@ -73,6 +80,7 @@ private:
     void apply_permutation(const std::vector<uint32_t>& perm);
 
     std::vector<Splat> build_node(size_t index);
+    size_t parent_points(size_t children_points) const { return parent_points_for(children_points, settings_.node_points); }
     std::vector<Splat> leaf_splats(const HNode& node);
     std::vector<Splat> finish_node(size_t index, std::vector<Splat> splats, float children_error,
                                    const float* children_box_min, const float* children_box_max);
@@ -352,7 +360,7 @@ std::vector<Splat> Builder::build_node(size_t index) {
     }
     left.insert(left.end(), right.begin(), right.end());
     std::vector<Splat>().swap(right);
-    simplify_splats(left, settings_.node_points);
+    simplify_splats(left, parent_points(left.size()));
     return finish_node(index, std::move(left), std::max(a.error, b.error), box_min, box_max);
 }
 

@@ -21,6 +21,8 @@
 namespace catpaq::points_detail {
 namespace {
 
+constexpr size_t kOrientationLinks = 8;
+
 // The unit normal of the points' best-fitting plane: the eigenvector of their covariance with
 // the smallest eigenvalue; +z when the points do not span a plane (fewer than 3, or a line:
 // then any direction across the line is as good, and +z unless the line is vertical).
@@ -104,7 +106,9 @@ void orient_leaf(const EstimateInput& in, size_t begin, size_t end, const std::v
 void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* normals, float* radii) {
     const size_t k = std::min<size_t>(std::max<size_t>(in.neighbours, 3), KdTree::kMaxK);
     const size_t n = end - begin;
-    std::vector<uint32_t> local_neighbours(normals ? n * k : 0, UINT32_MAX);
+    // Orientation follows the nearest few only: they are the most alike.
+    const size_t links = std::min<size_t>(k, kOrientationLinks);
+    std::vector<uint32_t> local_neighbours(normals ? n * links : 0, UINT32_MAX);
     uint32_t index[KdTree::kMaxK];
     float distance2[KdTree::kMaxK];
     for (size_t i = begin; i < end; ++i) {
@@ -116,12 +120,12 @@ void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* nor
         }
         if (normals) {
             normals[i] = pca_normal(in.positions, index, found);
-            for (size_t j = 0; j < found; ++j)
+            for (size_t j = 0; j < std::min(found, links); ++j)
                 if (index[j] >= begin && index[j] < end && index[j] != i)
-                    local_neighbours[(i - begin) * k + j] = uint32_t(index[j] - begin);
+                    local_neighbours[(i - begin) * links + j] = uint32_t(index[j] - begin);
         }
     }
-    if (normals) orient_leaf(in, begin, end, local_neighbours, k, normals);
+    if (normals) orient_leaf(in, begin, end, local_neighbours, links, normals);
 }
 
 }  // namespace catpaq::points_detail

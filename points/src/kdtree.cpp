@@ -21,6 +21,15 @@ void KdTree::build(const float* xyz, size_t n, bool parallel) {
     for (size_t i = 0; i < n; ++i) index_[i] = uint32_t(i);
     nodes_.clear();
     if (n == 0) return;
+    for (int a = 0; a < 3; ++a) {
+        lo_[a] = INFINITY;
+        hi_[a] = -INFINITY;
+    }
+    for (size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) {
+            lo_[a] = std::min(lo_[a], xyz[3 * i + a]);
+            hi_[a] = std::max(hi_[a], xyz[3 * i + a]);
+        }
     nodes_.resize(subtree_nodes(uint32_t(n)));
     build_node(0, 0, uint32_t(n), parallel);
 }
@@ -29,29 +38,29 @@ void KdTree::build_node(uint32_t slot, uint32_t begin, uint32_t end, bool parall
     Node& node = nodes_[slot];
     node.begin = begin;
     node.end = end;
-    for (int a = 0; a < 3; ++a) {
-        node.lo[a] = INFINITY;
-        node.hi[a] = -INFINITY;
-    }
+    node.right = 0;
+    const uint32_t count = end - begin;
+    if (count <= kLeafSize) return;
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (uint32_t i = begin; i < end; ++i) {
         const float* p = xyz_ + 3 * size_t(index_[i]);
         for (int a = 0; a < 3; ++a) {
-            node.lo[a] = std::min(node.lo[a], p[a]);
-            node.hi[a] = std::max(node.hi[a], p[a]);
+            lo[a] = std::min(lo[a], p[a]);
+            hi[a] = std::max(hi[a], p[a]);
         }
     }
-    const uint32_t count = end - begin;
-    if (count <= kLeafSize) {
-        node.right = 0;
-        return;
-    }
-    int axis = 0;
-    for (int a = 1; a < 3; ++a)
-        if (node.hi[a] - node.lo[a] > node.hi[axis] - node.lo[axis]) axis = a;
+    uint32_t axis = 0;
+    for (uint32_t a = 1; a < 3; ++a)
+        if (hi[a] - lo[a] > hi[axis] - lo[axis]) axis = a;
     const uint32_t middle = begin + count / 2;
     const float* xyz = xyz_;
-    std::nth_element(index_.begin() + begin, index_.begin() + middle, index_.begin() + end,
-                     [xyz, axis](uint32_t a, uint32_t b) { return xyz[3 * size_t(a) + axis] < xyz[3 * size_t(b) + axis]; });
+    auto less = [xyz, axis](uint32_t a, uint32_t b) { return xyz[3 * size_t(a) + axis] < xyz[3 * size_t(b) + axis]; };
+    std::nth_element(index_.begin() + begin, index_.begin() + middle, index_.begin() + end, less);
+    node.axis = axis;
+    node.right_low = xyz[3 * size_t(index_[middle]) + axis];
+    float left_high = -INFINITY;
+    for (uint32_t i = begin; i < middle; ++i) left_high = std::max(left_high, xyz[3 * size_t(index_[i]) + axis]);
+    node.left_high = left_high;
     const uint32_t left = slot + 1, right = left + subtree_nodes(count / 2);
     node.right = right;
     if (parallel && count > 100000) {
@@ -63,67 +72,72 @@ void KdTree::build_node(uint32_t slot, uint32_t begin, uint32_t end, bool parall
     }
 }
 
+struct KdTree::Query {
+    float q[3];
+    size_t k, found = 0;
+    float worst = INFINITY;  // distance2 of the k-th found (infinite until k are found)
+    uint32_t* index;
+    float* distance2;
+
+    void offer(uint32_t id, float d2) {
+        if (d2 >= worst) return;
+        size_t at = found < k ? found++ : k - 1;
+        while (at > 0 && distance2[at - 1] > d2) {
+            distance2[at] = distance2[at - 1];
+            index[at] = index[at - 1];
+            --at;
+        }
+        distance2[at] = d2;
+        index[at] = id;
+        if (found == k) worst = distance2[k - 1];
+    }
+};
+
+// Visits the nearer child first; the farther one only if the query's ball reaches it. The lower
+// bound of the distance to a node is kept incrementally, one axis per level (Arya and Mount's
+// incremental distance, as in nanoflann): offset[a] is the query's distance to the node's
+// region along axis a.
+void KdTree::search(const Node& node, float min_distance2, float offset[3], Query& query) const {
+    if (node.right == 0) {
+        for (uint32_t i = node.begin; i < node.end; ++i) {
+            const uint32_t id = index_[i];
+            const float* p = xyz_ + 3 * size_t(id);
+            float dx = p[0] - query.q[0], dy = p[1] - query.q[1], dz = p[2] - query.q[2];
+            query.offer(id, dx * dx + dy * dy + dz * dz);
+        }
+        return;
+    }
+    const uint32_t axis = node.axis;
+    const float value = query.q[axis];
+    const float to_left = value - node.left_high, to_right = node.right_low - value;
+    const Node* near = &node + 1;
+    const Node* far = &nodes_[node.right];
+    float cut = to_right > 0 ? to_right : 0;
+    if (to_left > 0 && to_left > to_right) {  // nearer the right child
+        std::swap(near, far);
+        cut = to_left;
+    }
+    search(*near, min_distance2, offset, query);
+    const float saved = offset[axis];
+    const float far_distance2 = min_distance2 - saved * saved + cut * cut;
+    if (far_distance2 < query.worst) {
+        offset[axis] = cut;
+        search(*far, far_distance2, offset, query);
+        offset[axis] = saved;
+    }
+}
+
 size_t KdTree::nearest(const float q[3], size_t k, uint32_t* out_index, float* out_distance2) const {
     assert(k >= 1 && k <= kMaxK);
     if (nodes_.empty()) return 0;
-    size_t found = 0;
-    float worst = INFINITY;  // distance2 of the k-th found (infinite until k are found)
-    auto box_distance2 = [q](const Node& node) {
-        float d2 = 0;
-        for (int a = 0; a < 3; ++a) {
-            float d = std::max(std::max(node.lo[a] - q[a], q[a] - node.hi[a]), 0.0f);
-            d2 += d * d;
-        }
-        return d2;
-    };
-    struct Pending {
-        uint32_t slot;
-        float distance2;
-    };
-    Pending stack[64];
-    int top = 0;
-    stack[top++] = {0, 0.0f};
-    while (top > 0) {
-        Pending pending = stack[--top];
-        if (pending.distance2 >= worst && found == k) continue;
-        const Node* node = &nodes_[pending.slot];
-        while (node->right != 0) {
-            const Node& a = nodes_[size_t(node - nodes_.data()) + 1];
-            const Node& b = nodes_[node->right];
-            float da = box_distance2(a), db = box_distance2(b);
-            const Node* near = &a;
-            const Node* far = &b;
-            if (db < da) {
-                std::swap(near, far);
-                std::swap(da, db);
-            }
-            if (!(found == k && db >= worst)) stack[top++] = {uint32_t(far - nodes_.data()), db};
-            if (found == k && da >= worst) {
-                node = nullptr;
-                break;
-            }
-            node = near;
-        }
-        if (!node) continue;
-        for (uint32_t i = node->begin; i < node->end; ++i) {
-            const uint32_t id = index_[i];
-            const float* p = xyz_ + 3 * size_t(id);
-            float dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
-            float d2 = dx * dx + dy * dy + dz * dz;
-            if (found == k && d2 >= worst) continue;
-            // Insertion into the sorted list of the best found so far.
-            size_t at = found < k ? found++ : k - 1;
-            while (at > 0 && out_distance2[at - 1] > d2) {
-                out_distance2[at] = out_distance2[at - 1];
-                out_index[at] = out_index[at - 1];
-                --at;
-            }
-            out_distance2[at] = d2;
-            out_index[at] = id;
-            if (found == k) worst = out_distance2[k - 1];
-        }
+    Query query{{q[0], q[1], q[2]}, k, 0, INFINITY, out_index, out_distance2};
+    float offset[3], d2 = 0;
+    for (int a = 0; a < 3; ++a) {
+        offset[a] = std::max(std::max(lo_[a] - q[a], q[a] - hi_[a]), 0.0f);
+        d2 += offset[a] * offset[a];
     }
-    return found;
+    search(nodes_[0], d2, offset, query);
+    return query.found;
 }
 
 }  // namespace catpaq::points_detail

@@ -27,12 +27,18 @@ public:
 
 private:
     struct Node {
-        float lo[3], hi[3];
         uint32_t begin, end;  // range in index_
         uint32_t right;       // slot of the right child (the left is the next slot); 0 for a leaf
+        uint32_t axis;        // split axis
+        float left_high;      // the left child's largest coordinate on the axis
+        float right_low;      // the right child's smallest
     };
+    struct Query;
     void build_node(uint32_t slot, uint32_t begin, uint32_t end, bool parallel);
+    void search(const Node& node, float min_distance2, float offset[3], Query& query) const;
     static uint32_t subtree_nodes(uint32_t count);
+
+    float lo_[3] = {0, 0, 0}, hi_[3] = {0, 0, 0};  // the root's box
 
     const float* xyz_ = nullptr;
     std::vector<uint32_t> index_;

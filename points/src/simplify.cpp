@@ -13,7 +13,7 @@
 namespace catpaq::points_detail {
 namespace {
 
-constexpr size_t kNeighbours = 8;
+constexpr size_t kNeighbours = 4;
 constexpr float kOpposedNormalCost = 4.0f;
 
 double distance(const double* a, const double* b) {

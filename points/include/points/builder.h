@@ -11,8 +11,8 @@
 //    outside (away from the cloud's centre) or up (+z, LAS), by majority vote. Points without radii
 //    get the side of the area per point their neighbours imply: sqrt(pi d_k^2 / (k - 1)).
 // 4. Inner nodes, bottom up (the two halves in parallel): the two children's decoded splats are
-//    merged by proximity down to node_points (points/src/splat.h), so quantization at a child is
-//    seen by its parent.
+//    merged by proximity down to half their number, at most node_points (points/src/splat.h), so
+//    quantization at a child is seen by its parent.
 // 5. Every node is encoded (points/codec.h) and written to the archive as soon as it is built;
 //    the archive appears atomically when complete.
 //
