@@ -29,9 +29,9 @@ constexpr uint32_t kMortonBits = 21;    // per axis in the 63-bit sort key
 // Shared by both sides
 
 // The decoded position of grid coordinate q: the decoder's exact float operations.
-inline float grid_position(float origin, float step, uint32_t q) { return origin + float(q) * step; }
+__attribute__((always_inline)) inline float grid_position(float origin, float step, uint32_t q) { return origin + float(q) * step; }
 
-inline float radius_value(float base, float step, float pad, uint32_t q) { return (base + float(q) * step) + pad; }
+__attribute__((always_inline)) inline float radius_value(float base, float step, float pad, uint32_t q) { return (base + float(q) * step) + pad; }
 
 // YCoCg-R (lossless for 8-bit RGB) with Co and Cg offset to be non-negative (0..510).
 struct Ycocg {
@@ -43,8 +43,8 @@ inline Ycocg to_ycocg(int r, int g, int b) {
     int cg = g - t;
     return {t + (cg >> 1), co + 255, cg + 255};
 }
-inline uint8_t clamp_byte(int v) { return uint8_t(v < 0 ? 0 : v > 255 ? 255 : v); }
-inline void from_ycocg(int y, int co, int cg, uint8_t* rgb) {
+__attribute__((always_inline)) inline uint8_t clamp_byte(int v) { return uint8_t(v < 0 ? 0 : v > 255 ? 255 : v); }
+__attribute__((always_inline)) inline void from_ycocg(int y, int co, int cg, uint8_t* rgb) {
     co -= 255;
     cg -= 255;
     int t = y - (cg >> 1);
@@ -56,7 +56,7 @@ inline void from_ycocg(int y, int co, int cg, uint8_t* rgb) {
     rgb[2] = clamp_byte(b);
 }
 // Quantized colour components back to full range (the decoder's operations).
-inline void dequantize_color(uint32_t yq, uint32_t coq, uint32_t cgq, int luma_shift, int chroma_shift, uint8_t* rgb) {
+__attribute__((always_inline)) inline void dequantize_color(uint32_t yq, uint32_t coq, uint32_t cgq, int luma_shift, int chroma_shift, uint8_t* rgb) {
     int y = std::min(int(yq << luma_shift), 255);
     int co = std::min(int(coq << chroma_shift), 510);
     int cg = std::min(int(cgq << chroma_shift), 510);
@@ -348,14 +348,19 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Col
 
 namespace {
 
-// Decodes one stream of `n` values into `out` from [cursor, end) (end: the unpadded end of the
-// node's streams; 8 + kRicePadding readable bytes follow it). Advances cursor past the stream.
-const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uint32_t* out) {
+// Decodes one stream of `n` values from [cursor, end) (end: the unpadded end of the node's
+// streams; kRicePadding readable bytes follow it), handing value i to sink(i, value) in order.
+// The sinks reconstruct attributes as the values arrive (prefix sums, dequantization), so no
+// value makes a round trip through memory. Advances cursor past the stream.
+template <class Sink>
+__attribute__((always_inline)) inline const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n,
+                                                             Sink&& sink) {
     ByteReader r(cursor, size_t(end - cursor));
     const uint32_t escape_bits = r.u8();
     if (escape_bits > 32) return "bad escape width";
     const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
-    const uint8_t* k_bytes = r.take((blocks * 5 + 7) / 8);
+    const size_t k_size = (blocks * 5 + 7) / 8;
+    const uint8_t* k_bytes = r.take(k_size);
     uint64_t lane_size[kRiceLanes];
     uint64_t total = 0;
     for (int l = 0; l < kRiceLanes; ++l) {
@@ -373,28 +378,53 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uin
         at += lane_size[l];
         lane_end[l] = at;
     }
-    const size_t k_size = (blocks * 5 + 7) / 8;
     for (size_t b = 0; b < blocks; ++b) {
         // k: 5 bits at bit 5b of k_bytes (read bytewise: the k array is not padded).
-        size_t bit = 5 * b;
-        uint32_t two = k_bytes[bit >> 3] | ((bit >> 3) + 1 < k_size ? uint32_t(k_bytes[(bit >> 3) + 1]) << 8 : 0u);
+        const size_t bit = 5 * b;
+        const uint32_t two = k_bytes[bit >> 3] | ((bit >> 3) + 1 < k_size ? uint32_t(k_bytes[(bit >> 3) + 1]) << 8 : 0u);
         const uint32_t k = (two >> (bit & 7)) & 31;
         const uint64_t k_mask = (uint64_t(1) << k) - 1;
         for (int l = 0; l < kRiceLanes; ++l)
             if (lanes[l].p > lane_end[l] + 8) return "stream overrun";
         const size_t first = b * kRiceBlock;
-        uint32_t* o = out + first;
-        if (first + kRiceBlock <= n) {
+        const uint32_t longest = kRiceEscape + std::max(escape_bits, k);  // bits of the block's longest code
+        if (first + kRiceBlock <= n && longest <= kRicePairBits) {
             RiceLane l0 = lanes[0], l1 = lanes[1], l2 = lanes[2], l3 = lanes[3];
-            for (size_t i = 0; i < kRiceBlock; i += 4) {
+            for (size_t i = first; i < first + kRiceBlock; i += 8) {
                 l0.refill();
                 l1.refill();
                 l2.refill();
                 l3.refill();
-                o[i] = l0.get(k, k_mask, escape_bits);
-                o[i + 1] = l1.get(k, k_mask, escape_bits);
-                o[i + 2] = l2.get(k, k_mask, escape_bits);
-                o[i + 3] = l3.get(k, k_mask, escape_bits);
+                uint32_t v0 = l0.get(k, k_mask, escape_bits), v1 = l1.get(k, k_mask, escape_bits);
+                uint32_t v2 = l2.get(k, k_mask, escape_bits), v3 = l3.get(k, k_mask, escape_bits);
+                sink(i, v0);
+                sink(i + 1, v1);
+                sink(i + 2, v2);
+                sink(i + 3, v3);
+                v0 = l0.get(k, k_mask, escape_bits), v1 = l1.get(k, k_mask, escape_bits);
+                v2 = l2.get(k, k_mask, escape_bits), v3 = l3.get(k, k_mask, escape_bits);
+                sink(i + 4, v0);
+                sink(i + 5, v1);
+                sink(i + 6, v2);
+                sink(i + 7, v3);
+            }
+            lanes[0] = l0;
+            lanes[1] = l1;
+            lanes[2] = l2;
+            lanes[3] = l3;
+        } else if (first + kRiceBlock <= n) {
+            RiceLane l0 = lanes[0], l1 = lanes[1], l2 = lanes[2], l3 = lanes[3];
+            for (size_t i = first; i < first + kRiceBlock; i += 4) {
+                l0.refill();
+                l1.refill();
+                l2.refill();
+                l3.refill();
+                const uint32_t v0 = l0.get(k, k_mask, escape_bits), v1 = l1.get(k, k_mask, escape_bits);
+                const uint32_t v2 = l2.get(k, k_mask, escape_bits), v3 = l3.get(k, k_mask, escape_bits);
+                sink(i, v0);
+                sink(i + 1, v1);
+                sink(i + 2, v2);
+                sink(i + 3, v3);
             }
             lanes[0] = l0;
             lanes[1] = l1;
@@ -404,7 +434,7 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uin
             for (size_t i = first; i < n; ++i) {
                 RiceLane& lane = lanes[i % kRiceLanes];
                 lane.refill();
-                out[i] = lane.get(k, k_mask, escape_bits);
+                sink(i, lane.get(k, k_mask, escape_bits));
             }
         }
     }
@@ -457,65 +487,81 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     const size_t body = size - kChecksumSize - kHeaderSize;
     if (streams * n > 8 * body) return "point count too large for the node size";
 
-    // A padded copy of the streams, so that lane refills may read 8 bytes anywhere.
-    std::vector<uint32_t>& values = out.scratch;
+    // A padded copy of the streams, so that lane refills may read 8 bytes anywhere; after it,
+    // room for the colours' chroma until the luma arrives.
+    std::vector<uint32_t>& scratch = out.scratch;
     const size_t padded_words = (body + kRicePadding + 8 + 3) / 4;
-    values.resize(streams * n + padded_words);
-    uint8_t* copy = reinterpret_cast<uint8_t*>(values.data() + streams * n);
+    scratch.resize(padded_words + (has_colors ? 2 * n : 0));
+    uint8_t* copy = reinterpret_cast<uint8_t*>(scratch.data());
     std::memcpy(copy, data + kHeaderSize, body);
     std::memset(copy + body, 0, padded_words * 4 - body);
     const uint8_t* cursor = copy;
     const uint8_t* end = copy + body;
-    for (size_t s = 0; s < streams; ++s)
-        if (const char* why = get_stream(cursor, end, n, values.data() + s * n)) return std::string("point node: ") + why;
-    if (cursor != end) return "point node: bytes left after the last stream";
+    auto failed = [](const char* why) { return std::string("point node: ") + why; };
 
     out.count = n;
     out.flags = flags;
     out.position_error = pad;
     out.grid_step = step;
     out.positions.resize(3 * n);
-    const uint32_t* v = values.data();
-    for (int a = 0; a < 3; ++a, v += n) {
-        uint32_t q = 0;
+    for (int a = 0; a < 3; ++a) {
         float* p = out.positions.data() + a;
-        for (size_t i = 0; i < n; ++i) {
-            q += uint32_t(unzigzag(v[i]));
-            p[3 * i] = grid_position(origin[a], step, q & ((1u << kMaxGridBits) - 1));
-        }
+        const float o = origin[a];
+        uint32_t q = 0;
+        const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
+            q += uint32_t(unzigzag(v));
+            p[3 * i] = grid_position(o, step, q & ((1u << kMaxGridBits) - 1));
+        });
+        if (why) return failed(why);
     }
     if (has_normals) {
         out.normals.resize(n);
+        uint16_t* normals = out.normals.data();
         uint32_t u = 0, w = 0;
-        for (size_t i = 0; i < n; ++i) {
-            u += uint32_t(unzigzag(v[i]));
-            w += uint32_t(unzigzag(v[n + i]));
-            out.normals[i] = uint16_t((u & 0xff) | (w & 0xff) << 8);
-        }
-        v += 2 * n;
+        const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
+            u += uint32_t(unzigzag(v));
+            normals[i] = uint16_t(u & 0xff);
+        });
+        if (!why) why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
+            w += uint32_t(unzigzag(v));
+            normals[i] = uint16_t(normals[i] | (w & 0xff) << 8);
+        });
+        if (why) return failed(why);
     } else {
         out.normals.clear();
     }
     if (has_colors) {
         out.colors.resize(3 * n);
-        const int luma_shift = 8 - luma_bits, chroma_shift = 9 - chroma_bits;
+        uint8_t* colors = out.colors.data();
+        uint32_t* chroma = scratch.data() + padded_words;
         uint32_t y = 0, co = 0, cg = 0;
-        for (size_t i = 0; i < n; ++i) {
-            y += uint32_t(unzigzag(v[i]));
-            co += uint32_t(unzigzag(v[n + i]));
-            cg += uint32_t(unzigzag(v[2 * n + i]));
-            dequantize_color(y & 0x1ff, co & 0x3ff, cg & 0x3ff, luma_shift, chroma_shift, &out.colors[3 * i]);
-        }
-        v += 3 * n;
+        const int luma_shift = 8 - luma_bits, chroma_shift = 9 - chroma_bits;
+        // Co then Cg are kept until Y, the last, arrives: then the point's RGB is known.
+        const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
+            y += uint32_t(unzigzag(v));
+            colors[3 * i] = uint8_t(std::min<uint32_t>(y & 0x1ff, 255));
+        });
+        if (!why) why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
+            co += uint32_t(unzigzag(v));
+            chroma[2 * i] = co & 0x3ff;
+        });
+        if (!why) why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
+            cg += uint32_t(unzigzag(v));
+            dequantize_color(colors[3 * i], chroma[2 * i], cg & 0x3ff, luma_shift, chroma_shift, &colors[3 * i]);
+        });
+        if (why) return failed(why);
     } else {
         out.colors.clear();
     }
     out.radii.resize(n);
+    float* radii = out.radii.data();
     uint32_t r = 0;
-    for (size_t i = 0; i < n; ++i) {
-        r += uint32_t(unzigzag(v[i]));
-        out.radii[i] = radius_value(radius_base, radius_step, pad, r & ((1u << 30) - 1));
-    }
+    const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
+        r += uint32_t(unzigzag(v));
+        radii[i] = radius_value(radius_base, radius_step, pad, r & ((1u << 30) - 1));
+    });
+    if (why) return failed(why);
+    if (cursor != end) return "point node: bytes left after the last stream";
     return "";
 }
 

@@ -13,8 +13,8 @@
 // significant first). Quotients of kRiceEscape or more are escaped: kRiceEscape zero bits, then
 // v in `escape_bits` raw bits (the bit width of the stream's largest value), so one outlier
 // costs at most kRiceEscape + escape_bits bits instead of a long run of zeros. Every code is at
-// most kRiceEscape + 32 = 48 bits, so one refill (which leaves at least 56 bits) per value
-// suffices.
+// most kRiceEscape + 32 = 40 bits, so one refill (which leaves at least 56 bits) per value
+// suffices; where a block's codes are at most kRicePairBits long, one refill serves two values.
 #include <bit>
 #include <cstddef>
 #include <cstdint>
@@ -25,15 +25,16 @@ namespace catpaq::points_detail {
 
 constexpr int kRiceLanes = 4;
 constexpr size_t kRiceBlock = 128;
-constexpr uint32_t kRiceEscape = 16;
+constexpr uint32_t kRiceEscape = 8;
 constexpr uint32_t kRiceMaxK = 31;  // stored in 5 bits
+constexpr uint32_t kRicePairBits = 28;  // two codes this long fit in the 56 bits a refill leaves
 // Bytes a decoder may read past the end of a lane (refills load 8 bytes at a time) and the most
 // bytes one block can take from a lane: the decoder pads its input by this much.
 constexpr size_t kRiceBlockMaxBytes = (kRiceBlock / kRiceLanes) * 6 + 8;
 constexpr size_t kRicePadding = kRiceBlockMaxBytes + 8;
 
-inline uint32_t zigzag(int32_t v) { return (uint32_t(v) << 1) ^ uint32_t(v >> 31); }
-inline int32_t unzigzag(uint32_t v) { return int32_t(v >> 1) ^ -int32_t(v & 1); }
+__attribute__((always_inline)) inline uint32_t zigzag(int32_t v) { return (uint32_t(v) << 1) ^ uint32_t(v >> 31); }
+__attribute__((always_inline)) inline int32_t unzigzag(uint32_t v) { return int32_t(v >> 1) ^ -int32_t(v & 1); }
 
 // Bits needed to write v (0 for 0).
 inline uint32_t bit_width32(uint32_t v) { return uint32_t(std::bit_width(v)); }
@@ -110,7 +111,7 @@ struct RiceLane {
         p += (63 - count) >> 3;
         count |= 56;
     }
-    // Decodes one value (at least 48 valid bits must be in buf).
+    // Decodes one value (at least as many valid bits as its code must be in buf).
     __attribute__((always_inline)) inline uint32_t get(uint32_t k, uint64_t k_mask, uint32_t escape_bits) {
         uint32_t q = uint32_t(__builtin_ctzll(buf | (uint64_t(1) << kRiceEscape)));
         if (q < kRiceEscape) [[likely]] {
