@@ -1,21 +1,26 @@
 // points_bench: the point converter and its node codec on scan-like clouds (random samples of
 // the generated scan-like surface, mesh/generators.h, with colours; normals and radii estimated
-// by the converter unless --with-normals), three parts:
+// by the converter unless --with-normals). Each conversion runs in a fresh child process that
+// reads the cloud from a binary PLY, so its peak resident memory (from the kernel) is the
+// conversion's, reading included. Parts:
 //
-//   conversion   input points/s (wall, both cores), CPU seconds, peak resident memory (of a
-//                child process holding the cloud and converting it), bytes per point, and as a
-//                baseline in the same process meshoptimizer's meshopt_simplifyPoints halving the
-//                same cloud (one pass, one thread): the ratio says how many "simplification
-//                passes" the whole conversion costs
-//   rate/error   bytes per point against the position error (as a fraction of the splat radius)
-//                and the colour precision, on the smallest size
-//   decode       decode_point_node over every node of the dataset, one thread, points per second
-//                of thread CPU time; baseline: meshoptimizer's vertex codec decoding the same
-//                decoded points as 24-byte vertices (float position, octahedral normal, RGB,
-//                float radius), and its size
+//   conversion   input points/s (wall), CPU seconds (all threads), peak memory, bytes per input
+//                point and per stored point (all levels), the payload's split by attribute, and
+//                as a baseline in this process meshoptimizer's meshopt_simplifyPoints halving the
+//                same cloud (one pass, one thread): "ratio" is our points/s over its
+//   decode       decode_point_node over every node of the first dataset, one thread, points per
+//                second of thread CPU time; baseline: meshoptimizer's vertex codec decoding the
+//                same decoded points as 24-byte vertices (float position, octahedral normal, RGB,
+//                float radius, 3 bytes of zero padding), and its size
+//   split rules  midpoint (seed 002) against balanced (seed 000) on the scan and on an uneven
+//                density cloud (a dense sphere inside a sparse blob): nodes, depth, leaf fill,
+//                bytes per point, CPU seconds
+//   rate/error   bytes per point against the colour precision and the position error (as a
+//                fraction of the node's smallest splat radius), on the smallest size
 //
-// usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split midpoint|balanced]
+// usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]
 //                     [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]
+// (--skip-rate skips the split and rate parts; sizes like 3e7 work for larger runs.)
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
@@ -45,10 +50,26 @@ namespace fs = std::filesystem;
 
 namespace {
 
-PointCloud make_cloud(size_t points, bool with_normals) {
+PointCloud make_cloud(size_t points, bool with_normals, bool uneven = false) {
     // About 4 surface samples per mesh vertex: the mesh is a smooth carrier, not the sampling.
-    Mesh mesh = make_scan_like(std::max<size_t>(points / 2, 20000), 7);
-    return sample_surface(mesh, points, 11, with_normals, true);
+    // Uneven: a dense sphere inside a sparse blob (mesh/generators.h), as in a scan with one
+    // finely detailed region; samples follow the triangles, so the density varies as theirs.
+    Mesh mesh = uneven ? make_uneven_density(std::max<size_t>(points / 2, 20000), 7)
+                       : make_scan_like(std::max<size_t>(points / 2, 20000), 7);
+    if (!uneven) return sample_surface(mesh, points, 11, with_normals, true);
+    // Uniform in triangles rather than in area: the sphere's small triangles get as many points.
+    PointCloud cloud;
+    for (size_t i = 0; i < points; ++i) {
+        size_t t = (i * 2654435761u) % mesh.triangle_count();
+        const uint32_t* c = &mesh.indices[3 * t];
+        double w0 = double((i * 40503u) % 1000) / 1000.0 * 0.5, w1 = double((i * 9973u) % 1000) / 1000.0 * 0.5;
+        Vec3d p;
+        for (int k = 0; k < 3; ++k)
+            p[k] = (1 - w0 - w1) * mesh.positions[c[0]][k] + w0 * mesh.positions[c[1]][k] + w1 * mesh.positions[c[2]][k];
+        cloud.positions.push_back(p);
+        cloud.colors.push_back(mesh.colors[c[0]]);
+    }
+    return cloud;
 }
 
 struct Conversion {
@@ -59,6 +80,7 @@ struct Conversion {
     double worst_error_to_radius = 0;
     double share[5] = {};  // position, normal, colour, radius, header: fractions of the payload
     double phases[4] = {};  // partition, search tree, nodes, write: seconds
+    double min_leaf = 0, mean_leaf = 0;
 };
 
 // The child's side: reads the cloud written by the parent, converts it, prints its figures.
@@ -81,6 +103,8 @@ int child_convert(const std::string& input, const std::string& output, const Poi
     for (int i = 0; i < 5; ++i) c.share[i] = share[i] / payload;
     const double phases[4] = {r.seconds_partition, r.seconds_search_tree, r.seconds_nodes, r.seconds_write};
     std::copy(phases, phases + 4, c.phases);
+    c.min_leaf = double(r.min_leaf_points);
+    c.mean_leaf = r.mean_leaf_points;
     std::printf("RESULT");
     const double* fields = &c.seconds;
     for (size_t i = 0; i < sizeof(Conversion) / sizeof(double); ++i) std::printf(" %.17g", fields[i]);
@@ -95,7 +119,8 @@ Conversion convert_in_child(const std::string& self, const std::string& cloud_pa
     std::vector<std::string> argv = {self, "--child", cloud_path, "--out", output, "--node-points",
                                      std::to_string(settings.node_points), "--split", point_split_rule_name(settings.split),
                                      "--luma", std::to_string(settings.color_bits.luma), "--chroma",
-                                     std::to_string(settings.color_bits.chroma)};
+                                     std::to_string(settings.color_bits.chroma), "--error-fraction",
+                                     std::to_string(settings.error_fraction)};
     ChildRun run = run_measured(argv, output + ".log");
     size_t at = run.output.find("RESULT");
     if (run.status != 0 || at == std::string::npos) fail("the conversion child failed: %s", run.output.c_str());
@@ -203,7 +228,7 @@ std::vector<size_t> parse_sizes(const std::string& text) {
 int main(int argc, char** argv) {
     try {
         Options options(argc, argv,
-                        "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split midpoint|balanced]\n"
+                        "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]\n"
                         "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n",
                         {"with-normals", "skip-rate"});
         if (options.help()) {
@@ -215,9 +240,10 @@ int main(int argc, char** argv) {
             settings.progress = false;
             std::string input = options.require("child"), output = options.require("out");
             settings.node_points = size_t(options.integer("node-points", 4096, 16, 1 << 20));
-            settings.split = options.get("split", "midpoint") == "balanced" ? PointSplitRule::Balanced : PointSplitRule::Midpoint;
+            settings.split = options.get("split", "balanced") == "balanced" ? PointSplitRule::Balanced : PointSplitRule::Midpoint;
             settings.color_bits.luma = uint8_t(options.integer("luma", 8, 1, 8));
             settings.color_bits.chroma = uint8_t(options.integer("chroma", 9, 1, 9));
+            settings.error_fraction = options.number("error-fraction", 0.25, 1e-3, 1.0);
             options.finish();
             return child_convert(input, output, settings);
         }
@@ -228,7 +254,7 @@ int main(int argc, char** argv) {
         PointsBuildSettings settings;
         settings.progress = false;
         settings.node_points = size_t(options.integer("node-points", 4096, 16, 1 << 20));
-        std::string split = options.get("split", "midpoint");
+        std::string split = options.get("split", "balanced");
         if (split == "balanced") settings.split = PointSplitRule::Balanced;
         else if (split != "midpoint") usage_error("--split: midpoint or balanced");
         const int runs = int(options.integer("decode-runs", 5, 1, 100));
@@ -269,16 +295,36 @@ int main(int argc, char** argv) {
                     d.bytes_per_point / d.meshopt_bytes_per_point);
 
         if (!skip_rate) {
+            std::printf("\n== split rules (%zu points; CPU s of the whole conversion)\n", sizes.front());
+            std::printf("%-9s %-9s %6s %6s %9s %9s %8s %8s\n", "cloud", "split", "nodes", "depth", "min leaf", "mean leaf",
+                        "B/pt", "cpu s");
+            for (bool uneven : {false, true}) {
+                std::string cloud_path = write_cloud(make_cloud(sizes.front(), with_normals, uneven), dir, "split.ply");
+                for (PointSplitRule rule : {PointSplitRule::Midpoint, PointSplitRule::Balanced}) {
+                    PointsBuildSettings s = settings;
+                    s.split = rule;
+                    Conversion c = convert_in_child(self, cloud_path, (dir / "split.cpq").string(), s);
+                    std::printf("%-9s %-9s %6.0f %6.0f %9.0f %9.0f %8.3f %8.2f\n", uneven ? "uneven" : "scan",
+                                point_split_rule_name(rule), c.nodes, c.depth, c.min_leaf, c.mean_leaf, c.bytes_per_point,
+                                c.cpu_seconds);
+                }
+            }
             std::printf("\n== bytes per point against error (%zu points)\n", sizes.front());
             std::string cloud_path = write_cloud(make_cloud(sizes.front(), with_normals), dir, "rate.ply");
-            std::printf("%-24s %8s %9s\n", "colour (luma/chroma bits)", "B/pt", "err/r");
-            const ColorBits variants[] = {{8, 9}, {6, 7}, {5, 6}};
-            for (const ColorBits& bits : variants) {
+            std::printf("%-14s %-12s %8s %10s %9s\n", "colour bits", "error/radius", "B/pt", "B/stored", "err/r");
+            struct Variant {
+                ColorBits bits;
+                double fraction;
+            };
+            const Variant variants[] = {{{8, 9}, 0.25}, {{6, 7}, 0.25}, {{5, 6}, 0.25}, {{8, 9}, 0.5},
+                                        {{8, 9}, 0.125}, {{5, 6}, 0.5}};
+            for (const Variant& v : variants) {
                 PointsBuildSettings s = settings;
-                s.color_bits = bits;
-                std::string output = (dir / "rate.cpq").string();
-                Conversion c = convert_in_child(self, cloud_path, output, s);
-                std::printf("%2u/%-21u %8.3f %9.3f\n", bits.luma, bits.chroma, c.bytes_per_point, c.worst_error_to_radius);
+                s.color_bits = v.bits;
+                s.error_fraction = v.fraction;
+                Conversion c = convert_in_child(self, cloud_path, (dir / "rate.cpq").string(), s);
+                std::printf("%2u/%-11u %-12.3f %8.3f %10.3f %9.3f\n", v.bits.luma, v.bits.chroma, v.fraction,
+                            c.bytes_per_point, c.stored_bytes_per_point, c.worst_error_to_radius);
             }
         }
         if (keep.empty()) fs::remove_all(dir);

@@ -301,7 +301,10 @@ std::vector<Splat> Builder::finish_node(size_t index, std::vector<Splat> splats,
     std::vector<uint32_t> order;
     DecodedPoints decoded;
     NodeRecord& record = records_[index];
-    std::vector<uint8_t> bytes = encode_point_node(view, settings_.color_bits, &order, &decoded, &record.stats);
+    PointEncodeSettings encode;
+    encode.color_bits = settings_.color_bits;
+    encode.error_fraction = settings_.error_fraction;
+    std::vector<uint8_t> bytes = encode_point_node(view, encode, &order, &decoded, &record.stats);
 
     std::vector<Splat> out(n);
     double error = children_error, radius_sum = 0;
@@ -489,6 +492,8 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
         settings.color_bits.chroma > 9)
         fail("colour precision %u/%u is out of range (luma 1..8, chroma 1..9 bits)", settings.color_bits.luma,
              settings.color_bits.chroma);
+    if (!(settings.error_fraction > 0 && settings.error_fraction <= 1))
+        fail("position error fraction %g is out of range (0, 1]", settings.error_fraction);
     std::unique_ptr<tbb::global_control> threads;
     if (settings.threads)
         threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings.threads);

@@ -132,7 +132,8 @@ struct Grid {
     uint32_t bits[3];
 };
 
-Grid choose_grid(const PointSamplesView& points, double min_radius) {
+// A grid whose rounding moves a point by at most `max_error`.
+Grid choose_grid(const PointSamplesView& points, double max_error) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t i = 0; i < points.count; ++i)
         for (int a = 0; a < 3; ++a) {
@@ -146,9 +147,9 @@ Grid choose_grid(const PointSamplesView& points, double min_radius) {
         extent = std::max(extent, hi[a] - double(grid.origin[a]));
     }
     // Rounding to the nearest grid point moves a point by at most step * sqrt(3) / 2.
-    double step = min_radius / (2.0 * std::sqrt(3.0));
+    double step = 2.0 * max_error / std::sqrt(3.0);
     step = std::max(step, extent / double((1u << kMaxGridBits) - 2));
-    if (!(step > 0)) step = std::max(min_radius, 1e-30);
+    if (!(step > 0)) step = std::max(max_error, 1e-30);
     grid.step = round_down(step);
     if (!(grid.step > 0)) grid.step = std::numeric_limits<float>::denorm_min();
     for (int a = 0; a < 3; ++a) grid.bits[a] = 0;
@@ -157,19 +158,21 @@ Grid choose_grid(const PointSamplesView& points, double min_radius) {
 
 }  // namespace
 
-std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const ColorBits& color_bits,
+std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const PointEncodeSettings& settings,
                                        std::vector<uint32_t>* order_out, DecodedPoints* decoded_out,
                                        PointEncodeStats* stats_out) {
     const size_t n = points.count;
     assert(n >= 1 && n < kMaxPoints);
     assert(points.positions && points.radii);
+    const ColorBits& color_bits = settings.color_bits;
     assert(color_bits.luma >= 1 && color_bits.luma <= 8 && color_bits.chroma >= 1 && color_bits.chroma <= 9);
+    assert(settings.error_fraction > 0 && settings.error_fraction <= 1);
     double min_radius = INFINITY;
     for (size_t i = 0; i < n; ++i) {
         assert(std::isfinite(points.radii[i]) && points.radii[i] > 0);
         min_radius = std::min(min_radius, double(points.radii[i]));
     }
-    const Grid grid = choose_grid(points, min_radius);
+    const Grid grid = choose_grid(points, min_radius * settings.error_fraction);
 
     // Grid coordinates and the Morton order of their cells.
     std::vector<uint32_t> q(3 * n);
@@ -197,7 +200,7 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Col
     const bool has_normals = points.normals != nullptr, has_colors = points.colors != nullptr;
     const uint8_t flags = uint8_t((has_normals ? kPointHasNormals : 0) | (has_colors ? kPointHasColors : 0));
     const float radius_base = round_down(min_radius);
-    float radius_step = round_down(min_radius / 4.0);
+    float radius_step = round_down(min_radius * settings.error_fraction);
     if (!(radius_step > 0)) radius_step = std::numeric_limits<float>::denorm_min();
 
     // Header; the position error (radius pad) is patched once measured.

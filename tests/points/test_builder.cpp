@@ -192,7 +192,9 @@ PointsBuildSettings small_nodes() {
 TEST(PointBuilder, EveryInvariantHoldsOnASphereWithTheMidpointSplit) {
     PointCloud cloud = test::sphere_cloud(12000);
     std::string path = test::scratch("sphere.cpq");
-    PointsBuildReport report = build_points(cloud, path, small_nodes());
+    PointsBuildSettings settings = small_nodes();
+    settings.split = PointSplitRule::Midpoint;
+    PointsBuildReport report = build_points(cloud, path, settings);
     EXPECT_TRUE(report.normals_estimated);
     EXPECT_TRUE(report.radii_estimated);
     EXPECT_LE(report.worst_error_to_radius, 0.25);

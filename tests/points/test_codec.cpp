@@ -60,7 +60,7 @@ TEST(PointCodec, RoundTripKeepsEveryAttributeWithinTheStatedBounds) {
     std::vector<uint32_t> order;
     DecodedPoints out;
     PointEncodeStats stats;
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{}, &order, nullptr, &stats);
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{}, &order, nullptr, &stats);
     ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), out), "");
     ASSERT_EQ(out.count, 3000u);
     EXPECT_EQ(out.flags, kPointHasNormals | kPointHasColors);
@@ -88,7 +88,7 @@ TEST(PointCodec, RoundTripKeepsEveryAttributeWithinTheStatedBounds) {
 TEST(PointCodec, EncoderDecodesItsOwnOutputForTheCaller) {
     Node node = make_node(500, 2);
     DecodedPoints from_encoder, from_decoder;
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{}, nullptr, &from_encoder);
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{}, nullptr, &from_encoder);
     ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), from_decoder), "");
     EXPECT_EQ(from_encoder.positions, from_decoder.positions);
     EXPECT_EQ(from_encoder.radii, from_decoder.radii);
@@ -99,8 +99,8 @@ TEST(PointCodec, ReducedColourPrecisionStaysWithinItsStepsAndShrinksTheNode) {
     Node node = make_node(2000, 3);
     DecodedPoints out;
     std::vector<uint32_t> order;
-    std::vector<uint8_t> lossless = encode_point_node(node.view(), ColorBits{});
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{5, 6}, &order);
+    std::vector<uint8_t> lossless = encode_point_node(node.view(), PointEncodeSettings{});
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{ColorBits{5, 6}}, &order);
     ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), out), "");
     int worst = 0;
     for (size_t i = 0; i < out.count; ++i)
@@ -116,7 +116,7 @@ TEST(PointCodec, NodesWithoutNormalsOrColoursAndSinglePointsRoundTrip) {
     node.normals.clear();
     node.colors.clear();
     DecodedPoints out;
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{});
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
     ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), out), "");
     EXPECT_EQ(out.count, 1u);
     EXPECT_EQ(out.flags, 0);
@@ -130,7 +130,7 @@ TEST(PointCodec, CoincidentPointsRoundTrip) {
     for (size_t i = 0; i < 200; ++i)
         for (int a = 0; a < 3; ++a) node.positions[3 * i + a] = node.positions[a];
     DecodedPoints out;
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{});
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
     ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), out), "");
     for (size_t i = 0; i < out.count; ++i) EXPECT_LE(distance(&out.positions[3 * i], &node.positions[0]), out.position_error);
 }
@@ -141,7 +141,7 @@ TEST(PointCodec, FarFromTheOriginKeepsTheBoundRelativeToTheLocalOrigin) {
     Node node = make_node(1000, 6, 1000.0);
     DecodedPoints out;
     std::vector<uint32_t> order;
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{}, &order);
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{}, &order);
     ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), out), "");
     for (size_t i = 0; i < out.count; ++i)
         EXPECT_LE(distance(&out.positions[3 * i], &node.positions[3 * order[i]]), out.position_error);
@@ -154,7 +154,7 @@ TEST(PointCodec, GoldenBytesOfASmallNode) {
     node.normals = {0, 0, 1, 0, 0, 1, 1, 0, 0, 0, 1, 0};
     node.colors = {255, 0, 0, 0, 255, 0, 0, 0, 255, 10, 20, 30};
     node.radii = {0.5f, 0.5f, 0.75f, 1.0f};
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{});
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
     ASSERT_GE(bytes.size(), 48u);
     EXPECT_EQ(std::string(reinterpret_cast<const char*>(bytes.data()), 4), "CPPN");
     EXPECT_EQ(bytes[4], kPointNodeVersion);
@@ -168,7 +168,7 @@ TEST(PointCodec, GoldenBytesOfASmallNode) {
 
 TEST(PointCodec, EveryTruncationIsRejected) {
     Node node = make_node(700, 7);
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{});
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
     DecodedPoints out;
     for (size_t size = 0; size < bytes.size(); ++size) {
         std::vector<uint8_t> part(bytes.begin(), bytes.begin() + ptrdiff_t(size));  // exact-size heap copy (ASan)
@@ -178,7 +178,7 @@ TEST(PointCodec, EveryTruncationIsRejected) {
 
 TEST(PointCodec, CorruptBytesAreRejected) {
     Node node = make_node(700, 8);
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{});
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
     DecodedPoints out;
     for (size_t at = 0; at < bytes.size(); at += 3) {
         std::vector<uint8_t> bad = bytes;
@@ -191,7 +191,7 @@ TEST(PointCodec, CorruptStreamsWithAValidChecksumNeverCrash) {
     // The checksum catches accidents; a forged node (checksum recomputed) must still decode
     // safely: an error, or some points, but no read outside the bytes (run under ASan in CI).
     Node node = make_node(700, 9);
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), ColorBits{});
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
     DecodedPoints out;
     uint64_t state = 99;
     size_t rejected = 0, trials = 0;

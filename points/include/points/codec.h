@@ -4,7 +4,7 @@
 // docs/formats/points.md ("Node payload").
 //
 // Positions are quantized on a per-node grid whose step keeps every decoded position within a
-// quarter of the node's smallest splat radius (Euclidean distance, float rounding included);
+// quarter (by default) of the node's smallest splat radius (Euclidean distance, float rounding included);
 // radii are quantized upwards on a grid of the same step and enlarged by the largest position
 // error, so a decoded splat always covers the splat it was made from. Points are ordered along
 // a Morton curve of their grid cells, every attribute is delta coded along that order
@@ -31,6 +31,13 @@ constexpr uint8_t kPointHasColors = 1u << 1;
 struct ColorBits {
     uint8_t luma = 8;    // 1..8
     uint8_t chroma = 9;  // 1..9
+};
+
+// What the encoder may lose: colour precision, and the position error as a fraction of the
+// node's smallest splat radius (seed 002: a quarter; the radius grid uses the same step).
+struct PointEncodeSettings {
+    ColorBits color_bits;
+    double error_fraction = 0.25;  // (0, 1]
 };
 
 // The encoder's input: `count` points as parallel arrays the caller owns.
@@ -67,7 +74,7 @@ struct PointEncodeStats {
 // (the encoder decodes its own output to measure the position error: callers building the next
 // level from decoded data get it for free). Asserts on caller bugs (non-finite or non-positive
 // radii, count 0).
-std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const ColorBits& color_bits,
+std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const PointEncodeSettings& settings,
                                        std::vector<uint32_t>* order = nullptr, DecodedPoints* decoded = nullptr,
                                        PointEncodeStats* stats = nullptr);
 

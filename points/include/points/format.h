@@ -59,7 +59,7 @@ struct PointsMeta {
     uint64_t input_points = 0;
     uint32_t node_points = 0;
     uint32_t flags = 0;
-    PointSplitRule split = PointSplitRule::Midpoint;
+    PointSplitRule split = PointSplitRule::Balanced;
     ColorBits color_bits;
     uint8_t up_axis = 0;
     std::vector<PointNodeInfo> nodes;  // in index order
