@@ -59,7 +59,7 @@ public:
 
 private:
     void refill() {
-        std::memmove(buffer_.data(), buffer_.data() + begin_, end_ - begin_);
+        if (end_ > begin_) std::memmove(buffer_.data(), buffer_.data() + begin_, end_ - begin_);
         end_ -= begin_;
         begin_ = 0;
         if (buffer_.size() - end_ < kChunk) {
