@@ -78,16 +78,24 @@ struct Simplifier {
         KdTree tree;
         tree.build(xyz.data(), live.size(), false);
         heap.clear();
-        uint32_t index[kNeighbours + 1];
+        // Each point's nearest (itself first, then kNeighbours); an edge both ends list is kept
+        // once, from its smaller end.
+        const size_t stride = kNeighbours + 1;
+        std::vector<uint32_t> lists(live.size() * stride, UINT32_MAX);
         float d2[kNeighbours + 1];
-        for (size_t i = 0; i < live.size(); ++i) {
-            size_t found = tree.nearest(&xyz[3 * i], kNeighbours + 1, index, d2);
-            for (size_t j = 0; j < found; ++j) {
-                uint32_t a = std::min(live[i], live[index[j]]), b = std::max(live[i], live[index[j]]);
-                // (An edge both ends list is pushed twice: its second copy is skipped when popped.)
-                if (a != b) heap.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
+        for (size_t i = 0; i < live.size(); ++i) tree.nearest(&xyz[3 * i], stride, &lists[i * stride], d2);
+        auto lists_contain = [&](size_t i, uint32_t j) {
+            for (size_t k = 0; k < stride; ++k)
+                if (lists[i * stride + k] == j) return true;
+            return false;
+        };
+        for (size_t i = 0; i < live.size(); ++i)
+            for (size_t k = 0; k < stride; ++k) {
+                uint32_t j = lists[i * stride + k];
+                if (j == UINT32_MAX || j == i || (j < i && lists_contain(j, uint32_t(i)))) continue;
+                uint32_t a = std::min(live[i], live[j]), b = std::max(live[i], live[j]);
+                heap.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
             }
-        }
         std::make_heap(heap.begin(), heap.end());
     }
 
