@@ -391,48 +391,33 @@ __attribute__((always_inline)) inline const char* get_stream(const uint8_t*& cur
             if (lanes[l].p > lane_end[l] + 8) return "stream overrun";
         const size_t first = b * kRiceBlock;
         const uint32_t longest = kRiceEscape + std::max(escape_bits, k);  // bits of the block's longest code
-        if (first + kRiceBlock <= n && longest <= kRicePairBits) {
-            RiceLane l0 = lanes[0], l1 = lanes[1], l2 = lanes[2], l3 = lanes[3];
-            for (size_t i = first; i < first + kRiceBlock; i += 8) {
-                l0.refill();
-                l1.refill();
-                l2.refill();
-                l3.refill();
-                uint32_t v0 = l0.get(k, k_mask, escape_bits), v1 = l1.get(k, k_mask, escape_bits);
-                uint32_t v2 = l2.get(k, k_mask, escape_bits), v3 = l3.get(k, k_mask, escape_bits);
-                sink(i, v0);
-                sink(i + 1, v1);
-                sink(i + 2, v2);
-                sink(i + 3, v3);
-                v0 = l0.get(k, k_mask, escape_bits), v1 = l1.get(k, k_mask, escape_bits);
-                v2 = l2.get(k, k_mask, escape_bits), v3 = l3.get(k, k_mask, escape_bits);
-                sink(i + 4, v0);
-                sink(i + 5, v1);
-                sink(i + 6, v2);
-                sink(i + 7, v3);
+        if (first + kRiceBlock <= n) {
+            RiceLane l[kRiceLanes];
+            for (int j = 0; j < kRiceLanes; ++j) l[j] = lanes[j];
+            if (longest <= kRicePairBits) {
+                for (size_t i = first; i < first + kRiceBlock; i += 2 * kRiceLanes) {
+                    uint32_t v[2 * kRiceLanes];
+#pragma GCC unroll 8
+                    for (int j = 0; j < kRiceLanes; ++j) l[j].refill();
+#pragma GCC unroll 8
+                    for (int j = 0; j < kRiceLanes; ++j) v[j] = l[j].get(k, k_mask, escape_bits);
+#pragma GCC unroll 8
+                    for (int j = 0; j < kRiceLanes; ++j) v[kRiceLanes + j] = l[j].get(k, k_mask, escape_bits);
+#pragma GCC unroll 16
+                    for (int j = 0; j < 2 * kRiceLanes; ++j) sink(i + size_t(j), v[j]);
+                }
+            } else {
+                for (size_t i = first; i < first + kRiceBlock; i += kRiceLanes) {
+                    uint32_t v[kRiceLanes];
+#pragma GCC unroll 8
+                    for (int j = 0; j < kRiceLanes; ++j) l[j].refill();
+#pragma GCC unroll 8
+                    for (int j = 0; j < kRiceLanes; ++j) v[j] = l[j].get(k, k_mask, escape_bits);
+#pragma GCC unroll 8
+                    for (int j = 0; j < kRiceLanes; ++j) sink(i + size_t(j), v[j]);
+                }
             }
-            lanes[0] = l0;
-            lanes[1] = l1;
-            lanes[2] = l2;
-            lanes[3] = l3;
-        } else if (first + kRiceBlock <= n) {
-            RiceLane l0 = lanes[0], l1 = lanes[1], l2 = lanes[2], l3 = lanes[3];
-            for (size_t i = first; i < first + kRiceBlock; i += 4) {
-                l0.refill();
-                l1.refill();
-                l2.refill();
-                l3.refill();
-                const uint32_t v0 = l0.get(k, k_mask, escape_bits), v1 = l1.get(k, k_mask, escape_bits);
-                const uint32_t v2 = l2.get(k, k_mask, escape_bits), v3 = l3.get(k, k_mask, escape_bits);
-                sink(i, v0);
-                sink(i + 1, v1);
-                sink(i + 2, v2);
-                sink(i + 3, v3);
-            }
-            lanes[0] = l0;
-            lanes[1] = l1;
-            lanes[2] = l2;
-            lanes[3] = l3;
+            for (int j = 0; j < kRiceLanes; ++j) lanes[j] = l[j];
         } else {
             for (size_t i = first; i < n; ++i) {
                 RiceLane& lane = lanes[i % kRiceLanes];
@@ -491,10 +476,10 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     if (streams * n > 8 * body) return "point count too large for the node size";
 
     // A padded copy of the streams, so that lane refills may read 8 bytes anywhere; after it,
-    // room for the colours' chroma until the luma arrives.
+    // room for the colours' quantized components.
     std::vector<uint32_t>& scratch = out.scratch;
     const size_t padded_words = (body + kRicePadding + 8 + 3) / 4;
-    scratch.resize(padded_words + (has_colors ? 2 * n : 0));
+    scratch.resize(padded_words + (has_colors ? 3 * n : 0));
     uint8_t* copy = reinterpret_cast<uint8_t*>(scratch.data());
     std::memcpy(copy, data + kHeaderSize, body);
     std::memset(copy + body, 0, padded_words * 4 - body);
@@ -534,25 +519,29 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
         out.normals.clear();
     }
     if (has_colors) {
+        // The three quantized components first, then RGB in one pass the compiler vectorizes.
         out.colors.resize(3 * n);
-        uint8_t* colors = out.colors.data();
-        uint32_t* chroma = scratch.data() + padded_words;
+        uint32_t* yq = scratch.data() + padded_words;
+        uint32_t* coq = yq + n;
+        uint32_t* cgq = coq + n;
         uint32_t y = 0, co = 0, cg = 0;
-        const int luma_shift = 8 - luma_bits, chroma_shift = 9 - chroma_bits;
-        // Co then Cg are kept until Y, the last, arrives: then the point's RGB is known.
         const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
             y += uint32_t(unzigzag(v));
-            colors[3 * i] = uint8_t(std::min<uint32_t>(y & 0x1ff, 255));
+            yq[i] = y & 0x1ff;
         });
         if (!why) why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
             co += uint32_t(unzigzag(v));
-            chroma[2 * i] = co & 0x3ff;
+            coq[i] = co & 0x3ff;
         });
         if (!why) why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
             cg += uint32_t(unzigzag(v));
-            dequantize_color(colors[3 * i], chroma[2 * i], cg & 0x3ff, luma_shift, chroma_shift, &colors[3 * i]);
+            cgq[i] = cg & 0x3ff;
         });
         if (why) return failed(why);
+        const int luma_shift = 8 - luma_bits, chroma_shift = 9 - chroma_bits;
+        uint8_t* colors = out.colors.data();
+        for (size_t i = 0; i < n; ++i)
+            dequantize_color(yq[i], coq[i], cgq[i], luma_shift, chroma_shift, &colors[3 * i]);
     } else {
         out.colors.clear();
     }
