@@ -3,6 +3,7 @@
 #include "points/codec.h"
 
 #include <algorithm>
+#include <array>
 #include <cassert>
 #include <cmath>
 #include <cstring>
@@ -129,10 +130,11 @@ void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, BitWriter 
 struct Grid {
     float origin[3];
     float step;
-    uint32_t bits[3];
 };
 
-// A grid whose rounding moves a point by at most `max_error`.
+// A grid whose rounding moves a point by at most `max_error` (step * sqrt(3) / 2), unless the
+// node is so large for its radii that 2^24 steps per axis cannot reach that (then coarser: the
+// radius pad still covers the measured error).
 Grid choose_grid(const PointSamplesView& points, double max_error) {
     double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t i = 0; i < points.count; ++i)
@@ -146,14 +148,133 @@ Grid choose_grid(const PointSamplesView& points, double max_error) {
         grid.origin[a] = round_down(lo[a]);
         extent = std::max(extent, hi[a] - double(grid.origin[a]));
     }
-    // Rounding to the nearest grid point moves a point by at most step * sqrt(3) / 2.
     double step = 2.0 * max_error / std::sqrt(3.0);
     step = std::max(step, extent / double((1u << kMaxGridBits) - 2));
     if (!(step > 0)) step = std::max(max_error, 1e-30);
     grid.step = round_down(step);
     if (!(grid.step > 0)) grid.step = std::numeric_limits<float>::denorm_min();
-    for (int a = 0; a < 3; ++a) grid.bits[a] = 0;
     return grid;
+}
+
+// Grid coordinates of every point (3 per point).
+std::vector<uint32_t> quantize_positions(const PointSamplesView& points, const Grid& grid) {
+    std::vector<uint32_t> q(3 * points.count);
+    for (size_t i = 0; i < points.count; ++i)
+        for (int a = 0; a < 3; ++a) {
+            double t = std::nearbyint((points.positions[3 * i + a] - double(grid.origin[a])) / double(grid.step));
+            q[3 * i + a] = uint32_t(std::clamp(t, 0.0, double((1u << kMaxGridBits) - 1)));
+        }
+    return q;
+}
+
+// The points' order along the Morton curve of their cells (the coarsest 21 bits per axis).
+void morton_order(const std::vector<uint32_t>& q, std::vector<uint32_t>& order) {
+    const size_t n = q.size() / 3;
+    uint32_t largest = 0;
+    for (uint32_t v : q) largest = std::max(largest, v);
+    const uint32_t shift = bit_width32(largest) > kMortonBits ? bit_width32(largest) - kMortonBits : 0;
+    std::vector<std::pair<uint64_t, uint32_t>> keys(n);
+    for (size_t i = 0; i < n; ++i) {
+        uint64_t key = spread_bits21(q[3 * i] >> shift) | spread_bits21(q[3 * i + 1] >> shift) << 1 |
+                       spread_bits21(q[3 * i + 2] >> shift) << 2;
+        keys[i] = {key, uint32_t(i)};
+    }
+    std::sort(keys.begin(), keys.end());
+    order.resize(n);
+    for (size_t i = 0; i < n; ++i) order[i] = keys[i].second;
+}
+
+// Appends the zigzagged deltas of values[order[i] * stride + offset] as one stream.
+struct StreamWriter {
+    ByteWriter& out;
+    const std::vector<uint32_t>& order;
+    std::vector<uint32_t> residuals;
+    BitWriter lanes[kRiceLanes];
+
+    template <class Value>
+    size_t put_deltas(Value value) {  // value(input index) -> int32
+        int32_t previous = 0;
+        residuals.resize(order.size());
+        for (size_t i = 0; i < order.size(); ++i) {
+            int32_t v = value(order[i]);
+            residuals[i] = zigzag(v - previous);
+            previous = v;
+        }
+        size_t before = out.size();
+        put_stream(out, residuals, lanes);
+        return out.size() - before;
+    }
+};
+
+// The quantized Y, Co, Cg of an RGB colour: chroma to the nearest step, then the luma (of the
+// nearest and its neighbours) that best restores RGB given that chroma.
+std::array<uint32_t, 3> quantize_color(const uint8_t* rgb, int luma_shift, int chroma_shift) {
+    Ycocg c = to_ycocg(rgb[0], rgb[1], rgb[2]);
+    auto nearest = [](int v, int shift, int top) {
+        return uint32_t(std::min((v + (shift ? 1 << (shift - 1) : 0)) >> shift, top >> shift));
+    };
+    const uint32_t co = nearest(c.co, chroma_shift, 510), cg = nearest(c.cg, chroma_shift, 510);
+    const uint32_t y0 = nearest(c.y, luma_shift, 255);
+    uint32_t best_y = y0;
+    int best_error = INT32_MAX;
+    for (int dy = -1; dy <= 1; ++dy) {
+        int y = int(y0) + dy;
+        if (y < 0 || y > (255 >> luma_shift) + 1) continue;
+        uint8_t back[3];
+        dequantize_color(uint32_t(y), co, cg, luma_shift, chroma_shift, back);
+        int error = 0;
+        for (int k = 0; k < 3; ++k) error = std::max(error, std::abs(int(back[k]) - int(rgb[k])));
+        if (error < best_error) best_error = error, best_y = uint32_t(y);
+    }
+    return {best_y, co, cg};
+}
+
+// The smallest radius grid index whose decoded value (before the pad) is at least r: rounded up
+// so splats never shrink, then stepped up while the decoder's float arithmetic falls short.
+int32_t quantize_radius(double r, float base, float step) {
+    double t = std::ceil((r - double(base)) / double(step));
+    int32_t v = int32_t(std::clamp(t, 0.0, double(1 << 30)));
+    while (radius_value(base, step, 0.0f, uint32_t(v)) < float(r) && v < (1 << 30)) ++v;
+    return v;
+}
+
+// Decodes the node in `out` (its checksum and pad not yet set), measures every point's
+// position error against the input, then sets the pad so that every decoded splat covers its
+// input splat grown by that error, and seals the node with its checksum. `decoded` receives
+// the final decode.
+void seal_node(ByteWriter& out, size_t pad_at, size_t body_end, const PointSamplesView& points,
+               const std::vector<uint32_t>& order, DecodedPoints& decoded, PointEncodeStats& stats) {
+    const size_t n = points.count;
+    auto decode_with_pad = [&](float pad) {
+        uint32_t pad_bits;
+        std::memcpy(&pad_bits, &pad, 4);
+        out.patch_u32(pad_at, pad_bits);
+        out.patch_u64(body_end, checksum64(out.bytes().data(), body_end));
+        std::string problem = decode_point_node(out.bytes().data(), out.size(), decoded);
+        assert(problem.empty() && "the encoder's own output must decode");
+        (void)problem;
+    };
+    decode_with_pad(0.0f);
+    std::vector<double> error(n);
+    double worst = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const double* p = points.positions + 3 * order[i];
+        double d2 = 0;
+        for (int a = 0; a < 3; ++a) d2 += (double(decoded.positions[3 * i + a]) - p[a]) * (double(decoded.positions[3 * i + a]) - p[a]);
+        error[i] = std::sqrt(d2);
+        worst = std::max(worst, error[i]);
+    }
+    stats.position_error = worst;
+    float pad = round_up(worst);
+    for (int attempt = 0;; ++attempt) {
+        decode_with_pad(pad);
+        double deficit = 0;
+        for (size_t i = 0; i < n; ++i)
+            deficit = std::max(deficit, double(points.radii[order[i]]) + error[i] - double(decoded.radii[i]));
+        if (deficit <= 0) break;
+        assert(attempt < 8);
+        pad = round_up(double(pad) + deficit * (1.0 + 1e-6));
+    }
 }
 
 }  // namespace
@@ -173,32 +294,12 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
         min_radius = std::min(min_radius, double(points.radii[i]));
     }
     const Grid grid = choose_grid(points, min_radius * settings.error_fraction);
-
-    // Grid coordinates and the Morton order of their cells.
-    std::vector<uint32_t> q(3 * n);
-    uint32_t largest = 0;
-    for (size_t i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) {
-            double t = std::nearbyint((points.positions[3 * i + a] - double(grid.origin[a])) / double(grid.step));
-            uint32_t v = uint32_t(std::clamp(t, 0.0, double((1u << kMaxGridBits) - 1)));
-            q[3 * i + a] = v;
-            largest = std::max(largest, v);
-        }
-    const uint32_t shift = bit_width32(largest) > kMortonBits ? bit_width32(largest) - kMortonBits : 0;
-    std::vector<std::pair<uint64_t, uint32_t>> keys(n);
-    for (size_t i = 0; i < n; ++i) {
-        uint64_t key = spread_bits21(q[3 * i] >> shift) | spread_bits21(q[3 * i + 1] >> shift) << 1 |
-                       spread_bits21(q[3 * i + 2] >> shift) << 2;
-        keys[i] = {key, uint32_t(i)};
-    }
-    std::sort(keys.begin(), keys.end());
+    const std::vector<uint32_t> q = quantize_positions(points, grid);
     std::vector<uint32_t> local_order;
     std::vector<uint32_t>& order = order_out ? *order_out : local_order;
-    order.resize(n);
-    for (size_t i = 0; i < n; ++i) order[i] = keys[i].second;
+    morton_order(q, order);
 
     const bool has_normals = points.normals != nullptr, has_colors = points.colors != nullptr;
-    const uint8_t flags = uint8_t((has_normals ? kPointHasNormals : 0) | (has_colors ? kPointHasColors : 0));
     const float radius_base = round_down(min_radius);
     float radius_step = round_down(min_radius * settings.error_fraction);
     if (!(radius_step > 0)) radius_step = std::numeric_limits<float>::denorm_min();
@@ -207,7 +308,7 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
     ByteWriter out;
     out.raw(kPointNodeMagic, 4);
     out.u8(kPointNodeVersion);
-    out.u8(flags);
+    out.u8(uint8_t((has_normals ? kPointHasNormals : 0) | (has_colors ? kPointHasColors : 0)));
     out.u8(color_bits.luma);
     out.u8(color_bits.chroma);
     out.u32(uint32_t(n));
@@ -222,126 +323,37 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
     PointEncodeStats stats;
     stats.min_radius = min_radius;
     stats.bytes_header = kHeaderSize + kChecksumSize;
-    BitWriter lanes[kRiceLanes];
-    std::vector<uint32_t> residuals(n);
-    auto put = [&](size_t& bytes) {
-        size_t before = out.size();
-        put_stream(out, residuals, lanes);
-        bytes += out.size() - before;
-    };
-    for (int a = 0; a < 3; ++a) {
-        int32_t previous = 0;
-        for (size_t i = 0; i < n; ++i) {
-            int32_t v = int32_t(q[3 * order[i] + a]);
-            residuals[i] = zigzag(v - previous);
-            previous = v;
-        }
-        put(stats.bytes_position);
-    }
+    StreamWriter streams{out, order, {}, {}};
+    for (int a = 0; a < 3; ++a)
+        stats.bytes_position += streams.put_deltas([&](uint32_t i) { return int32_t(q[3 * i + a]); });
     if (has_normals) {
         std::vector<uint16_t> codes(n);
-        for (size_t i = 0; i < n; ++i) {
-            const float* nv = points.normals + 3 * order[i];
-            codes[i] = oct_encode_precise(nv[0], nv[1], nv[2]);
-        }
+        for (size_t i = 0; i < n; ++i)
+            codes[i] = oct_encode_precise(points.normals[3 * i], points.normals[3 * i + 1], points.normals[3 * i + 2]);
+        // Octahedral coordinates wrap modulo 256: a delta is the signed byte difference.
         for (int c = 0; c < 2; ++c) {
-            int previous = 0;
-            for (size_t i = 0; i < n; ++i) {
+            int32_t running = 0;
+            stats.bytes_normal += streams.put_deltas([&](uint32_t i) {
                 int v = (codes[i] >> (8 * c)) & 0xff;
-                residuals[i] = zigzag(int8_t(uint8_t(v - previous)));
-                previous = v;
-            }
-            put(stats.bytes_normal);
+                running += int8_t(uint8_t(v - (running & 0xff)));
+                return running;
+            });
         }
     }
     if (has_colors) {
         const int luma_shift = 8 - color_bits.luma, chroma_shift = 9 - color_bits.chroma;
-        std::vector<uint32_t> quantized(3 * n);
-        for (size_t i = 0; i < n; ++i) {
-            const uint8_t* rgb = points.colors + 3 * order[i];
-            Ycocg c = to_ycocg(rgb[0], rgb[1], rgb[2]);
-            auto nearest = [](int v, int shift, int top) {
-                return uint32_t(std::min((v + (shift ? 1 << (shift - 1) : 0)) >> shift, top >> shift));
-            };
-            uint32_t co = nearest(c.co, chroma_shift, 510), cg = nearest(c.cg, chroma_shift, 510);
-            // Luma last: the one (of the nearest and its neighbours) that best restores RGB given
-            // the quantized chroma.
-            uint32_t y0 = nearest(c.y, luma_shift, 255), best_y = y0;
-            int best_error = INT32_MAX;
-            for (int dy = -1; dy <= 1; ++dy) {
-                int y = int(y0) + dy;
-                if (y < 0 || y > (255 >> luma_shift) + 1) continue;
-                uint8_t back[3];
-                dequantize_color(uint32_t(y), co, cg, luma_shift, chroma_shift, back);
-                int error = 0;
-                for (int k = 0; k < 3; ++k) error = std::max(error, std::abs(int(back[k]) - int(rgb[k])));
-                if (error < best_error) best_error = error, best_y = uint32_t(y);
-            }
-            quantized[3 * i] = best_y;
-            quantized[3 * i + 1] = co;
-            quantized[3 * i + 2] = cg;
-        }
-        for (int c = 0; c < 3; ++c) {
-            int32_t previous = 0;
-            for (size_t i = 0; i < n; ++i) {
-                int32_t v = int32_t(quantized[3 * i + c]);
-                residuals[i] = zigzag(v - previous);
-                previous = v;
-            }
-            put(stats.bytes_color);
-        }
+        std::vector<std::array<uint32_t, 3>> quantized(n);
+        for (size_t i = 0; i < n; ++i) quantized[i] = quantize_color(points.colors + 3 * i, luma_shift, chroma_shift);
+        for (int c = 0; c < 3; ++c)
+            stats.bytes_color += streams.put_deltas([&](uint32_t i) { return int32_t(quantized[i][size_t(c)]); });
     }
-    {
-        int32_t previous = 0;
-        for (size_t i = 0; i < n; ++i) {
-            double r = points.radii[order[i]];
-            double t = std::ceil((r - double(radius_base)) / double(radius_step));
-            int32_t v = int32_t(std::clamp(t, 0.0, double(1 << 30)));
-            // The decoder's float arithmetic may round below r: step up until it does not.
-            while (radius_value(radius_base, radius_step, 0.0f, uint32_t(v)) < float(r) && v < (1 << 30)) ++v;
-            residuals[i] = zigzag(v - previous);
-            previous = v;
-        }
-        put(stats.bytes_radius);
-    }
+    stats.bytes_radius += streams.put_deltas(
+        [&](uint32_t i) { return quantize_radius(points.radii[i], radius_base, radius_step); });
     const size_t body_end = out.size();
     out.u64(0);
 
-    // Measure the decoded positions, set the radius pad so that every decoded splat covers its
-    // input splat, and seal with the checksum.
     DecodedPoints local_decoded;
-    DecodedPoints& decoded = decoded_out ? *decoded_out : local_decoded;
-    std::vector<double> error(n);
-    float pad = 0.0f;
-    for (int attempt = 0;; ++attempt) {
-        std::vector<uint8_t>& bytes = out.bytes();
-        uint32_t pad_bits;
-        std::memcpy(&pad_bits, &pad, 4);
-        out.patch_u32(pad_at, pad_bits);
-        out.patch_u64(body_end, checksum64(bytes.data(), body_end));
-        std::string problem = decode_point_node(bytes.data(), bytes.size(), decoded);
-        assert(problem.empty() && "the encoder's own output must decode");
-        (void)problem;
-        if (attempt == 0) {
-            double worst = 0;
-            for (size_t i = 0; i < n; ++i) {
-                const double* p = points.positions + 3 * order[i];
-                double dx = double(decoded.positions[3 * i]) - p[0], dy = double(decoded.positions[3 * i + 1]) - p[1],
-                       dz = double(decoded.positions[3 * i + 2]) - p[2];
-                error[i] = std::sqrt(dx * dx + dy * dy + dz * dz);
-                worst = std::max(worst, error[i]);
-            }
-            stats.position_error = worst;
-            pad = round_up(worst);
-            continue;
-        }
-        double deficit = 0;
-        for (size_t i = 0; i < n; ++i)
-            deficit = std::max(deficit, double(points.radii[order[i]]) + error[i] - double(decoded.radii[i]));
-        if (deficit <= 0) break;
-        assert(attempt < 8);
-        pad = round_up(double(pad) + deficit * (1.0 + 1e-6));
-    }
+    seal_node(out, pad_at, body_end, points, order, decoded_out ? *decoded_out : local_decoded, stats);
     if (stats_out) *stats_out = stats;
     return std::move(out.bytes());
 }
