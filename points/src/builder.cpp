@@ -79,6 +79,12 @@ public:
     PointsBuildReport run(const std::string& output_path);
 
 private:
+    void prepare(PointsBuildReport& report);
+    void partition_all();
+    void build_search_tree();
+    PointsMeta make_meta(const PointsBuildReport& report) const;
+    std::vector<size_t> index_order() const;
+    void summarize(PointsBuildReport& report) const;
     void place_at_origin();
     std::vector<HNode> partition(Items& items, uint32_t begin, uint32_t end, uint64_t key, int depth);
     uint32_t choose_split(Items& items, uint32_t begin, uint32_t end, int depth) const;
@@ -369,17 +375,15 @@ std::vector<Splat> Builder::build_node(size_t index) {
     return finish_node(index, std::move(left), std::max(a.error, b.error), box_min, box_max);
 }
 
-PointsBuildReport Builder::run(const std::string& output_path) {
-    PointsBuildReport report;
-    const double start = now_seconds();
+// Moves the points to their origin, decides what to estimate, and sets the radius floor.
+void Builder::prepare(PointsBuildReport& report) {
     const size_t n = cloud_.size();
     report.input_points = n;
     if (n >= (size_t(1) << 32)) fail("%zu points: more than this converter's 2^32", n);
     place_at_origin();
-    const double diagonal = bounds_.diagonal();
     float largest_radius = 0;
     for (float r : cloud_.radii) largest_radius = std::max(largest_radius, r);
-    radius_floor_ = std::max(diagonal, double(largest_radius)) * 0x1p-20;
+    radius_floor_ = std::max(bounds_.diagonal(), double(largest_radius)) * 0x1p-20;
     if (!(radius_floor_ > 0))
         fail("all %zu points coincide and carry no radii: no splat size can be estimated (give radii in the input)", n);
     estimate_normals_ = !cloud_.has_normals();
@@ -389,10 +393,11 @@ PointsBuildReport Builder::run(const std::string& output_path) {
     report.has_colors = cloud_.has_colors();
     if (estimate_normals_) cloud_.normals.assign(n, Vec3f{0, 0, 1});
     if (estimate_radii_) cloud_.radii.assign(n, 0.0f);
-    writer_ = std::make_unique<ArchiveWriter>(output_path, ArchiveKind::Points);
+}
 
-    // Partition.
-    if (progress_) progress_->phase("partitioning", n, "pt");
+// Builds the hierarchy's nodes and puts the points in their order (every leaf a range).
+void Builder::partition_all() {
+    const size_t n = cloud_.size();
     std::vector<uint32_t> perm(n);
     {
         Items items(n);
@@ -406,58 +411,61 @@ PointsBuildReport Builder::run(const std::string& output_path) {
         for (size_t i = 0; i < n; ++i) perm[i] = items[i].index;
     }
     apply_permutation(perm);
-    std::vector<uint32_t>().swap(perm);
     records_.resize(nodes_.size());
-    report.seconds_partition = now_seconds() - start;
+}
 
-    // The search tree for the leaves' estimates.
-    double t0 = now_seconds();
-    if (estimate_normals_ || estimate_radii_) {
-        xyz_.resize(3 * n);
-        for (size_t i = 0; i < n; ++i)
-            for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = float(cloud_.positions[i][a]);
-        tree_.build(xyz_.data(), n, true);
-    }
-    report.seconds_search_tree = now_seconds() - t0;
+// The search tree the leaves' estimates query (only when something is estimated).
+void Builder::build_search_tree() {
+    if (!estimate_normals_ && !estimate_radii_) return;
+    const size_t n = cloud_.size();
+    xyz_.resize(3 * n);
+    for (size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = float(cloud_.positions[i][a]);
+    tree_.build(xyz_.data(), n, true);
+}
 
-    // Nodes, bottom up.
-    t0 = now_seconds();
-    if (progress_) progress_->phase("building nodes", nodes_.size(), "nodes");
-    build_node(0);
-    report.seconds_nodes = now_seconds() - t0;
-
-    // Metadata and the file.
-    t0 = now_seconds();
-    if (progress_) progress_->phase("writing", 0, "");
+// The metadata: node records in index order, (depth, key).
+PointsMeta Builder::make_meta(const PointsBuildReport& report) const {
     PointsMeta meta;
     for (int a = 0; a < 3; ++a) {
         meta.origin[a] = origin_[a];
         meta.bounds_min[a] = bounds_.min[a];
         meta.bounds_max[a] = bounds_.max[a];
     }
-    meta.input_points = n;
+    meta.input_points = report.input_points;
     meta.node_points = uint32_t(settings_.node_points);
     meta.flags = (estimate_normals_ ? 0 : kPointsMetaInputNormals) | (report.has_colors ? kPointsMetaInputColors : 0) |
                  (estimate_radii_ ? 0 : kPointsMetaInputRadii);
     meta.split = settings_.split;
     meta.color_bits = settings_.color_bits;
     meta.up_axis = z_up_ ? 3 : 0;
-    // Records in index order: (depth, key).
+    for (size_t i : index_order()) {
+        const NodeRecord& r = records_[i];
+        PointNodeInfo info;
+        info.key = nodes_[i].key;
+        std::copy(r.box_min, r.box_min + 3, info.box_min);
+        std::copy(r.box_max, r.box_max + 3, info.box_max);
+        info.mean_radius = r.mean_radius;
+        meta.nodes.push_back(info);
+    }
+    return meta;
+}
+
+std::vector<size_t> Builder::index_order() const {
     std::vector<size_t> order(nodes_.size());
     for (size_t i = 0; i < order.size(); ++i) order[i] = i;
     std::sort(order.begin(), order.end(), [this](size_t a, size_t b) {
         return nodes_[a].depth != nodes_[b].depth ? nodes_[a].depth < nodes_[b].depth : nodes_[a].key < nodes_[b].key;
     });
+    return order;
+}
+
+// Per-level and per-leaf figures, the codec's byte split.
+void Builder::summarize(PointsBuildReport& report) const {
     report.min_leaf_points = SIZE_MAX;
-    for (size_t i : order) {
+    for (size_t i = 0; i < nodes_.size(); ++i) {
         const HNode& node = nodes_[i];
         const NodeRecord& r = records_[i];
-        PointNodeInfo info;
-        info.key = node.key;
-        std::copy(r.box_min, r.box_min + 3, info.box_min);
-        std::copy(r.box_max, r.box_max + 3, info.box_max);
-        info.mean_radius = r.mean_radius;
-        meta.nodes.push_back(info);
         if (size_t(node.depth) >= report.levels.size()) report.levels.resize(size_t(node.depth) + 1);
         PointsLevelStats& level = report.levels[size_t(node.depth)];
         level.depth = node.depth;
@@ -483,9 +491,33 @@ PointsBuildReport Builder::run(const std::string& output_path) {
     for (PointsLevelStats& level : report.levels)
         if (level.points) level.mean_radius /= double(level.points);
     report.nodes = nodes_.size();
-    report.mean_leaf_points = double(n) / double(report.leaves);
+    report.mean_leaf_points = double(report.input_points) / double(report.leaves);
+}
+
+PointsBuildReport Builder::run(const std::string& output_path) {
+    PointsBuildReport report;
+    const double start = now_seconds();
+    prepare(report);
+    writer_ = std::make_unique<ArchiveWriter>(output_path, ArchiveKind::Points);
+
+    if (progress_) progress_->phase("partitioning", cloud_.size(), "pt");
+    partition_all();
+    report.seconds_partition = now_seconds() - start;
+
+    double t0 = now_seconds();
+    build_search_tree();
+    report.seconds_search_tree = now_seconds() - t0;
+
+    t0 = now_seconds();
+    if (progress_) progress_->phase("building nodes", nodes_.size(), "nodes");
+    build_node(0);
+    report.seconds_nodes = now_seconds() - t0;
+
+    t0 = now_seconds();
+    if (progress_) progress_->phase("writing", 0, "");
+    summarize(report);
     report.payload_bytes = writer_->payload_bytes();
-    report.file_bytes = writer_->finish(encode_points_meta(meta));
+    report.file_bytes = writer_->finish(encode_points_meta(make_meta(report)));
     report.seconds_write = now_seconds() - t0;
     report.seconds = now_seconds() - start;
     report.peak_rss = peak_rss_bytes();
