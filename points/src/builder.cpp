@@ -542,7 +542,7 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
         threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings.threads);
     std::unique_ptr<Progress> progress;
     if (settings.progress && Progress::enabled())
-        progress = std::make_unique<Progress>("convert", "partitioning", cloud.size(), "pt");
+        progress = std::make_unique<Progress>("convert", "preparing", 0, "");
     Builder builder(cloud, settings, z_up, progress.get());
     PointsBuildReport report = builder.run(output_path);
     if (progress) progress->finish();

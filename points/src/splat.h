@@ -21,7 +21,7 @@ struct Splat {
 // the centre moved. Returns it.
 Splat merge_splats(const Splat& a, const Splat& b);
 
-// Reduces `splats` to `target` (>= 1) by repeatedly merging the pair, among each splat's six
+// Reduces `splats` to `target` (>= 1) by repeatedly merging the pair, among each splat's four
 // nearest, whose merged splat is smallest (a pair whose normals face away from each
 // other costs four times its radius: the two sides of a thin wall are merged last). Splats
 // keep their order otherwise. Deterministic.

@@ -20,8 +20,10 @@
 // centre, tracked through every merge and quantization (leaves: the quantization error), and at
 // least its children's bounds (monotone). Splat radii cover the children's splats.
 //
-// Memory: in core, about 70 bytes per input point (the points, a permutation, a float copy and
-// the search tree) plus node_points splats per level of the tree per thread.
+// Memory: in core, about 75 bytes per input point at the peak (10M points: 720 MiB, reading
+// included: the points in double precision with normals, colours and radii, the partition's
+// items, a float copy and the search tree), plus node_points splats per level of the tree per
+// thread. Bounding it by processing one subtree at a time is not done yet.
 #include <cstdint>
 #include <string>
 #include <vector>
