@@ -281,6 +281,18 @@ TEST(PointBuilder, OnePointWorksWithARadiusAndIsRefusedWithout) {
     EXPECT_TRUE(test::fails_with([&] { build_points(same, path, small_nodes()); }, {"all 100 points coincide"}));
 }
 
+TEST(PointBuilder, OutputIsTheSameOnOneThreadAndOnAll) {
+    // Subtrees are built in parallel and nodes reach the archive in any order: the file must not
+    // depend on it.
+    PointCloud cloud = test::sphere_cloud(6000, 1.0, {0, 0, 0}, 6);
+    PointsBuildSettings settings = small_nodes();
+    std::string all = test::scratch("threads_all.cpq"), one = test::scratch("threads_one.cpq");
+    build_points(cloud, all, settings);
+    settings.threads = 1;
+    build_points(cloud, one, settings);
+    EXPECT_EQ(read_file(all), read_file(one));
+}
+
 TEST(PointBuilder, BadCloudsAndSettingsAreRefused) {
     PointCloud cloud = test::sphere_cloud(100);
     cloud.positions[7][2] = INFINITY;
