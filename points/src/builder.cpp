@@ -13,6 +13,7 @@
 #include <tbb/parallel_invoke.h>
 
 #include "base/error.h"
+#include "base/output_path.h"
 #include "base/progress.h"
 #include "base/sysinfo.h"
 #include "common_codec/archive.h"
@@ -528,6 +529,7 @@ PointsBuildReport Builder::run(const std::string& output_path) {
 
 PointsBuildReport build_points(PointCloud cloud, const std::string& output_path, const PointsBuildSettings& settings,
                                bool z_up) {
+    check_output_file(output_path, "output");
     validate_point_cloud(cloud, "point cloud");
     if (settings.node_points < 16 || settings.node_points > (size_t(1) << 20))
         fail("node size %zu is out of range (16 .. 2^20 points)", settings.node_points);
@@ -551,6 +553,7 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
 
 PointsBuildReport build_points_file(const std::string& input_path, const std::string& output_path,
                                     const PointsBuildSettings& settings) {
+    check_output_file(output_path, "output");  // before the input is read, however long that takes
     PointReadInfo info;
     PointCloud cloud = read_point_cloud(input_path, &info);
     PointsBuildReport report = build_points(std::move(cloud), output_path, settings, info.z_up);

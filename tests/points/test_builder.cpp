@@ -302,6 +302,11 @@ TEST(PointBuilder, BadCloudsAndSettingsAreRefused) {
     PointsBuildSettings settings = small_nodes();
     settings.node_points = 3;
     EXPECT_TRUE(test::fails_with([&] { build_points(test::sphere_cloud(100), path, settings); }, {"node size"}));
+    const std::string nowhere = test::scratch("missing_dir/out.cpq");
+    EXPECT_TRUE(test::fails_with([&] { build_points(test::sphere_cloud(100), nowhere, small_nodes()); }, {"missing_dir"}));
+    std::filesystem::create_directories(test::scratch("a_directory"));
+    const std::string directory = test::scratch("a_directory");
+    EXPECT_TRUE(test::fails_with([&] { build_points(test::sphere_cloud(100), directory, small_nodes()); }, {"a_directory"}));
 }
 
 TEST(PointBuilder, ConvertsAFileAndReportsWhatItDropped) {

@@ -83,7 +83,8 @@ struct PointsBuildReport {
     std::vector<std::string> dropped_input;
 };
 
-// Converts `cloud` (validated here: Error if it is not) into a dataset at `output_path`.
+// Converts `cloud` (validated here: Error if it is not) into a dataset at `output_path` (checked
+// first: Error naming it if it is a directory or its directory is missing or not writable).
 // `z_up`: the input's convention is z up (for NormalOrientation::Auto and the meta's up axis).
 // Refuses with Error: clouds whose points all coincide when they carry no radii (no splat size
 // can be estimated), and more than 2^32 points.
