@@ -44,10 +44,15 @@ struct Edge {
     }
 };
 
+// The graph's edges come sorted once (cheapest first, a plain sort); only edges re-priced after
+// a merge go through the heap. Each step takes the cheaper of the two fronts, so the merges are
+// those of one heap holding everything, with far fewer heap operations.
 struct Simplifier {
     std::vector<Splat>& splats;
     std::vector<uint32_t> parent, generation;
-    std::vector<Edge> heap;
+    std::vector<Edge> sorted;  // cheapest first; sorted[next] is the next one not taken
+    size_t next = 0;
+    std::vector<Edge> heap;    // re-priced edges
     size_t alive;
 
     explicit Simplifier(std::vector<Splat>& s) : splats(s), parent(s.size()), generation(s.size(), 0), alive(s.size()) {
@@ -78,6 +83,8 @@ struct Simplifier {
         KdTree tree;
         tree.build(xyz.data(), live.size(), false);
         heap.clear();
+        sorted.clear();
+        next = 0;
         // Each point's nearest (itself first, then kNeighbours); an edge both ends list is kept
         // once, from its smaller end.
         const size_t stride = kNeighbours + 1;
@@ -94,22 +101,33 @@ struct Simplifier {
                 uint32_t j = lists[i * stride + k];
                 if (j == UINT32_MAX || j == i || (j < i && lists_contain(j, uint32_t(i)))) continue;
                 uint32_t a = std::min(live[i], live[j]), b = std::max(live[i], live[j]);
-                heap.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
+                sorted.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
             }
-        std::make_heap(heap.begin(), heap.end());
+        std::sort(sorted.begin(), sorted.end(), [](const Edge& x, const Edge& y) { return y < x; });
+    }
+
+    // The cheapest edge of either front, or false when both are empty.
+    bool take(Edge& e) {
+        if (next < sorted.size() && (heap.empty() || !(sorted[next] < heap.front()))) {
+            e = sorted[next++];
+            return true;
+        }
+        if (heap.empty()) return false;
+        std::pop_heap(heap.begin(), heap.end());
+        e = heap.back();
+        heap.pop_back();
+        return true;
     }
 
     void run(size_t target) {
         connect_alive();
         while (alive > target) {
-            if (heap.empty()) {
+            Edge e;
+            if (!take(e)) {  // the graph fell apart into pieces merged whole: connect what is left
                 connect_alive();
-                assert(!heap.empty());
+                assert(!sorted.empty());
                 continue;
             }
-            std::pop_heap(heap.begin(), heap.end());
-            Edge e = heap.back();
-            heap.pop_back();
             uint32_t a = find(e.a), b = find(e.b);
             if (a == b) continue;
             if (a != e.a || b != e.b || generation[a] != e.generation_a || generation[b] != e.generation_b) {
