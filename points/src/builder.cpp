@@ -110,7 +110,6 @@ private:
     bool estimate_normals_ = false, estimate_radii_ = false;
     std::vector<HNode> nodes_;
     std::vector<NodeRecord> records_;
-    std::vector<float> xyz_;
     KdTree tree_;
     std::unique_ptr<ArchiveWriter> writer_;
 };
@@ -253,7 +252,6 @@ std::vector<Splat> Builder::leaf_splats(const HNode& node) {
     if (estimate_normals_ || estimate_radii_) {
         EstimateInput in;
         in.tree = &tree_;
-        in.xyz = xyz_.data();
         in.positions = cloud_.positions.data();
         in.neighbours = settings_.neighbours;
         in.orient_up = settings_.orientation == NormalOrientation::Up ||
@@ -419,10 +417,10 @@ void Builder::partition_all() {
 void Builder::build_search_tree() {
     if (!estimate_normals_ && !estimate_radii_) return;
     const size_t n = cloud_.size();
-    xyz_.resize(3 * n);
+    std::vector<float> xyz(3 * n);  // the tree keeps its own copy, in its order
     for (size_t i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = float(cloud_.positions[i][a]);
-    tree_.build(xyz_.data(), n, true);
+        for (int a = 0; a < 3; ++a) xyz[3 * i + a] = float(cloud_.positions[i][a]);
+    tree_.build(xyz.data(), n, true);
 }
 
 // The metadata: node records in index order, (depth, key).

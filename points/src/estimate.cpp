@@ -112,7 +112,8 @@ void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* nor
     uint32_t index[KdTree::kMaxK];
     float distance2[KdTree::kMaxK];
     for (size_t i = begin; i < end; ++i) {
-        size_t found = in.tree->nearest(&in.xyz[3 * i], k, index, distance2);
+        const float q[3] = {float(in.positions[i][0]), float(in.positions[i][1]), float(in.positions[i][2])};
+        size_t found = in.tree->nearest(q, k, index, distance2);
         if (radii) {
             // k nearest within distance d: an area of pi d^2 holds about k - 1 spacings.
             double d2 = found > 1 ? double(distance2[found - 1]) : 0.0;

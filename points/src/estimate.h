@@ -10,9 +10,8 @@
 namespace catpaq::points_detail {
 
 struct EstimateInput {
-    const KdTree* tree = nullptr;   // over `xyz`
-    const float* xyz = nullptr;     // all points, float, relative to the origin
-    const Vec3d* positions = nullptr;  // the same points in double precision
+    const KdTree* tree = nullptr;      // over all points (float, relative to the origin)
+    const Vec3d* positions = nullptr;  // the same points in double precision, in the tree's ids
     size_t neighbours = 16;
     bool orient_up = false;         // else outward from the origin (the bounds' centre)
 };

@@ -20,6 +20,7 @@ void KdTree::build(const float* xyz, size_t n, bool parallel) {
     index_.resize(n);
     for (size_t i = 0; i < n; ++i) index_[i] = uint32_t(i);
     nodes_.clear();
+    ordered_.clear();
     if (n == 0) return;
     for (int a = 0; a < 3; ++a) {
         lo_[a] = INFINITY;
@@ -32,6 +33,10 @@ void KdTree::build(const float* xyz, size_t n, bool parallel) {
         }
     nodes_.resize(subtree_nodes(uint32_t(n)));
     build_node(0, 0, uint32_t(n), parallel);
+    ordered_.resize(3 * n);
+    for (size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) ordered_[3 * i + a] = xyz[3 * size_t(index_[i]) + a];
+    xyz_ = nullptr;
 }
 
 void KdTree::build_node(uint32_t slot, uint32_t begin, uint32_t end, bool parallel) {
@@ -100,10 +105,10 @@ struct KdTree::Query {
 void KdTree::search(const Node& node, float min_distance2, float offset[3], Query& query) const {
     if (node.right == 0) {
         for (uint32_t i = node.begin; i < node.end; ++i) {
-            const uint32_t id = index_[i];
-            const float* p = xyz_ + 3 * size_t(id);
+            const float* p = &ordered_[3 * size_t(i)];
             float dx = p[0] - query.q[0], dy = p[1] - query.q[1], dz = p[2] - query.q[2];
-            query.offer(id, dx * dx + dy * dy + dz * dz);
+            float d2 = dx * dx + dy * dy + dz * dz;
+            if (d2 < query.worst) query.offer(index_[i], d2);
         }
         return;
     }

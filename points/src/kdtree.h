@@ -15,8 +15,8 @@ public:
     static constexpr uint32_t kLeafSize = 12;
     static constexpr size_t kMaxK = 64;
 
-    // Builds over n points (xyz interleaved; the array must outlive the tree). Uses TBB for large
-    // inputs when `parallel`.
+    // Builds over n points (xyz interleaved; copied: the tree keeps them in its own order, so a
+    // leaf's points are contiguous in memory). Uses TBB for large inputs when `parallel`.
     void build(const float* xyz, size_t n, bool parallel = true);
 
     // The min(k, n) points nearest to q (which may be one of the points: it is then found first,
@@ -40,7 +40,8 @@ private:
 
     float lo_[3] = {0, 0, 0}, hi_[3] = {0, 0, 0};  // the root's box
 
-    const float* xyz_ = nullptr;
+    const float* xyz_ = nullptr;      // the caller's points, during build only
+    std::vector<float> ordered_;      // the points in index_ order (3 per point)
     std::vector<uint32_t> index_;
     std::vector<Node> nodes_;
 };
