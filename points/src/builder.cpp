@@ -416,11 +416,7 @@ void Builder::partition_all() {
 // The search tree the leaves' estimates query (only when something is estimated).
 void Builder::build_search_tree() {
     if (!estimate_normals_ && !estimate_radii_) return;
-    const size_t n = cloud_.size();
-    std::vector<float> xyz(3 * n);  // the tree keeps its own copy, in its order
-    for (size_t i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) xyz[3 * i + a] = float(cloud_.positions[i][a]);
-    tree_.build(xyz.data(), n, true);
+    tree_.build(cloud_.positions.data(), cloud_.size(), true);
 }
 
 // The metadata: node records in index order, (depth, key).

@@ -16,27 +16,34 @@ uint32_t KdTree::subtree_nodes(uint32_t count) {
 
 void KdTree::build(const float* xyz, size_t n, bool parallel) {
     assert(n < (size_t(1) << 31));
-    xyz_ = xyz;
-    index_.resize(n);
-    for (size_t i = 0; i < n; ++i) index_[i] = uint32_t(i);
+    points_.resize(n);
+    for (size_t i = 0; i < n; ++i) points_[i] = {{xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]}, uint32_t(i)};
+    build_tree(parallel);
+}
+
+void KdTree::build(const Vec3d* positions, size_t n, bool parallel) {
+    assert(n < (size_t(1) << 31));
+    points_.resize(n);
+    for (size_t i = 0; i < n; ++i)
+        points_[i] = {{float(positions[i][0]), float(positions[i][1]), float(positions[i][2])}, uint32_t(i)};
+    build_tree(parallel);
+}
+
+void KdTree::build_tree(bool parallel) {
     nodes_.clear();
-    ordered_.clear();
+    const size_t n = points_.size();
     if (n == 0) return;
     for (int a = 0; a < 3; ++a) {
         lo_[a] = INFINITY;
         hi_[a] = -INFINITY;
     }
-    for (size_t i = 0; i < n; ++i)
+    for (const Point& point : points_)
         for (int a = 0; a < 3; ++a) {
-            lo_[a] = std::min(lo_[a], xyz[3 * i + a]);
-            hi_[a] = std::max(hi_[a], xyz[3 * i + a]);
+            lo_[a] = std::min(lo_[a], point.p[a]);
+            hi_[a] = std::max(hi_[a], point.p[a]);
         }
     nodes_.resize(subtree_nodes(uint32_t(n)));
     build_node(0, 0, uint32_t(n), parallel);
-    ordered_.resize(3 * n);
-    for (size_t i = 0; i < n; ++i)
-        for (int a = 0; a < 3; ++a) ordered_[3 * i + a] = xyz[3 * size_t(index_[i]) + a];
-    xyz_ = nullptr;
 }
 
 void KdTree::build_node(uint32_t slot, uint32_t begin, uint32_t end, bool parallel) {
@@ -47,24 +54,21 @@ void KdTree::build_node(uint32_t slot, uint32_t begin, uint32_t end, bool parall
     const uint32_t count = end - begin;
     if (count <= kLeafSize) return;
     float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (uint32_t i = begin; i < end; ++i) {
-        const float* p = xyz_ + 3 * size_t(index_[i]);
+    for (uint32_t i = begin; i < end; ++i)
         for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], p[a]);
-            hi[a] = std::max(hi[a], p[a]);
+            lo[a] = std::min(lo[a], points_[i].p[a]);
+            hi[a] = std::max(hi[a], points_[i].p[a]);
         }
-    }
     uint32_t axis = 0;
     for (uint32_t a = 1; a < 3; ++a)
         if (hi[a] - lo[a] > hi[axis] - lo[axis]) axis = a;
     const uint32_t middle = begin + count / 2;
-    const float* xyz = xyz_;
-    auto less = [xyz, axis](uint32_t a, uint32_t b) { return xyz[3 * size_t(a) + axis] < xyz[3 * size_t(b) + axis]; };
-    std::nth_element(index_.begin() + begin, index_.begin() + middle, index_.begin() + end, less);
+    std::nth_element(points_.begin() + begin, points_.begin() + middle, points_.begin() + end,
+                     [axis](const Point& a, const Point& b) { return a.p[axis] < b.p[axis]; });
     node.axis = axis;
-    node.right_low = xyz[3 * size_t(index_[middle]) + axis];
+    node.right_low = points_[middle].p[axis];
     float left_high = -INFINITY;
-    for (uint32_t i = begin; i < middle; ++i) left_high = std::max(left_high, xyz[3 * size_t(index_[i]) + axis]);
+    for (uint32_t i = begin; i < middle; ++i) left_high = std::max(left_high, points_[i].p[axis]);
     node.left_high = left_high;
     const uint32_t left = slot + 1, right = left + subtree_nodes(count / 2);
     node.right = right;
@@ -105,10 +109,10 @@ struct KdTree::Query {
 void KdTree::search(const Node& node, float min_distance2, float offset[3], Query& query) const {
     if (node.right == 0) {
         for (uint32_t i = node.begin; i < node.end; ++i) {
-            const float* p = &ordered_[3 * size_t(i)];
-            float dx = p[0] - query.q[0], dy = p[1] - query.q[1], dz = p[2] - query.q[2];
+            const Point& point = points_[i];
+            float dx = point.p[0] - query.q[0], dy = point.p[1] - query.q[1], dz = point.p[2] - query.q[2];
             float d2 = dx * dx + dy * dy + dz * dz;
-            if (d2 < query.worst) query.offer(index_[i], d2);
+            if (d2 < query.worst) query.offer(point.id, d2);
         }
         return;
     }
