@@ -29,7 +29,8 @@ enum class PlyType : uint8_t { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float3
 enum class PlyFormat { Ascii, BinaryLittle, BinaryBig };
 
 // The vertex properties the reader understands, in the order Impl::field stores them.
-enum Field { kX, kY, kZ, kNx, kNy, kNz, kRed, kGreen, kBlue, kFieldCount };
+// kRadius is read only for point clouds (PlyStream::has_radii); a Mesh has no radii.
+enum Field { kX, kY, kZ, kNx, kNy, kNz, kRed, kGreen, kBlue, kRadius, kFieldCount };
 
 struct PlyProperty {
     std::string name;
@@ -149,7 +150,7 @@ struct PlyStream::Impl {
     size_t field[kFieldCount];   // property index of each Field in the vertex element, or kNone
     size_t offset[kFieldCount];  // its byte offset in a fixed-size binary vertex
     PlyType field_type[kFieldCount];
-    bool normals = false, colors = false;
+    bool normals = false, colors = false, radii = false;
     size_t index_list = kNone;  // property index of vertex_indices in the face element
     size_t current = 0;         // element being read (file order)
     uint64_t done = 0;          // instances of `current` already consumed
@@ -180,13 +181,14 @@ struct PlyStream::Impl {
     void end_of_batch();
 
     void emit_vertex(const double* values, uint64_t index, std::vector<Vec3d>& positions,
-                     std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out) const;
+                     std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out,
+                     std::vector<float>* radii_out) const;
     uint8_t color_byte(double value, PlyType type, uint64_t index) const;
     void check_index(int64_t index, uint64_t face) const;
 
     template <bool Swap>
     void read_vertices_binary(size_t n, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals_out,
-                              std::vector<Rgb8>* colors_out);
+                              std::vector<Rgb8>* colors_out, std::vector<float>* radii_out);
     template <bool Swap>
     void walk_binary_instance(const PlyElement& element, double* values);
     template <bool Swap>
@@ -201,7 +203,7 @@ struct PlyStream::Impl {
     std::string_view next_data_line();
     double ascii_value(Tokens& tokens, const PlyElement& element, PlyType type, const std::string& name) const;
     void read_vertices_ascii(size_t n, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals_out,
-                             std::vector<Rgb8>* colors_out);
+                             std::vector<Rgb8>* colors_out, std::vector<float>* radii_out);
     void read_faces_ascii(size_t n, std::vector<uint32_t>& indices);
 };
 
@@ -291,12 +293,14 @@ void PlyStream::Impl::resolve_vertex_fields() {
     // Accepted spellings per Field; the first found wins.
     static const std::vector<std::vector<std::string_view>> kNames = {
         {"x"}, {"y"}, {"z"}, {"nx"}, {"ny"}, {"nz"},
-        {"red", "diffuse_red", "r"}, {"green", "diffuse_green", "g"}, {"blue", "diffuse_blue", "b"}};
+        {"red", "diffuse_red", "r"}, {"green", "diffuse_green", "g"}, {"blue", "diffuse_blue", "b"},
+        {"radius", "scale"}};
     for (int f = 0; f < kFieldCount; ++f) {
         field[f] = kNone;
         for (std::string_view name : kNames[f]) {
             for (size_t p = 0; p < vertex.properties.size() && field[f] == kNone; ++p)
-                if (vertex.properties[p].name == name) field[f] = p;
+                // A radius list is some other data: skipped as before radii were read.
+                if (vertex.properties[p].name == name && !(f == kRadius && vertex.properties[p].list)) field[f] = p;
         }
         if (field[f] != kNone) {
             if (vertex.properties[field[f]].list)
@@ -308,6 +312,7 @@ void PlyStream::Impl::resolve_vertex_fields() {
         if (field[f] == kNone) header_error(std::string("the vertex element has no '") + "xyz"[f] + "' property");
     normals = field[kNx] != kNone && field[kNy] != kNone && field[kNz] != kNone;
     colors = field[kRed] != kNone && field[kGreen] != kNone && field[kBlue] != kNone;
+    radii = field[kRadius] != kNone;
     if (vertex.count > UINT32_MAX)
         header_error(strprintf("%llu vertices exceed the 32-bit index limit", ull(vertex.count)));
 }
@@ -421,7 +426,8 @@ uint8_t PlyStream::Impl::color_byte(double value, PlyType type, uint64_t index) 
 }
 
 void PlyStream::Impl::emit_vertex(const double* values, uint64_t index, std::vector<Vec3d>& positions,
-                                  std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out) const {
+                                  std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out,
+                                  std::vector<float>* radii_out) const {
     if (!mesh_io::finite3(values[kX], values[kY], values[kZ]))
         data_error(strprintf("vertex %llu has a non-finite coordinate (%g, %g, %g)", ull(index), values[kX],
                              values[kY], values[kZ]));
@@ -435,6 +441,12 @@ void PlyStream::Impl::emit_vertex(const double* values, uint64_t index, std::vec
         colors_out->push_back({color_byte(values[kRed], field_type[kRed], index),
                                color_byte(values[kGreen], field_type[kGreen], index),
                                color_byte(values[kBlue], field_type[kBlue], index)});
+    }
+    if (radii_out) {
+        double radius = values[kRadius];
+        if (!std::isfinite(radius) || radius < 0.0 || radius > 3.0e38)
+            data_error(strprintf("vertex %llu has an invalid radius (%g)", ull(index), radius));
+        radii_out->push_back(float(radius));
     }
 }
 
@@ -450,19 +462,19 @@ void PlyStream::Impl::check_index(int64_t index, uint64_t face) const {
 
 template <bool Swap>
 void PlyStream::Impl::read_vertices_binary(size_t n, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals_out,
-                                           std::vector<Rgb8>* colors_out) {
+                                           std::vector<Rgb8>* colors_out, std::vector<float>* radii_out) {
     const PlyElement& vertex = elements[vertex_element];
     double values[kFieldCount] = {};
     if (!vertex.fixed_size) {  // rare: a list among the vertex properties
         for (size_t i = 0; i < n; ++i, ++done) {
             walk_binary_instance<Swap>(vertex, values);
-            emit_vertex(values, done, positions, normals_out, colors_out);
+            emit_vertex(values, done, positions, normals_out, colors_out, radii_out);
         }
         return;
     }
     const size_t stride = vertex.stride;
     const size_t batch = std::max<size_t>(1, kBatchBytes / stride);
-    const int last_field = colors_out ? kBlue : normals_out ? kNz : kZ;
+    const int last_field = radii_out ? kRadius : colors_out ? kBlue : normals_out ? kNz : kZ;
     for (size_t first = 0; first < n;) {
         size_t k = std::min(n - first, batch);
         if (!file.ensure(k * stride)) {
@@ -473,7 +485,7 @@ void PlyStream::Impl::read_vertices_binary(size_t n, std::vector<Vec3d>& positio
         for (size_t i = 0; i < k; ++i, p += stride) {
             for (int f = 0; f <= last_field; ++f)
                 if (field[f] != kNone) values[f] = load_double<Swap>(p + offset[f], field_type[f]);
-            emit_vertex(values, done + i, positions, normals_out, colors_out);
+            emit_vertex(values, done + i, positions, normals_out, colors_out, radii_out);
         }
         file.consume(k * stride);
         first += k;
@@ -638,7 +650,7 @@ double PlyStream::Impl::ascii_value(Tokens& tokens, const PlyElement& element, P
 }
 
 void PlyStream::Impl::read_vertices_ascii(size_t n, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals_out,
-                                          std::vector<Rgb8>* colors_out) {
+                                          std::vector<Rgb8>* colors_out, std::vector<float>* radii_out) {
     const PlyElement& vertex = elements[vertex_element];
     double values[kFieldCount] = {};
     for (size_t i = 0; i < n; ++i, ++done) {
@@ -655,7 +667,7 @@ void PlyStream::Impl::read_vertices_ascii(size_t n, std::vector<Vec3d>& position
                 if (field[f] == p) values[f] = value;
         }
         if (!tokens.empty()) file.fail_line("more values than the header declares for vertex %llu", ull(done));
-        emit_vertex(values, done, positions, normals_out, colors_out);
+        emit_vertex(values, done, positions, normals_out, colors_out, radii_out);
     }
 }
 
@@ -702,8 +714,9 @@ uint64_t PlyStream::face_count() const {
 
 bool PlyStream::has_normals() const { return impl_->normals; }
 bool PlyStream::has_colors() const { return impl_->colors; }
+bool PlyStream::has_radii() const { return impl_->radii; }
 
-std::vector<std::string> PlyStream::dropped() const {
+std::vector<std::string> PlyStream::dropped(bool keeps_radii) const {
     const Impl& s = *impl_;
     std::vector<std::string> out;
     auto names = [](const std::vector<std::string>& list) {
@@ -717,7 +730,8 @@ std::vector<std::string> PlyStream::dropped() const {
         bool used = false;
         for (int f = 0; f < kFieldCount; ++f)
             // Normals and colours only count when all three components are there.
-            used |= s.field[f] == p && (f < kNx || (f < kRed ? s.normals : s.colors));
+            used |= s.field[f] == p &&
+                    (f < kNx || (f < kRed ? s.normals : f < kRadius ? s.colors : keeps_radii));
         if (!used) unused.push_back(vertex.properties[p].name);
     }
     if (!unused.empty()) out.push_back("vertex properties " + names(unused) + " (not kept)");
@@ -742,17 +756,18 @@ std::vector<std::string> PlyStream::dropped() const {
 }
 
 size_t PlyStream::read_vertices(size_t max, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals,
-                                std::vector<Rgb8>* colors) {
+                                std::vector<Rgb8>* colors, std::vector<float>* radii) {
     Impl& s = *impl_;
     assert(!normals || s.normals);
     assert(!colors || s.colors);
+    assert(!radii || s.radii);
     if (s.current > s.vertex_element) return 0;
     s.advance_to(s.vertex_element);
     size_t n = size_t(std::min<uint64_t>(max, s.elements[s.vertex_element].count - s.done));
     if (n == 0) return 0;
-    if (s.ascii()) s.read_vertices_ascii(n, positions, normals, colors);
-    else if (s.swap()) s.read_vertices_binary<true>(n, positions, normals, colors);
-    else s.read_vertices_binary<false>(n, positions, normals, colors);
+    if (s.ascii()) s.read_vertices_ascii(n, positions, normals, colors, radii);
+    else if (s.swap()) s.read_vertices_binary<true>(n, positions, normals, colors, radii);
+    else s.read_vertices_binary<false>(n, positions, normals, colors, radii);
     s.end_of_batch();
     return n;
 }

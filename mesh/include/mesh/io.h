@@ -52,15 +52,18 @@ public:
     uint64_t face_count() const;  // polygons as declared; 0 when there is no face element
     bool has_normals() const;     // nx, ny, nz present
     bool has_colors() const;      // red, green, blue present
+    bool has_radii() const;       // a splat radius: 'radius' (or 'scale') present; point clouds only
     // What the header declares that a Mesh cannot hold and the reader skips (face colours, other
-    // properties and elements), one sentence per kind.
-    std::vector<std::string> dropped() const;
+    // properties and elements), one sentence per kind. A radius property counts as skipped
+    // unless `keeps_radii` (a point-cloud reader that asks for radii).
+    std::vector<std::string> dropped(bool keeps_radii = false) const;
 
     // Reads up to `max` further vertices and appends them to `positions` (and to `normals` and
-    // `colors` when those are non-null; they must then be offered by the file). Returns the
-    // number read, 0 once all vertices are read. Throws on truncation or non-finite values.
+    // `colors`, `radii` when those are non-null; they must then be offered by the file). Returns
+    // the number read, 0 once all vertices are read. Throws on truncation, non-finite values and
+    // negative radii.
     size_t read_vertices(size_t max, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals,
-                         std::vector<Rgb8>* colors);
+                         std::vector<Rgb8>* colors, std::vector<float>* radii = nullptr);
 
     // Reads up to `max` further faces (polygons) and appends 3 indices per triangle to
     // `indices`, fan-triangulating polygons (n corners give n - 2 triangles). Returns the number

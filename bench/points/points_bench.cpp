@@ -1,0 +1,339 @@
+// points_bench: the point converter and its node codec on scan-like clouds (random samples of
+// the generated scan-like surface, mesh/generators.h, with colours; normals and radii estimated
+// by the converter unless --with-normals). Each conversion runs in a fresh child process that
+// reads the cloud from a binary PLY, so its peak resident memory (from the kernel) is the
+// conversion's, reading included. Parts:
+//
+//   conversion   input points/s (wall), CPU seconds (all threads), peak memory, bytes per input
+//                point and per stored point (all levels), the payload's split by attribute, and
+//                as a baseline in this process meshoptimizer's meshopt_simplifyPoints halving the
+//                same cloud (one pass, one thread): "ratio" is our points/s over its
+//   decode       decode_point_node over every node of the first dataset, one thread, points per
+//                second of thread CPU time; baseline: meshoptimizer's vertex codec decoding the
+//                same decoded points as 24-byte vertices (float position, octahedral normal, RGB,
+//                float radius, 3 bytes of zero padding), and its size
+//   split rules  midpoint (seed 002) against balanced (seed 000) on the scan and on an uneven
+//                density cloud (a dense sphere inside a sparse blob): nodes, depth, leaf fill,
+//                bytes per point, CPU seconds
+//   rate/error   bytes per point against the colour precision and the position error (as a
+//                fraction of the node's smallest splat radius), on the smallest size
+//
+// usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]
+//                     [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]
+// (--skip-rate skips the split and rate parts; sizes like 3e7 work for larger runs.)
+#include <cinttypes>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <sstream>
+#include <string>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <thread>
+#include <unistd.h>
+#include <vector>
+
+#include <meshoptimizer.h>
+
+#include "base/child_process.h"
+#include "base/error.h"
+#include "mesh/io.h"
+#include "base/options.h"
+#include "base/sysinfo.h"
+#include "mesh/generators.h"
+#include "points/builder.h"
+#include "points/dataset.h"
+#include "points/sampling.h"
+
+using namespace catpaq;
+namespace fs = std::filesystem;
+
+namespace {
+
+PointCloud make_cloud(size_t points, bool with_normals, bool uneven = false) {
+    // About 4 surface samples per mesh vertex: the mesh is a smooth carrier, not the sampling.
+    // Uneven: a dense sphere inside a sparse blob (mesh/generators.h), as in a scan with one
+    // finely detailed region; samples follow the triangles, so the density varies as theirs.
+    Mesh mesh = uneven ? make_uneven_density(std::max<size_t>(points / 2, 20000), 7)
+                       : make_scan_like(std::max<size_t>(points / 2, 20000), 7);
+    if (!uneven) return sample_surface(mesh, points, 11, with_normals, true);
+    // Uniform in triangles rather than in area: the sphere's small triangles get as many points.
+    PointCloud cloud;
+    for (size_t i = 0; i < points; ++i) {
+        size_t t = (i * 2654435761u) % mesh.triangle_count();
+        const uint32_t* c = &mesh.indices[3 * t];
+        double w0 = double((i * 40503u) % 1000) / 1000.0 * 0.5, w1 = double((i * 9973u) % 1000) / 1000.0 * 0.5;
+        Vec3d p;
+        for (int k = 0; k < 3; ++k)
+            p[k] = (1 - w0 - w1) * mesh.positions[c[0]][k] + w0 * mesh.positions[c[1]][k] + w1 * mesh.positions[c[2]][k];
+        cloud.positions.push_back(p);
+        cloud.colors.push_back(mesh.colors[c[0]]);
+    }
+    return cloud;
+}
+
+struct Conversion {
+    double seconds = 0, cpu_seconds = 0, peak_mib = 0, bytes_per_point = 0, points_per_second = 0;
+    double stored_bytes_per_point = 0;  // file bytes / points stored in all nodes
+    double nodes = 0, depth = 0;
+    double baseline_points_per_second = 0;
+    double worst_error_to_radius = 0;
+    double share[5] = {};  // position, normal, colour, radius, header: fractions of the payload
+    double phases[4] = {};  // partition, search tree, nodes, write: seconds
+    double min_leaf = 0, mean_leaf = 0;
+};
+
+// The child's side: reads the cloud written by the parent, converts it, prints its figures.
+int child_convert(const std::string& input, const std::string& output, const PointsBuildSettings& settings) {
+    PointCloud cloud = read_point_cloud(input);
+    double cpu0 = cpu_seconds();
+    PointsBuildReport r = build_points(std::move(cloud), output, settings);
+    Conversion c;
+    c.cpu_seconds = cpu_seconds() - cpu0;
+    c.seconds = r.seconds;
+    c.points_per_second = double(r.input_points) / r.seconds;
+    c.bytes_per_point = double(r.file_bytes) / double(r.input_points);
+    c.stored_bytes_per_point = double(r.file_bytes) / double(r.stored_points);
+    c.nodes = double(r.nodes);
+    c.depth = double(r.depth);
+    c.worst_error_to_radius = r.worst_error_to_radius;
+    double payload = double(r.payload_bytes);
+    const double share[5] = {double(r.bytes_position), double(r.bytes_normal), double(r.bytes_color),
+                             double(r.bytes_radius), double(r.bytes_header)};
+    for (int i = 0; i < 5; ++i) c.share[i] = share[i] / payload;
+    const double phases[4] = {r.seconds_partition, r.seconds_search_tree, r.seconds_nodes, r.seconds_write};
+    std::copy(phases, phases + 4, c.phases);
+    c.min_leaf = double(r.min_leaf_points);
+    c.mean_leaf = r.mean_leaf_points;
+    std::printf("RESULT");
+    const double* fields = &c.seconds;
+    for (size_t i = 0; i < sizeof(Conversion) / sizeof(double); ++i) std::printf(" %.17g", fields[i]);
+    std::printf("\n");
+    return 0;
+}
+
+// Converts in a child process (a fresh one: TBB's thread pool does not survive a fork) so the
+// peak memory is the conversion's (with the cloud it reads); the cloud goes through a PLY file.
+Conversion convert_in_child(const std::string& self, const std::string& cloud_path, const std::string& output,
+                            const PointsBuildSettings& settings) {
+    std::vector<std::string> argv = {self, "--child", cloud_path, "--out", output, "--node-points",
+                                     std::to_string(settings.node_points), "--split", point_split_rule_name(settings.split),
+                                     "--luma", std::to_string(settings.color_bits.luma), "--chroma",
+                                     std::to_string(settings.color_bits.chroma), "--error-fraction",
+                                     std::to_string(settings.error_fraction)};
+    ChildRun run = run_measured(argv, output + ".log");
+    size_t at = run.output.find("RESULT");
+    if (run.status != 0 || at == std::string::npos) fail("the conversion child failed: %s", run.output.c_str());
+    Conversion c;
+    std::stringstream in(run.output.substr(at + 6));
+    double* fields = &c.seconds;
+    for (size_t i = 0; i < sizeof(Conversion) / sizeof(double); ++i) in >> fields[i];
+    c.peak_mib = double(run.peak_bytes) / (1 << 20);
+    return c;
+}
+
+std::string write_cloud(const PointCloud& cloud, const fs::path& dir, const std::string& name) {
+    Mesh mesh;
+    mesh.positions = cloud.positions;
+    mesh.normals = cloud.normals;
+    mesh.colors = cloud.colors;
+    std::string path = (dir / name).string();
+    write_ply(path, mesh, true);
+    return path;
+}
+
+double simplify_points_baseline(const PointCloud& cloud) {
+    std::vector<float> xyz(3 * cloud.size());
+    for (size_t i = 0; i < cloud.size(); ++i)
+        for (int a = 0; a < 3; ++a) xyz[3 * i + a] = float(cloud.positions[i][a]);
+    std::vector<unsigned> kept(cloud.size());
+    double t = best_of(1, [&] { meshopt_simplifyPoints(kept.data(), xyz.data(), cloud.size(), 12, cloud.size() / 2); });
+    return double(cloud.size()) / t;
+}
+
+struct DecodeResult {
+    double points_per_second = 0, meshopt_points_per_second = 0;
+    double bytes_per_point = 0, meshopt_bytes_per_point = 0;
+    size_t points = 0;
+};
+
+DecodeResult measure_decode(const std::string& path, int runs) {
+    PointDataset dataset(path);
+    std::vector<std::vector<uint8_t>> payloads;
+    std::vector<std::vector<uint8_t>> meshopt;
+    std::vector<size_t> counts;
+    DecodeResult result;
+    DecodedPoints decoded;
+    uint64_t payload_bytes = 0, meshopt_bytes = 0;
+    struct Vertex {
+        float p[3];
+        uint16_t normal;
+        uint8_t rgb[3], pad;
+        float radius;
+    };
+    static_assert(sizeof(Vertex) == 24);  // 3 bytes of zero padding, which its codec removes
+    for (size_t i = 0; i < dataset.node_count(); ++i) {
+        std::string error;
+        const uint8_t* bytes = dataset.node_bytes(i, &error);
+        if (!bytes) fail("%s", error.c_str());
+        payloads.emplace_back(bytes, bytes + dataset.entries()[i].size);
+        payload_bytes += payloads.back().size();
+        std::string problem = decode_point_node(bytes, payloads.back().size(), decoded);
+        if (!problem.empty()) fail("%s", problem.c_str());
+        std::vector<Vertex> vertices(decoded.count);
+        for (size_t k = 0; k < decoded.count; ++k) {
+            Vertex& v = vertices[k];
+            std::memcpy(v.p, &decoded.positions[3 * k], 12);
+            v.normal = decoded.normals.empty() ? 0 : decoded.normals[k];
+            for (int c = 0; c < 3; ++c) v.rgb[c] = decoded.colors.empty() ? 0 : decoded.colors[3 * k + c];
+            v.pad = 0;
+            v.radius = decoded.radii[k];
+        }
+        std::vector<uint8_t> encoded(meshopt_encodeVertexBufferBound(decoded.count, sizeof(Vertex)));
+        encoded.resize(meshopt_encodeVertexBuffer(encoded.data(), encoded.size(), vertices.data(), decoded.count, sizeof(Vertex)));
+        meshopt_bytes += encoded.size();
+        meshopt.push_back(std::move(encoded));
+        counts.push_back(decoded.count);
+        result.points += decoded.count;
+    }
+    double ours = best_of(runs, [&] {
+        for (const std::vector<uint8_t>& p : payloads)
+            if (!decode_point_node(p.data(), p.size(), decoded).empty()) fail("decode failed");
+    }, thread_cpu_seconds);
+    std::vector<Vertex> vertices;
+    double theirs = best_of(runs, [&] {
+        for (size_t i = 0; i < meshopt.size(); ++i) {
+            vertices.resize(counts[i]);
+            if (meshopt_decodeVertexBuffer(vertices.data(), counts[i], sizeof(Vertex), meshopt[i].data(), meshopt[i].size()) != 0)
+                fail("meshopt decode failed");
+        }
+    }, thread_cpu_seconds);
+    result.points_per_second = double(result.points) / ours;
+    result.meshopt_points_per_second = double(result.points) / theirs;
+    result.bytes_per_point = double(payload_bytes) / double(result.points);
+    result.meshopt_bytes_per_point = double(meshopt_bytes) / double(result.points);
+    return result;
+}
+
+std::vector<size_t> parse_sizes(const std::string& text) {
+    std::vector<size_t> sizes;
+    std::stringstream in(text);
+    std::string item;
+    while (std::getline(in, item, ',')) sizes.push_back(size_t(std::stod(item)));
+    return sizes;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+    try {
+        Options options(argc, argv,
+                        "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]\n"
+                        "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n",
+                        {"with-normals", "skip-rate"});
+        if (options.help()) {
+            std::printf("%s", options.usage().c_str());
+            return 0;
+        }
+        if (options.has("child")) {  // internal: one conversion in a fresh process
+            PointsBuildSettings settings;
+            settings.progress = false;
+            std::string input = options.require("child"), output = options.require("out");
+            settings.node_points = size_t(options.integer("node-points", 4096, 16, 1 << 20));
+            settings.split = options.get("split", "balanced") == "balanced" ? PointSplitRule::Balanced : PointSplitRule::Midpoint;
+            settings.color_bits.luma = uint8_t(options.integer("luma", 8, 1, 8));
+            settings.color_bits.chroma = uint8_t(options.integer("chroma", 9, 1, 9));
+            settings.error_fraction = options.number("error-fraction", 0.25, 1e-3, 1.0);
+            options.finish();
+            return child_convert(input, output, settings);
+        }
+        const std::string self = fs::canonical("/proc/self/exe").string();
+        std::vector<size_t> sizes = parse_sizes(options.get("sizes", "1000000,10000000"));
+        const bool with_normals = options.flag("with-normals");
+        const bool skip_rate = options.flag("skip-rate");
+        PointsBuildSettings settings;
+        settings.progress = false;
+        settings.node_points = size_t(options.integer("node-points", 4096, 16, 1 << 20));
+        std::string split = options.get("split", "balanced");
+        if (split == "balanced") settings.split = PointSplitRule::Balanced;
+        else if (split != "midpoint") usage_error("--split: midpoint or balanced");
+        const int runs = int(options.integer("decode-runs", 5, 1, 100));
+        std::string keep = options.get("keep", "");
+        options.finish();
+        fs::path dir = keep.empty() ? fs::temp_directory_path() / ("points_bench_" + std::to_string(getpid())) : fs::path(keep);
+        fs::create_directories(dir);
+
+        std::printf("points_bench on %s, %u threads; clouds: random samples of the scan-like surface with colours, normals %s\n",
+                    cpu_model().c_str(), std::thread::hardware_concurrency(), with_normals ? "given" : "estimated");
+        std::printf("\n== conversion (%s split, %zu points per node)\n", point_split_rule_name(settings.split), settings.node_points);
+        std::printf("%10s %8s %8s %10s %9s %7s %6s %9s %9s %10s %8s  %s\n", "points", "wall s", "cpu s", "Mpt/s", "peak MiB",
+                    "B/pt", "nodes", "B/stored", "err/r", "simpl Mpt/s", "ratio", "payload: pos/nrm/col/rad/hdr");
+        std::string last_dataset;
+        for (size_t n : sizes) {
+            PointCloud cloud = make_cloud(n, with_normals);
+            double baseline = simplify_points_baseline(cloud);
+            std::string cloud_path = write_cloud(cloud, dir, "scan_" + std::to_string(n) + ".ply");
+            PointCloud().positions.swap(cloud.positions);
+            std::string output = (dir / ("scan_" + std::to_string(n) + ".cpq")).string();
+            Conversion c = convert_in_child(self, cloud_path, output, settings);
+            std::printf("%10zu %8.2f %8.2f %10.3f %9.0f %7.3f %6.0f %9.3f %9.3f %10.3f %8.2f  %.0f%%/%.0f%%/%.0f%%/%.0f%%/%.0f%%\n", n,
+                        c.seconds, c.cpu_seconds, c.points_per_second / 1e6, c.peak_mib, c.bytes_per_point, c.nodes,
+                        c.stored_bytes_per_point, c.worst_error_to_radius, baseline / 1e6, c.points_per_second / baseline,
+                        100 * c.share[0], 100 * c.share[1], 100 * c.share[2], 100 * c.share[3], 100 * c.share[4]);
+            std::printf("%10s phases (wall s): partition %.2f, search tree %.2f, nodes %.2f, write %.2f\n", "", c.phases[0],
+                        c.phases[1], c.phases[2], c.phases[3]);
+            std::fflush(stdout);
+            if (last_dataset.empty()) last_dataset = output;
+        }
+
+        std::printf("\n== decode, one thread (%s)\n", last_dataset.c_str());
+        DecodeResult d = measure_decode(last_dataset, runs);
+        std::printf("ours:      %8.1f M points/s  %6.3f B/point\n", d.points_per_second / 1e6, d.bytes_per_point);
+        std::printf("meshopt:   %8.1f M points/s  %6.3f B/point (vertex codec on the same decoded points)\n",
+                    d.meshopt_points_per_second / 1e6, d.meshopt_bytes_per_point);
+        std::printf("ratio:     %8.2f x speed     %6.3f x size\n", d.points_per_second / d.meshopt_points_per_second,
+                    d.bytes_per_point / d.meshopt_bytes_per_point);
+
+        if (!skip_rate) {
+            std::printf("\n== split rules (%zu points; CPU s of the whole conversion)\n", sizes.front());
+            std::printf("%-9s %-9s %6s %6s %9s %9s %8s %8s\n", "cloud", "split", "nodes", "depth", "min leaf", "mean leaf",
+                        "B/pt", "cpu s");
+            for (bool uneven : {false, true}) {
+                std::string cloud_path = write_cloud(make_cloud(sizes.front(), with_normals, uneven), dir, "split.ply");
+                for (PointSplitRule rule : {PointSplitRule::Midpoint, PointSplitRule::Balanced}) {
+                    PointsBuildSettings s = settings;
+                    s.split = rule;
+                    Conversion c = convert_in_child(self, cloud_path, (dir / "split.cpq").string(), s);
+                    std::printf("%-9s %-9s %6.0f %6.0f %9.0f %9.0f %8.3f %8.2f\n", uneven ? "uneven" : "scan",
+                                point_split_rule_name(rule), c.nodes, c.depth, c.min_leaf, c.mean_leaf, c.bytes_per_point,
+                                c.cpu_seconds);
+                }
+            }
+            std::printf("\n== bytes per point against error (%zu points)\n", sizes.front());
+            std::string cloud_path = write_cloud(make_cloud(sizes.front(), with_normals), dir, "rate.ply");
+            std::printf("%-14s %-12s %8s %10s %9s\n", "colour bits", "error/radius", "B/pt", "B/stored", "err/r");
+            struct Variant {
+                ColorBits bits;
+                double fraction;
+            };
+            const Variant variants[] = {{{8, 9}, 0.25}, {{6, 7}, 0.25}, {{5, 6}, 0.25}, {{8, 9}, 0.5},
+                                        {{8, 9}, 0.125}, {{5, 6}, 0.5}};
+            for (const Variant& v : variants) {
+                PointsBuildSettings s = settings;
+                s.color_bits = v.bits;
+                s.error_fraction = v.fraction;
+                Conversion c = convert_in_child(self, cloud_path, (dir / "rate.cpq").string(), s);
+                std::printf("%2u/%-11u %-12.3f %8.3f %10.3f %9.3f\n", v.bits.luma, v.bits.chroma, v.fraction,
+                            c.bytes_per_point, c.stored_bytes_per_point, c.worst_error_to_radius);
+            }
+        }
+        if (keep.empty()) fs::remove_all(dir);
+        return 0;
+    } catch (const UsageError& e) {
+        std::fprintf(stderr, "points_bench: %s\n", e.what());
+        return 2;
+    } catch (const std::exception& e) {
+        std::fprintf(stderr, "points_bench: %s\n", e.what());
+        return 1;
+    }
+}

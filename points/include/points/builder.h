@@ -1,0 +1,98 @@
+#pragma once
+// The point converter: a point cloud in, a point dataset (points/format.h) out.
+//
+// 1. The cloud is moved to a local origin (the centre of its bounds, in double precision).
+// 2. Partition: a binary kd-tree over the points, split until a node holds at most node_points
+//    (seed 000's most balanced plane under an aspect bound, by default; or seed 002's middle of
+//    the longest side of the node's tight box). Leaves hold the input points.
+// 3. Leaves: points without normals get them by PCA over their k nearest neighbours, oriented
+//    consistently within the leaf (orientation propagated along the neighbour graph, strongest
+//    agreement first, as Hoppe et al. 1992 do globally) and, per connected piece, towards the
+//    outside (away from the cloud's centre) or up (+z, LAS), by majority vote. Points without radii
+//    get the side of the area per point their neighbours imply: sqrt(pi d_k^2 / (k - 1)).
+// 4. Inner nodes, bottom up (the two halves in parallel): the two children's decoded splats are
+//    merged by proximity down to half their number, at most node_points (points/src/splat.h), so
+//    quantization at a child is seen by its parent.
+// 5. Every node is encoded (points/codec.h) and written to the archive as soon as it is built;
+//    the archive appears atomically when complete.
+//
+// Error bound of a node: the largest distance from an input point it stands for to its splat's
+// centre, tracked through every merge and quantization (leaves: the quantization error), and at
+// least its children's bounds (monotone). Splat radii cover the children's splats.
+//
+// Memory: in core, about 75 bytes per input point at the peak (10M points: 720 MiB, reading
+// included: the points in double precision with normals, colours and radii, the partition's
+// items, a float copy and the search tree), plus node_points splats per level of the tree per
+// thread. Bounding it by processing one subtree at a time is not done yet.
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "points/codec.h"
+#include "points/format.h"
+#include "points/point_cloud.h"
+
+namespace catpaq {
+
+enum class NormalOrientation : uint8_t {
+    Auto,     // Up for inputs whose convention is z up (LAS), else Outward
+    Outward,  // away from the centre of the cloud's bounds (closed, star-shaped objects)
+    Up,       // towards +z (terrain, aerial scans)
+};
+
+struct PointsBuildSettings {
+    size_t node_points = 4096;  // the most points in a node (seed 002: "a few thousand")
+    // Balanced by default: on the 1M scan it makes 513 nodes against 721 (depth 9 against 10)
+    // with no leaf under 1597 points (midpoint: 849) and 0.5% fewer bytes; on an uneven density
+    // cloud midpoint leaves go down to 4 points (balanced: 538). Its CPU cost was within 5-10%
+    // (bench/points/points_bench, split rules).
+    PointSplitRule split = PointSplitRule::Balanced;
+    double max_aspect = 4.0;    // Balanced: a child's side across the plane is at least 1/max_aspect of the longest side
+    size_t neighbours = 16;     // k of the normal and radius estimates
+    NormalOrientation orientation = NormalOrientation::Auto;
+    ColorBits color_bits;       // default: lossless 8-bit RGB
+    double error_fraction = 0.25;  // position error / the node's smallest splat radius (0, 1]
+    unsigned threads = 0;       // 0: all cores
+    bool progress = true;       // progress display on a terminal
+};
+
+struct PointsLevelStats {
+    int depth = 0;
+    size_t nodes = 0, points = 0;
+    uint64_t bytes = 0;
+    double max_error = 0;       // world units
+    double mean_radius = 0;
+};
+
+struct PointsBuildReport {
+    size_t input_points = 0;
+    size_t nodes = 0, leaves = 0;
+    int depth = 0;                         // of the deepest leaf
+    size_t min_leaf_points = 0, max_leaf_points = 0;
+    double mean_leaf_points = 0;
+    uint64_t file_bytes = 0, payload_bytes = 0;
+    uint64_t bytes_position = 0, bytes_normal = 0, bytes_color = 0, bytes_radius = 0, bytes_header = 0;
+    uint64_t stored_points = 0;            // in all nodes
+    bool normals_estimated = false, radii_estimated = false, has_colors = false;
+    // Largest position error of a node divided by that node's smallest splat radius (the codec
+    // keeps it at most settings.error_fraction).
+    double worst_error_to_radius = 0;
+    double seconds = 0, seconds_partition = 0, seconds_search_tree = 0, seconds_nodes = 0, seconds_write = 0;
+    uint64_t peak_rss = 0;
+    std::vector<PointsLevelStats> levels;  // by depth, root first
+    std::vector<std::string> dropped_input;
+};
+
+// Converts `cloud` (validated here: Error if it is not) into a dataset at `output_path` (checked
+// first: Error naming it if it is a directory or its directory is missing or not writable).
+// `z_up`: the input's convention is z up (for NormalOrientation::Auto and the meta's up axis).
+// Refuses with Error: clouds whose points all coincide when they carry no radii (no splat size
+// can be estimated), and more than 2^32 points.
+PointsBuildReport build_points(PointCloud cloud, const std::string& output_path, const PointsBuildSettings& settings,
+                               bool z_up = false);
+
+// Reads a point file (points/point_cloud.h) and converts it.
+PointsBuildReport build_points_file(const std::string& input_path, const std::string& output_path,
+                                    const PointsBuildSettings& settings);
+
+}  // namespace catpaq

@@ -1,0 +1,132 @@
+// Normals by PCA over the k nearest neighbours, oriented consistently within a leaf, and radii
+// from the neighbours' spread (estimate.h).
+//
+// Orientation: the sign of a PCA normal is arbitrary. Within a leaf, signs are propagated along
+// the neighbour graph in Prim's order of the strongest agreement |n_i . n_j| first (Hoppe et
+// al. 1992's minimum spanning tree, restricted to the leaf: it stays local, parallel and needs
+// no global graph), which crosses smooth regions before creases. Each connected piece then
+// gets one global sign by majority vote against a reference direction (outward from the centre,
+// or +z), which a few points of a concave region cannot overturn. Pieces are at most a leaf, so
+// two leaves on either side of a fold may disagree; splats are lit two-sided by the client, so
+// this only matters for back-face culling.
+#include "estimate.h"
+
+#include <algorithm>
+#include <cmath>
+#include <queue>
+#include <vector>
+
+#include <Eigen/Eigenvalues>
+
+namespace catpaq::points_detail {
+namespace {
+
+constexpr size_t kOrientationLinks = 8;
+
+// The unit normal of the points' best-fitting plane: the eigenvector of their covariance with
+// the smallest eigenvalue; +z when the points do not span a plane (fewer than 3, or a line:
+// then any direction across the line is as good, and +z unless the line is vertical).
+Vec3f pca_normal(const Vec3d* positions, const uint32_t* index, size_t count) {
+    if (count < 3) return {0, 0, 1};
+    double c[3] = {0, 0, 0};
+    for (size_t i = 0; i < count; ++i)
+        for (int a = 0; a < 3; ++a) c[a] += positions[index[i]][a];
+    for (double& v : c) v /= double(count);
+    Eigen::Matrix3d cov = Eigen::Matrix3d::Zero();
+    for (size_t i = 0; i < count; ++i) {
+        Eigen::Vector3d d(positions[index[i]][0] - c[0], positions[index[i]][1] - c[1], positions[index[i]][2] - c[2]);
+        cov += d * d.transpose();
+    }
+    Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> solver;
+    solver.computeDirect(cov);
+    const Eigen::Vector3d values = solver.eigenvalues();
+    Eigen::Vector3d n = solver.eigenvectors().col(0);
+    // A line (or a point): the two smallest eigenvalues are both ~0 and the plane is undefined.
+    if (!(values[1] > 1e-12 * values[2]) || !std::isfinite(n[0] + n[1] + n[2])) {
+        Eigen::Vector3d along = solver.eigenvectors().col(2);
+        n = along.cross(std::fabs(along[2]) < 0.9 ? Eigen::Vector3d(0, 0, 1) : Eigen::Vector3d(1, 0, 0)).normalized();
+        if (!std::isfinite(n[0] + n[1] + n[2])) return {0, 0, 1};
+    }
+    return {float(n[0]), float(n[1]), float(n[2])};
+}
+
+float dot(const Vec3f& a, const Vec3f& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+
+// Makes the orientation of normals[begin, end) consistent along the neighbour graph and votes
+// each connected piece's sign (see the file comment).
+void orient_leaf(const EstimateInput& in, size_t begin, size_t end, const std::vector<uint32_t>& neighbours,
+                 size_t k, Vec3f* normals) {
+    const size_t n = end - begin;
+    std::vector<uint8_t> done(n, 0);
+    std::vector<uint32_t> piece;
+    struct Step {
+        float agreement;
+        uint32_t from, to;  // leaf-local
+        bool operator<(const Step& o) const { return agreement < o.agreement; }
+    };
+    std::priority_queue<Step> queue;
+    for (size_t seed = 0; seed < n; ++seed) {
+        if (done[seed]) continue;
+        piece.clear();
+        queue.push({2.0f, uint32_t(seed), uint32_t(seed)});
+        while (!queue.empty()) {
+            Step step = queue.top();
+            queue.pop();
+            if (done[step.to]) continue;
+            done[step.to] = 1;
+            piece.push_back(step.to);
+            Vec3f& normal = normals[begin + step.to];
+            if (step.from != step.to && dot(normal, normals[begin + step.from]) < 0)
+                for (float& v : normal) v = -v;
+            for (size_t j = 0; j < k; ++j) {
+                uint32_t other = neighbours[step.to * k + j];
+                if (other == UINT32_MAX || done[other]) continue;
+                queue.push({std::fabs(dot(normal, normals[begin + other])), step.to, other});
+            }
+        }
+        double vote = 0;
+        for (uint32_t i : piece) {
+            const Vec3f& normal = normals[begin + i];
+            if (in.orient_up) {
+                vote += normal[2];
+            } else {
+                const Vec3d& p = in.positions[begin + i];
+                double length = std::sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2]);
+                if (length > 0) vote += (normal[0] * p[0] + normal[1] * p[1] + normal[2] * p[2]) / length;
+            }
+        }
+        if (vote < 0)
+            for (uint32_t i : piece)
+                for (float& v : normals[begin + i]) v = -v;
+    }
+}
+
+}  // namespace
+
+void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* normals, float* radii) {
+    const size_t k = std::min<size_t>(std::max<size_t>(in.neighbours, 3), KdTree::kMaxK);
+    const size_t n = end - begin;
+    // Orientation follows the nearest few only: they are the most alike.
+    const size_t links = std::min<size_t>(k, kOrientationLinks);
+    std::vector<uint32_t> local_neighbours(normals ? n * links : 0, UINT32_MAX);
+    uint32_t index[KdTree::kMaxK];
+    float distance2[KdTree::kMaxK];
+    for (size_t i = begin; i < end; ++i) {
+        const float q[3] = {float(in.positions[i][0]), float(in.positions[i][1]), float(in.positions[i][2])};
+        size_t found = in.tree->nearest(q, k, index, distance2);
+        if (radii) {
+            // k nearest within distance d: an area of pi d^2 holds about k - 1 spacings.
+            double d2 = found > 1 ? double(distance2[found - 1]) : 0.0;
+            radii[i] = float(std::sqrt(M_PI * d2 / double(std::max<size_t>(found - 1, 1))));
+        }
+        if (normals) {
+            normals[i] = pca_normal(in.positions, index, found);
+            for (size_t j = 0; j < std::min(found, links); ++j)
+                if (index[j] >= begin && index[j] < end && index[j] != i)
+                    local_neighbours[(i - begin) * links + j] = uint32_t(index[j] - begin);
+        }
+    }
+    if (normals) orient_leaf(in, begin, end, local_neighbours, links, normals);
+}
+
+}  // namespace catpaq::points_detail

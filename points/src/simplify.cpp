@@ -1,0 +1,199 @@
+// Proximity merging of splats (splat.h): a greedy collapse over the k-nearest-neighbour graph
+// with a lazily refreshed heap. A merge changes the survivor, so the edges that touch it become
+// stale; rather than finding and updating them, every heap entry carries the generation of
+// both ends when it was pushed, and a stale entry popped is re-priced and pushed again. Merged
+// splats are found through a union-find (an edge to a merged splat leads to its survivor).
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+
+#include "kdtree.h"
+#include "splat.h"
+
+namespace catpaq::points_detail {
+namespace {
+
+constexpr size_t kNeighbours = 4;
+constexpr float kOpposedNormalCost = 4.0f;
+
+double distance(const double* a, const double* b) {
+    double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
+    return std::sqrt(dx * dx + dy * dy + dz * dz);
+}
+
+// Radius of the smallest ball holding both splats' balls.
+double merged_radius(const Splat& a, const Splat& b) {
+    double d = distance(a.p, b.p);
+    return std::max({double(a.radius), double(b.radius), 0.5 * (d + a.radius + b.radius)});
+}
+
+float merge_cost(const Splat& a, const Splat& b) {
+    float cost = float(merged_radius(a, b));
+    float dot = a.n[0] * b.n[0] + a.n[1] * b.n[1] + a.n[2] * b.n[2];
+    return dot < 0 ? cost * kOpposedNormalCost : cost;
+}
+
+struct Edge {
+    float cost;
+    uint32_t a, b;
+    uint32_t generation_a, generation_b;
+    bool operator<(const Edge& o) const {  // for a min-heap by cost (ties: by index, deterministic)
+        if (cost != o.cost) return cost > o.cost;
+        if (a != o.a) return a > o.a;
+        return b > o.b;
+    }
+};
+
+// The graph's edges come sorted once (cheapest first, a plain sort); only edges re-priced after
+// a merge go through the heap. Each step takes the cheaper of the two fronts, so the merges are
+// those of one heap holding everything, with far fewer heap operations.
+struct Simplifier {
+    std::vector<Splat>& splats;
+    std::vector<uint32_t> parent, generation;
+    std::vector<Edge> sorted;  // cheapest first; sorted[next] is the next one not taken
+    size_t next = 0;
+    std::vector<Edge> heap;    // re-priced edges
+    size_t alive;
+
+    explicit Simplifier(std::vector<Splat>& s) : splats(s), parent(s.size()), generation(s.size(), 0), alive(s.size()) {
+        for (size_t i = 0; i < s.size(); ++i) parent[i] = uint32_t(i);
+    }
+
+    uint32_t find(uint32_t i) {
+        while (parent[i] != i) {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        return i;
+    }
+
+    void push(uint32_t a, uint32_t b) {
+        heap.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
+        std::push_heap(heap.begin(), heap.end());
+    }
+
+    // Builds the proximity graph of the splats still alive.
+    void connect_alive() {
+        std::vector<uint32_t> live;
+        for (uint32_t i = 0; i < splats.size(); ++i)
+            if (parent[i] == i) live.push_back(i);
+        std::vector<float> xyz(3 * live.size());
+        for (size_t i = 0; i < live.size(); ++i)
+            for (int a = 0; a < 3; ++a) xyz[3 * i + a] = float(splats[live[i]].p[a]);
+        KdTree tree;
+        tree.build(xyz.data(), live.size(), false);
+        heap.clear();
+        sorted.clear();
+        next = 0;
+        // Each point's nearest (itself first, then kNeighbours); an edge both ends list is kept
+        // once, from its smaller end.
+        const size_t stride = kNeighbours + 1;
+        std::vector<uint32_t> lists(live.size() * stride, UINT32_MAX);
+        float d2[kNeighbours + 1];
+        for (size_t i = 0; i < live.size(); ++i) tree.nearest(&xyz[3 * i], stride, &lists[i * stride], d2);
+        auto lists_contain = [&](size_t i, uint32_t j) {
+            for (size_t k = 0; k < stride; ++k)
+                if (lists[i * stride + k] == j) return true;
+            return false;
+        };
+        for (size_t i = 0; i < live.size(); ++i)
+            for (size_t k = 0; k < stride; ++k) {
+                uint32_t j = lists[i * stride + k];
+                if (j == UINT32_MAX || j == i || (j < i && lists_contain(j, uint32_t(i)))) continue;
+                uint32_t a = std::min(live[i], live[j]), b = std::max(live[i], live[j]);
+                sorted.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
+            }
+        std::sort(sorted.begin(), sorted.end(), [](const Edge& x, const Edge& y) { return y < x; });
+    }
+
+    // The cheapest edge of either front, or false when both are empty.
+    bool take(Edge& e) {
+        if (next < sorted.size() && (heap.empty() || !(sorted[next] < heap.front()))) {
+            e = sorted[next++];
+            return true;
+        }
+        if (heap.empty()) return false;
+        std::pop_heap(heap.begin(), heap.end());
+        e = heap.back();
+        heap.pop_back();
+        return true;
+    }
+
+    void run(size_t target) {
+        connect_alive();
+        while (alive > target) {
+            Edge e;
+            if (!take(e)) {  // the graph fell apart into pieces merged whole: connect what is left
+                connect_alive();
+                assert(!sorted.empty());
+                continue;
+            }
+            uint32_t a = find(e.a), b = find(e.b);
+            if (a == b) continue;
+            if (a != e.a || b != e.b || generation[a] != e.generation_a || generation[b] != e.generation_b) {
+                push(std::min(a, b), std::max(a, b));
+                continue;
+            }
+            splats[a] = merge_splats(splats[a], splats[b]);
+            parent[b] = a;
+            ++generation[a];
+            --alive;
+        }
+        size_t out = 0;
+        for (size_t i = 0; i < splats.size(); ++i)
+            if (parent[i] == i) splats[out++] = splats[i];
+        splats.resize(out);
+    }
+};
+
+}  // namespace
+
+Splat merge_splats(const Splat& a, const Splat& b) {
+    const double d = distance(a.p, b.p);
+    Splat m;
+    double radius;
+    if (d + b.radius <= a.radius) {  // a's ball holds b's
+        std::copy(a.p, a.p + 3, m.p);
+        radius = a.radius;
+    } else if (d + a.radius <= b.radius) {
+        std::copy(b.p, b.p + 3, m.p);
+        radius = b.radius;
+    } else {
+        radius = 0.5 * (d + a.radius + b.radius);
+        double t = (radius - a.radius) / d;  // d > 0 here: equal centres fall in a case above
+        for (int k = 0; k < 3; ++k) m.p[k] = a.p[k] + (b.p[k] - a.p[k]) * t;
+    }
+    // Rounded up so that the float radius still holds both balls.
+    float r = float(radius);
+    if (double(r) < radius) r = std::nextafter(r, INFINITY);
+    m.radius = r;
+    double cover = std::max(distance(m.p, a.p) + a.cover, distance(m.p, b.p) + b.cover);
+    float c = float(cover);
+    if (double(c) < cover) c = std::nextafter(c, INFINITY);
+    m.cover = c;
+    const float wa = a.weight, wb = b.weight, w = wa + wb;
+    const float ta = w > 0 ? wa / w : 0.5f, tb = 1.0f - ta;
+    float n[3], length2 = 0;
+    for (int k = 0; k < 3; ++k) {
+        n[k] = ta * a.n[k] + tb * b.n[k];
+        length2 += n[k] * n[k];
+    }
+    if (length2 > 1e-12f) {
+        float inv = 1.0f / std::sqrt(length2);
+        for (int k = 0; k < 3; ++k) m.n[k] = n[k] * inv;
+    } else {  // opposed normals of equal weight: keep one
+        std::copy(a.n, a.n + 3, m.n);
+    }
+    for (int k = 0; k < 3; ++k) m.color[k] = ta * a.color[k] + tb * b.color[k];
+    m.weight = w;
+    return m;
+}
+
+void simplify_splats(std::vector<Splat>& splats, size_t target) {
+    assert(target >= 1);
+    if (splats.size() <= target) return;
+    Simplifier simplifier(splats);
+    simplifier.run(target);
+}
+
+}  // namespace catpaq::points_detail
