@@ -1,0 +1,204 @@
+// BaseDomain connectivity and charts (aqp/domain.h).
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+
+#include "aqp/domain.h"
+
+namespace catpaq::aqp {
+
+bool BaseDomain::connect() {
+    const size_t n = triangles.size();
+    neighbour.assign(n, {kNone, kNone, kNone});
+    neighbour_edge.assign(n, {0, 0, 0});
+    std::unordered_map<uint64_t, uint32_t> directed;  // (start << 32 | end) -> triangle * 3 + k
+    directed.reserve(n * 3);
+    for (uint32_t t = 0; t < n; ++t)
+        for (uint32_t k = 0; k < 3; ++k) {
+            uint64_t key = (uint64_t(triangles[t][k]) << 32) | triangles[t][(k + 1) % 3];
+            if (!directed.emplace(key, t * 3 + k).second) return false;
+        }
+    for (uint32_t t = 0; t < n; ++t)
+        for (uint32_t k = 0; k < 3; ++k) {
+            uint64_t twin = (uint64_t(triangles[t][(k + 1) % 3]) << 32) | triangles[t][k];
+            auto it = directed.find(twin);
+            if (it == directed.end()) continue;
+            neighbour[t][k] = it->second / 3;
+            neighbour_edge[t][k] = uint8_t(it->second % 3);
+        }
+    return true;
+}
+
+namespace {
+
+// The corners of the neighbour across edge k of a triangle whose corners are `c`.
+bool unfold_across(const BaseDomain& d, uint32_t& t, uint32_t k, std::array<Lattice2, 3>& c) {
+    uint32_t n = d.neighbour[t][k];
+    if (n == kNone) return false;
+    uint32_t m = d.neighbour_edge[t][k];
+    std::array<Lattice2, 3> out;
+    out[m] = c[(k + 1) % 3];
+    out[(m + 1) % 3] = c[k];
+    const Lattice2& far = c[(k + 2) % 3];
+    out[(m + 2) % 3] = {c[k][0] + c[(k + 1) % 3][0] - far[0], c[k][1] + c[(k + 1) % 3][1] - far[1]};
+    c = out;
+    t = n;
+    return true;
+}
+
+int corner_of(const BaseDomain& d, uint32_t t, uint32_t v) {
+    for (int i = 0; i < 3; ++i)
+        if (d.triangles[t][i] == v) return i;
+    return -1;
+}
+
+// Walks the fan of base vertex v from `to` (corners in `c`) one way round until `from`; returns
+// the number of steps, or -1 (a border, or back at the start).
+int walk_fan(const BaseDomain& d, uint32_t v, uint32_t to, uint32_t from, bool counter_clockwise,
+             std::array<Lattice2, 3>& c) {
+    uint32_t t = to;
+    for (int steps = 1; steps <= 64; ++steps) {
+        int i = corner_of(d, t, v);
+        // Counter-clockwise around v the next triangle shares the edge (corner i+2 -> corner i).
+        uint32_t k = counter_clockwise ? uint32_t(i + 2) % 3 : uint32_t(i);
+        if (!unfold_across(d, t, k, c)) return -1;
+        if (t == from) return steps;
+        if (t == to) return -1;
+    }
+    return -1;
+}
+
+}  // namespace
+
+bool BaseDomain::unfold(uint32_t from, uint32_t to, std::array<Lattice2, 3>& corners, int* steps_out) const {
+    const std::array<Lattice2, 3> standard = {Lattice2{0, 0}, Lattice2{1, 0}, Lattice2{0, 1}};
+    if (from == to) {
+        corners = standard;
+        if (steps_out) *steps_out = 0;
+        return true;
+    }
+    // An edge neighbour is one step; otherwise the shortest walk round a shared corner.
+    for (uint32_t k = 0; k < 3; ++k)
+        if (neighbour[to][k] == from) {
+            corners = standard;
+            uint32_t t = to;
+            unfold_across(*this, t, k, corners);
+            if (steps_out) *steps_out = 1;
+            return true;
+        }
+    int best = -1;
+    for (int i = 0; i < 3; ++i) {
+        uint32_t v = triangles[to][i];
+        if (corner_of(*this, from, v) < 0) continue;
+        for (bool ccw : {true, false}) {
+            std::array<Lattice2, 3> c = standard;
+            int steps = walk_fan(*this, v, to, from, ccw, c);
+            if (steps > 0 && (best < 0 || steps < best)) {
+                best = steps;
+                corners = c;
+            }
+        }
+    }
+    if (steps_out) *steps_out = best;
+    return best > 0;
+}
+
+bool BaseDomain::chart_position(const DomainPoint& p, uint32_t to, Vec2& out) const {
+    const Lattice2 standard[3] = {{0, 0}, {1, 0}, {0, 1}};
+    // A base vertex is a corner of every triangle around it, however far its own triangle is.
+    for (int i = 0; i < 3; ++i)
+        if (p.bary[i] == 1.0) {
+            const uint32_t v = triangles[p.triangle][i];
+            int j = corner_of(*this, to, v);
+            if (j >= 0) {
+                out = {double(standard[j][0]), double(standard[j][1])};
+                return true;
+            }
+            // Else unfold the triangle around v nearest to `to`.
+            int best = -1;
+            for (bool ccw : {true, false}) {
+                uint32_t t = p.triangle;
+                for (int step = 0; step < 64; ++step) {
+                    std::array<Lattice2, 3> c;
+                    int steps;
+                    if (unfold(t, to, c, &steps) && (best < 0 || steps < best)) {
+                        best = steps;
+                        const Lattice2& corner = c[corner_of(*this, t, v)];
+                        out = {double(corner[0]), double(corner[1])};
+                    }
+                    int k = corner_of(*this, t, v);
+                    uint32_t edge = ccw ? uint32_t(k + 2) % 3 : uint32_t(k);
+                    t = neighbour[t][edge];
+                    if (t == kNone || t == p.triangle) break;
+                }
+            }
+            return best >= 0;
+        }
+    std::array<Lattice2, 3> c;
+    if (!unfold(p.triangle, to, c)) return false;
+    out = {0, 0};
+    for (int i = 0; i < 3; ++i) {
+        out[0] += p.bary[i] * c[i][0];
+        out[1] += p.bary[i] * c[i][1];
+    }
+    return true;
+}
+
+bool BaseDomain::locate(uint32_t start, const Vec2& x, DomainPoint& out, int max_steps) const {
+    std::array<Lattice2, 3> c = {Lattice2{0, 0}, Lattice2{1, 0}, Lattice2{0, 1}};
+    uint32_t t = start;
+    for (int step = 0; step <= max_steps; ++step) {
+        // Barycentric coordinates of x in the unfolded triangle (affine in lattice coordinates).
+        double ax = c[1][0] - c[0][0], ay = c[1][1] - c[0][1], bx = c[2][0] - c[0][0], by = c[2][1] - c[0][1];
+        double det = ax * by - ay * bx;  // +1 or -1 times the unit triangle's: never zero
+        double px = x[0] - c[0][0], py = x[1] - c[0][1];
+        double l1 = (px * by - py * bx) / det, l2 = (ax * py - ay * px) / det;
+        std::array<double, 3> b = {1.0 - l1 - l2, l1, l2};
+        int worst = 0;
+        for (int i = 1; i < 3; ++i)
+            if (b[i] < b[worst]) worst = i;
+        if (b[worst] >= -1e-12) {  // on an edge, up to rounding
+            double sum = 0;
+            for (double& v : b) sum += (v = std::max(v, 0.0));
+            for (double& v : b) v /= sum;
+            out.triangle = t;
+            out.bary = b;
+            return true;
+        }
+        // Cross the edge opposite the most negative coordinate.
+        if (!unfold_across(*this, t, uint32_t(worst + 1) % 3, c)) return false;
+    }
+    return false;
+}
+
+bool triangle_image(const Parameterization& param, const uint32_t tri[3], Vec2 out[3], uint32_t* chart_out) {
+    int first = 0;
+    while (first < 2 && param.base_vertex[tri[first]] != kNone) ++first;
+    const uint32_t chart = param.points[tri[first]].triangle;
+    if (chart_out) *chart_out = chart;
+    for (int k = 0; k < 3; ++k)
+        if (!param.domain.chart_position(param.points[tri[k]], chart, out[k])) return false;
+    return true;
+}
+
+bool triangle_image_area(const Parameterization& param, const uint32_t tri[3], double& area) {
+    constexpr double kPlaneArea = 0.86602540378443864676 / 2;  // lattice area to plane area, halved
+    bool first = true;
+    for (int s = 0; s < 3; ++s) {
+        if (param.base_vertex[tri[s]] != kNone && !(s == 2 && first)) continue;
+        const uint32_t chart = param.points[tri[s]].triangle;
+        Vec2 x[3];
+        for (int k = 0; k < 3; ++k)
+            if (!param.domain.chart_position(param.points[tri[k]], chart, x[k])) return false;
+        double a = kPlaneArea * ((x[1][0] - x[0][0]) * (x[2][1] - x[0][1]) - (x[1][1] - x[0][1]) * (x[2][0] - x[0][0]));
+        if (first) {
+            area = a;
+            first = false;
+        } else if (std::fabs(a - area) > 1e-9 * (std::fabs(area) + 1e-6)) {
+            return false;
+        }
+    }
+    return true;
+}
+
+}  // namespace catpaq::aqp
