@@ -46,6 +46,14 @@ bool unfold_across(const BaseDomain& d, uint32_t& t, uint32_t k, std::array<Latt
     return true;
 }
 
+}  // namespace
+
+bool BaseDomain::across(uint32_t& t, uint32_t k, std::array<Lattice2, 3>& corners) const {
+    return unfold_across(*this, t, k, corners);
+}
+
+namespace {
+
 int corner_of(const BaseDomain& d, uint32_t t, uint32_t v) {
     for (int i = 0; i < 3; ++i)
         if (d.triangles[t][i] == v) return i;
@@ -173,8 +181,29 @@ bool BaseDomain::locate(uint32_t start, const Vec2& x, DomainPoint& out, int max
 
 bool triangle_image(const Parameterization& param, const uint32_t tri[3], Vec2 out[3], uint32_t* chart_out) {
     int first = 0;
-    while (first < 2 && param.base_vertex[tri[first]] != kNone) ++first;
-    const uint32_t chart = param.points[tri[first]].triangle;
+    while (first < 3 && param.base_vertex[tri[first]] != kNone) ++first;
+    uint32_t chart = param.points[tri[first % 3]].triangle;
+    if (first == 3) {
+        // Three base vertices: a surface triangle no collapse touched, so a base triangle itself
+        // (its fan round tri[0] holds it).
+        const BaseDomain& d = param.domain;
+        const uint32_t b0 = param.base_vertex[tri[0]], b1 = param.base_vertex[tri[1]], b2 = param.base_vertex[tri[2]];
+        const uint32_t start = param.points[tri[0]].triangle;
+        bool found = false;
+        for (bool ccw : {true, false}) {
+            uint32_t t = start;
+            for (int step = 0; step < 64 && t != kNone && !found; ++step) {
+                const auto& c = d.triangles[t];
+                auto has = [&](uint32_t b) { return c[0] == b || c[1] == b || c[2] == b; };
+                if (has(b0) && has(b1) && has(b2)) {
+                    chart = t;
+                    found = true;
+                }
+                t = d.neighbour[t][ccw ? (corner_of(d, t, b0) + 2) % 3 : corner_of(d, t, b0)];
+                if (t == start) break;
+            }
+        }
+    }
     if (chart_out) *chart_out = chart;
     for (int k = 0; k < 3; ++k)
         if (!param.domain.chart_position(param.points[tri[k]], chart, out[k])) return false;
@@ -183,20 +212,19 @@ bool triangle_image(const Parameterization& param, const uint32_t tri[3], Vec2 o
 
 bool triangle_image_area(const Parameterization& param, const uint32_t tri[3], double& area) {
     constexpr double kPlaneArea = 0.86602540378443864676 / 2;  // lattice area to plane area, halved
-    bool first = true;
+    auto area_of = [](const Vec2 x[3]) {
+        return kPlaneArea * ((x[1][0] - x[0][0]) * (x[2][1] - x[0][1]) - (x[1][1] - x[0][1]) * (x[2][0] - x[0][0]));
+    };
+    Vec2 x[3];
+    uint32_t chart;
+    if (!triangle_image(param, tri, x, &chart)) return false;
+    area = area_of(x);
     for (int s = 0; s < 3; ++s) {
-        if (param.base_vertex[tri[s]] != kNone && !(s == 2 && first)) continue;
-        const uint32_t chart = param.points[tri[s]].triangle;
-        Vec2 x[3];
+        const uint32_t other = param.points[tri[s]].triangle;
+        if (param.base_vertex[tri[s]] != kNone || other == chart) continue;
         for (int k = 0; k < 3; ++k)
-            if (!param.domain.chart_position(param.points[tri[k]], chart, x[k])) return false;
-        double a = kPlaneArea * ((x[1][0] - x[0][0]) * (x[2][1] - x[0][1]) - (x[1][1] - x[0][1]) * (x[2][0] - x[0][0]));
-        if (first) {
-            area = a;
-            first = false;
-        } else if (std::fabs(a - area) > 1e-9 * (std::fabs(area) + 1e-6)) {
-            return false;
-        }
+            if (!param.domain.chart_position(param.points[tri[k]], other, x[k])) return false;
+        if (std::fabs(area_of(x) - area) > 1e-9 * (std::fabs(area) + 1e-6)) return false;
     }
     return true;
 }

@@ -41,10 +41,11 @@ bool ParamCheck::bijective() const {
 
 std::string ParamCheck::describe() const {
     return strprintf("%zu triangles: %zu flipped, %zu degenerate, %zu without a shared chart, %zu wrapped, %zu bad points, %zu base "
-                     "vertices off their corner, image area %.9g of %.9g; angle distortion mean %.3f max %.3g, area "
-                     "distortion mean %.3f max %.3g",
+                     "vertices off their corner, image area %.9g of %.9g; angle distortion mean %.3f p99 %.3g max %.3g, area "
+                     "distortion mean %.3f p99 %.3g max %.3g",
                      triangles, flipped, degenerate, unfold_failures, wrapped, bad_points, base_vertices_off_corner, image_area,
-                     domain_area, angle_distortion_mean, angle_distortion_max, area_distortion_mean, area_distortion_max);
+                     domain_area, angle_distortion_mean, angle_distortion_p99, angle_distortion_max, area_distortion_mean,
+                     area_distortion_p99, area_distortion_max);
 }
 
 ParamCheck check_parameterization(const Mesh& surface, const Parameterization& param) {
@@ -77,6 +78,12 @@ ParamCheck check_parameterization(const Mesh& surface, const Parameterization& p
     // Domain lengths scaled so that the domain's area is the surface's.
     const double scale = surface_area > 0 ? std::sqrt(surface_area / c.domain_area) : 1.0;
     double weight = 0;
+    struct Measured {
+        double angle, areal, area;
+        uint32_t triangle;
+    };
+    std::vector<Measured> measured;
+    measured.reserve(c.triangles);
     for (size_t t = 0; t < c.triangles; ++t) {
         const uint32_t* tri = &surface.indices[3 * t];
         Vec2 x[3];
@@ -117,11 +124,22 @@ ParamCheck check_parameterization(const Mesh& surface, const Parameterization& p
         weight += area;
         c.angle_distortion_max = std::max(c.angle_distortion_max, angle);
         c.area_distortion_max = std::max(c.area_distortion_max, areal_sym);
+        measured.push_back({angle, areal_sym, area, uint32_t(t)});
     }
     if (weight > 0) {
         c.angle_distortion_mean /= weight;
         c.area_distortion_mean /= weight;
     }
+    auto percentile99 = [&](auto key) {
+        std::sort(measured.begin(), measured.end(), [&](const Measured& a, const Measured& b) { return key(a) < key(b); });
+        double seen = 0;
+        for (const Measured& m : measured)
+            if ((seen += m.area) >= 0.99 * weight) return key(m);
+        return measured.empty() ? 0.0 : key(measured.back());
+    };
+    c.area_distortion_p99 = percentile99([](const Measured& m) { return m.areal; });
+    c.angle_distortion_p99 = percentile99([](const Measured& m) { return m.angle; });
+    for (size_t i = measured.size(); i-- > 0 && c.worst_triangles.size() < 16;) c.worst_triangles.push_back(measured[i].triangle);
     return c;
 }
 

@@ -36,6 +36,16 @@ Vec3d cross(const Vec3d& a, const Vec3d& b) {
 }
 double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 double length(const Vec3d& a) { return std::sqrt(dot(a, a)); }
+// 4 sqrt(3) area / (sum of squared edges): 1 for an equilateral triangle, 0 for a degenerate
+// one; about 0.35 with a 20 degree angle between equal sides.
+double triangle_quality(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    const Vec3d ab = sub(b, a), bc = sub(c, b), ca = sub(a, c);
+    return 2 * std::sqrt(3.0) * length(cross(ab, sub(c, a))) / std::max(dot(ab, ab) + dot(bc, bc) + dot(ca, ca), 1e-300);
+}
+constexpr double kMinBaseQuality = 0.3;
+constexpr double kMaxFlatAngle = 0.9 * kPi;
+constexpr size_t kSmallestSimplified = 64;  // triangles (about twice the vertices) of a component
+
 double orient(const Vec2& a, const Vec2& b, const Vec2& c) {
     return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
 }
@@ -77,6 +87,8 @@ public:
     void simplify(size_t target, Progress* progress, DomainReport& report);
     Parameterization finish() const;
     size_t alive_triangles() const { return alive_triangles_; }
+    // Triangles of the components too small to simplify (kept whole).
+    size_t frozen_triangles() const { return frozen_triangles_; }
 
 private:
     // The 1-ring of v counter-clockwise: triangle t[i] = (v, w[i], w[i+1]); a closed ring has as
@@ -84,6 +96,7 @@ private:
     struct Ring {
         std::vector<uint32_t> w, t;
         bool open = false;
+        double quality = 1;  // of its worst triangle (triangle_quality)
         size_t next(size_t i) const { return (i + 1) % w.size(); }
     };
     struct Entry {
@@ -98,6 +111,7 @@ private:
     void update(uint32_t v);
     void collapse(uint32_t v, uint32_t u);
     bool edge_has_other_triangle(uint32_t a, uint32_t b, uint32_t except) const;
+    double keep_penalty(uint32_t u) const;
     int corner(uint32_t t, uint32_t v) const {
         return tris_[t][0] == v ? 0 : tris_[t][1] == v ? 1 : tris_[t][2] == v ? 2 : -1;
     }
@@ -107,9 +121,11 @@ private:
     std::vector<uint8_t> tri_alive_;
     std::vector<std::vector<uint32_t>> vtris_;
     std::vector<uint8_t> alive_, border_;
+    std::vector<uint32_t> original_degree_;  // neighbours in the surface (triangles, plus 1 on the border)
     std::vector<uint32_t> component_;
     std::vector<size_t> component_vertices_;
     std::vector<uint8_t> component_open_;
+    std::vector<uint8_t> component_frozen_;  // too small to simplify
     std::vector<Quadric> quadric_;
     std::vector<DomainPoint> point_;                // removed vertices
     std::vector<std::vector<uint32_t>> tri_points_;  // removed vertices lying in each triangle
@@ -117,7 +133,7 @@ private:
     std::vector<uint32_t> mark_;
     uint32_t mark_id_ = 0;
     std::priority_queue<Entry> queue_;
-    size_t alive_triangles_ = 0;
+    size_t alive_triangles_ = 0, frozen_triangles_ = 0;
     size_t rejected_ = 0;
     // Scratch.
     Ring ring_;
@@ -157,6 +173,8 @@ DomainSimplifier::DomainSimplifier(const Mesh& mesh) : mesh_(mesh) {
             if (!twin) border_[v] = border_[w] = 1;
         }
     }
+    original_degree_.resize(nv);
+    for (uint32_t v = 0; v < nv; ++v) original_degree_[v] = uint32_t(vtris_[v].size()) + border_[v];
     // Components (by vertex), their sizes and whether they have a border.
     component_.assign(nv, kNone);
     std::vector<uint32_t> stack;
@@ -165,6 +183,7 @@ DomainSimplifier::DomainSimplifier(const Mesh& mesh) : mesh_(mesh) {
         uint32_t id = uint32_t(component_vertices_.size());
         component_vertices_.push_back(0);
         component_open_.push_back(0);
+        component_frozen_.push_back(0);
         component_[seed] = id;
         stack.assign(1, seed);
         while (!stack.empty()) {
@@ -176,7 +195,11 @@ DomainSimplifier::DomainSimplifier(const Mesh& mesh) : mesh_(mesh) {
                 for (uint32_t w : tris_[t])
                     if (component_[w] == kNone) component_[w] = id, stack.push_back(w);
         }
+        // A small component is its own base domain: every triangle a base triangle, the map
+        // the identity (bijective whatever the shape; needles defeat the flattenings).
+        component_frozen_[id] = component_vertices_[id] * 2 < kSmallestSimplified;
     }
+    for (const Tri& t : tris_) frozen_triangles_ += component_frozen_[component_[t[0]]];
     point_.resize(nv);
     tri_points_.resize(nt);
     stamp_.assign(nv, 0);
@@ -217,8 +240,15 @@ bool DomainSimplifier::ring_of(uint32_t v, Ring& r) const {
         r.w.push_back(cur);
     else if (cur != start)
         return false;
+    r.quality = 1;
+    for (size_t i = 0; i < d; ++i)
+        r.quality = std::min(r.quality, triangle_quality(mesh_.positions[v], mesh_.positions[r.w[i]], mesh_.positions[r.w[r.next(i)]]));
     return true;
 }
+
+// The radii's exponent: the angles are scaled by `scale`, and z^a with a = scale is conformal
+// (MAPS); clamped so that needle tips (tiny total angles) do not crush or blow up the radii.
+double radius_power(double scale) { return std::clamp(scale, 0.5, 2.0); }
 
 bool DomainSimplifier::flatten(uint32_t v, const Ring& r, std::vector<Vec2>& flat) const {
     const Vec3d& p = mesh_.positions[v];
@@ -234,18 +264,37 @@ bool DomainSimplifier::flatten(uint32_t v, const Ring& r, std::vector<Vec2>& fla
     for (size_t i = 0; i < d; ++i) {
         Vec3d a = sub(mesh_.positions[r.w[i]], p), b = sub(mesh_.positions[r.w[r.next(i)]], p);
         angle[i] = std::atan2(length(cross(a, b)), dot(a, b));
+        if (!(angle[i] > 0)) return false;
         total += angle[i];
     }
     if (!(total > 0)) return false;
-    const double scale = (r.open ? kPi : 2 * kPi) / total;
+    const double target = r.open ? kPi : 2 * kPi;
+    const double scale = target / total;
+    // Scaled angles, none above kMaxFlatAngle: a vertex almost on an edge (a cap, angle near pi)
+    // would flatten to a degenerate or folded triangle. Clamped angles give their excess to the
+    // others in proportion (any star-shaped flattening keeps the map bijective).
+    double flat_angle[64];
+    for (size_t i = 0; i < d; ++i) flat_angle[i] = angle[i] * scale;
+    for (int pass = 0; pass < 8; ++pass) {
+        double clamped = 0, free_sum = 0;
+        for (size_t i = 0; i < d; ++i) {
+            if (flat_angle[i] >= kMaxFlatAngle) flat_angle[i] = kMaxFlatAngle, clamped += kMaxFlatAngle;
+            else free_sum += flat_angle[i];
+        }
+        if (clamped == 0) break;
+        if (!(free_sum > 0) || clamped >= target) return false;
+        bool over = false;
+        for (size_t i = 0; i < d; ++i)
+            if (flat_angle[i] < kMaxFlatAngle) over |= (flat_angle[i] *= (target - clamped) / free_sum) >= kMaxFlatAngle;
+        if (!over) break;
+    }
     double phi = 0;
     for (size_t i = 0; i < n; ++i) {
-        double radius = length(sub(mesh_.positions[r.w[i]], p)) / mean_radius;
+        double radius = std::pow(length(sub(mesh_.positions[r.w[i]], p)) / mean_radius, radius_power(scale));
         flat[i] = {radius * std::cos(phi), radius * std::sin(phi)};
         if (i < d) {
-            // A scaled angle of pi or more would fold the flattened old triangle.
-            if (!(angle[i] * scale < kPi * (1 - 1e-9)) || !(angle[i] > 0)) return false;
-            phi += angle[i] * scale;
+            if (!(flat_angle[i] < kPi * (1 - 1e-9))) return false;
+            phi += flat_angle[i];
         }
     }
     return true;
@@ -265,7 +314,7 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
     // points.
     if (r.open && ((j != 0 && j != n - 1) || d < 2)) return false;
     const uint32_t c = component_[v];
-    if (component_vertices_[c] <= (component_open_[c] ? 3u : 4u)) return false;
+    if (component_frozen_[c] || component_vertices_[c] <= (component_open_[c] ? 3u : 4u)) return false;
     // Link condition: u and v share exactly the vertices of the triangles on edge uv.
     ++mark_id_;
     for (uint32_t w : r.w) mark_[w] = mark_id_;
@@ -291,19 +340,49 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
         const Vec3d& b = mesh_.positions[r.w[i1]];
         Vec3d n_new = cross(sub(a, pu), sub(b, pu)), n_old = cross(sub(a, pv), sub(b, pv));
         if (!(dot(n_new, n_old) > 0)) return false;
-        double e0 = dot(sub(a, pu), sub(a, pu)), e1 = dot(sub(b, a), sub(b, a)), e2 = dot(sub(pu, b), sub(pu, b));
-        double q = 2 * std::sqrt(3.0) * length(n_new) / std::max(e0 + e1 + e2, 1e-300);  // 1: equilateral
-        min_quality = std::min(min_quality, q);
-        max_edge2 = std::max({max_edge2, e0, e2});
+        min_quality = std::min(min_quality, triangle_quality(pu, a, b));
+        max_edge2 = std::max({max_edge2, dot(sub(a, pu), sub(a, pu)), dot(sub(pu, b), sub(pu, b))});
     }
-    // Short edges first (base triangles of even size), weighted by the shape error and the
-    // worst new triangle's shape (nearly equilateral base triangles).
+    // Base triangles with a small angle stretch the angles of the surface around that corner
+    // (every base triangle is equilateral in the domain): an angle of 20 degrees is stretched
+    // threefold, and a surface triangle there can end up spanning more than 180 degrees, which
+    // no straight image can. Such collapses are refused unless the ring is that bad already.
+    if (min_quality < std::min(kMinBaseQuality, r.quality)) return false;
+    // Valences near 6 (4 on the border): a base vertex of valence 3 is a cone of 180 degrees in
+    // the domain, where the surface around it must be squeezed to half its angle.
+    auto valence = [&](uint32_t w) { return int(vtris_[w].size()) + border_[w]; };
+    auto deviation = [&](uint32_t w, int val) {
+        const int target = border_[w] ? 4 : 6;
+        return double((val - target) * (val - target));
+    };
+    const int u_after = valence(u) + int(n) - (border_edge ? 3 : 4);
+    if (u_after < (border_[u] ? 2 : 4) && component_vertices_[c] > 12) return false;
+    double valence_change = deviation(u, u_after) - deviation(u, valence(u)) - deviation(v, int(n));
+    for (size_t o : {j == 0 ? (r.open ? n : n - 1) : j - 1, j + 1}) {
+        if (o >= n) continue;  // (the open ring's ends have one neighbour on the edge's side)
+        const uint32_t x = r.w[o];
+        const int after = valence(x) - 1;
+        if (after < (border_[x] ? 2 : 4) && component_vertices_[c] > 12) return false;
+        valence_change += deviation(x, after) - deviation(x, valence(x));
+    }
+    // Short edges first (base triangles of even size), weighted by the shape error, the worst
+    // new triangle's shape (nearly equilateral base triangles) and the valences.
     Quadric q = quadric_[u];
     q.add(quadric_[v]);
     double shape_error = q.mean_error(pu);
     double length2 = dot(sub(pu, pv), sub(pu, pv));
-    cost = (length2 + 0.25 * max_edge2 + 16 * shape_error) / std::max(min_quality, 1e-3);
+    cost = (length2 + 0.25 * max_edge2 + 16 * shape_error) / std::max(min_quality, 1e-3) *
+           (1 + 0.25 * std::max(valence_change, 0.0)) * keep_penalty(u);
     return true;
+}
+
+// Surface vertices of low degree make poor base vertices: all their triangles meet at the base
+// vertex, spread over its cone of 60 degrees per base triangle, so one may have to span more than
+// 180 degrees there, which no straight image can (seen on a 200k scan: a degree-4 base vertex).
+// Collapsing into them costs more, so they are removed rather than kept.
+double DomainSimplifier::keep_penalty(uint32_t u) const {
+    const uint32_t degree = original_degree_[u];
+    return degree <= 4 ? 8.0 : degree == 5 ? 2.0 : 1.0;
 }
 
 void DomainSimplifier::update(uint32_t v) {
@@ -514,8 +593,8 @@ Parameterization build_parameterization(const Mesh& surface, const DomainOptions
     auto t0 = std::chrono::steady_clock::now();
     report.target_triangles = options.target_triangles ? options.target_triangles : default_domain_triangles(surface.triangle_count());
     DomainSimplifier simplifier(surface);
-    simplifier.simplify(report.target_triangles, progress, report);
-    if (simplifier.alive_triangles() > 2 * report.target_triangles + 8)
+    simplifier.simplify(report.target_triangles + simplifier.frozen_triangles(), progress, report);
+    if (simplifier.alive_triangles() > 2 * report.target_triangles + 8 + simplifier.frozen_triangles())
         fail("the surface could not be simplified to %zu base triangles (it stopped at %zu): it has handles or thin "
              "parts the domain cannot follow at that size; ask for more domain triangles",
              report.target_triangles, simplifier.alive_triangles());
@@ -528,7 +607,8 @@ Parameterization build_parameterization(const Mesh& surface, const DomainOptions
     report.base_triangles = param.domain.triangle_count();
     for (const auto& n : param.domain.neighbour)
         for (uint32_t t : n) report.base_border_edges += t == kNone;
-    ParamCheck check = check_parameterization(surface, param);
+    report.check = check_parameterization(surface, param);
+    const ParamCheck& check = report.check;
     if (!check.bijective()) fail("the parameterization is not bijective (%s): refusing to build folded patches", check.describe().c_str());
     if (report_out) *report_out = report;
     return param;

@@ -57,6 +57,9 @@ struct BaseDomain {
     // Fills `neighbour` and `neighbour_edge` from `triangles`; false if an edge has more than two
     // triangles or two triangles run an edge the same way (not an oriented manifold).
     bool connect();
+    // Steps from triangle t across its edge k: t becomes the neighbour and `corners` (t's corners
+    // in some chart) the neighbour's corners in the same chart. False on the border.
+    bool across(uint32_t& t, uint32_t k, std::array<Lattice2, 3>& corners) const;
     // Where the corners of `from` lie in the chart of `to` (integer lattice points); false when
     // `from` is not `to`, an edge neighbour or in the fan of a corner of `to`.
     bool unfold(uint32_t from, uint32_t to, std::array<Lattice2, 3>& corners, int* steps = nullptr) const;
@@ -94,26 +97,11 @@ struct DomainOptions {
     size_t target_triangles = 0;
     // Sweeps of parameter smoothing after simplification (each moves every free vertex towards
     // the mean-value centre of its neighbours when that flips nothing).
-    int smoothing_sweeps = 8;
+    int smoothing_sweeps = 4;
 };
 
 // The default number of base triangles for a surface of `triangles` triangles.
 size_t default_domain_triangles(size_t triangles);
-
-struct DomainReport {
-    size_t target_triangles = 0;
-    size_t base_vertices = 0, base_triangles = 0, base_border_edges = 0;
-    size_t collapses = 0;
-    size_t rejected_collapses = 0;  // candidate collapses refused (flips, topology)
-    double seconds_simplify = 0, seconds_smooth = 0;
-};
-
-// Simplifies `surface` (an oriented two-manifold: aqp/clean.h) to a base domain and gives every
-// vertex its DomainPoint. Throws Error when the surface cannot be simplified to within twice the
-// target (handles of genus too high for the domain size, or a collapse-resistant shape), or
-// when the resulting map is not bijective. `progress`, if given, counts collapses.
-Parameterization build_parameterization(const Mesh& surface, const DomainOptions& options, DomainReport* report,
-                                        Progress* progress = nullptr);
 
 // Distortion of the map from surface triangles to their images, with the domain scaled to the
 // surface's area: per triangle the singular values s1 >= s2 of the affine map; angle distortion
@@ -129,11 +117,30 @@ struct ParamCheck {
     double image_area = 0, domain_area = 0;  // in domain units (equilateral triangles of side 1)
     double angle_distortion_mean = 0, angle_distortion_max = 0;  // area-weighted mean
     double area_distortion_mean = 0, area_distortion_max = 0;    // max of max(s1 s2, 1 / (s1 s2))
+    // The values 99% of the surface's area stays within (an area-weighted percentile).
+    double angle_distortion_p99 = 0, area_distortion_p99 = 0;
+    std::vector<uint32_t> worst_triangles;  // the 16 with the largest angle distortion, worst first
     bool bijective() const;
     // Surface vertices of the flipped, degenerate and wrapped triangles (for diagnosis).
     std::vector<uint32_t> bad_vertices;
     std::string describe() const;  // one line
 };
+
+struct DomainReport {
+    size_t target_triangles = 0;
+    size_t base_vertices = 0, base_triangles = 0, base_border_edges = 0;
+    size_t collapses = 0;
+    size_t rejected_collapses = 0;  // candidate collapses refused (flips, topology)
+    double seconds_simplify = 0, seconds_smooth = 0;
+    ParamCheck check;  // of the result
+};
+
+// Simplifies `surface` (an oriented two-manifold: aqp/clean.h) to a base domain and gives every
+// vertex its DomainPoint. Throws Error when the surface cannot be simplified to within twice the
+// target (handles of genus too high for the domain size, or a collapse-resistant shape), or
+// when the resulting map is not bijective. `progress`, if given, counts collapses.
+Parameterization build_parameterization(const Mesh& surface, const DomainOptions& options, DomainReport* report,
+                                        Progress* progress = nullptr);
 
 ParamCheck check_parameterization(const Mesh& surface, const Parameterization& param);
 
