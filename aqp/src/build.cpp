@@ -298,9 +298,9 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
     r.levels.resize(size_t(k) + 1);
     std::vector<std::vector<uint64_t>> bytes(layout.patch_count(), std::vector<uint64_t>(size_t(k) + 1));
     tbb::parallel_for(size_t(0), layout.patch_count(), [&](size_t p) {
-        PatchGrid g;
-        g.patch = uint32_t(p);
+        PatchGrid g, coarser;
         for (int l = 0; l <= k; ++l) {
+            g.patch = uint32_t(p);
             g.level = l;
             g.size = (1 << l) + 1;
             const int stride = 1 << (k - l);
@@ -316,7 +316,8 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
                     g.normal[at] = normals[s];
                     if (colors) g.color[at] = samples[s].color;
                 }
-            std::vector<uint8_t> node = encode_patch_node(g, colors, o.png_compression);
+            std::vector<uint8_t> node = encode_patch_node(g, l > 0 ? &coarser : nullptr, colors, o.png_compression);
+            std::swap(coarser, g);
             ArchiveEntry entry;
             entry.key = aqp_node_key(uint32_t(p), l);
             entry.level = uint16_t(l);

@@ -39,7 +39,7 @@ const ArchiveEntry& AqpDataset::entry(uint32_t patch, int level) const {
     return archive_->entries()[size_t(level) * meta_.patches.size() + patch];
 }
 
-PatchGrid AqpDataset::decode(uint32_t patch, int level) const {
+PatchGrid AqpDataset::decode(uint32_t patch, int level, const PatchGrid& coarser) const {
     if (patch >= meta_.patches.size() || level < 0 || level > finest_level())
         fail("'%s' has no patch %u at level %d", path_.c_str(), patch, level);
     const size_t index = size_t(level) * meta_.patches.size() + patch;
@@ -47,10 +47,23 @@ PatchGrid AqpDataset::decode(uint32_t patch, int level) const {
     const uint8_t* bytes = archive_->node(index, &error);
     if (!bytes) fail("'%s' patch %u level %d: %s", path_.c_str(), patch, level, error.c_str());
     PatchGrid grid;
-    if (std::string e = decode_patch_node(bytes, archive_->entries()[index].size, patch, level, meta_.has_colors(), grid);
+    if (std::string e = decode_patch_node(bytes, archive_->entries()[index].size, patch, level, meta_.has_colors(),
+                                          level > 0 ? &coarser : nullptr, grid);
         !e.empty())
         fail("'%s' patch %u level %d: %s", path_.c_str(), patch, level, e.c_str());
     return grid;
+}
+
+std::vector<PatchGrid> AqpDataset::decode_levels(uint32_t patch, int level) const {
+    std::vector<PatchGrid> levels;
+    PatchGrid none;
+    for (int l = 0; l <= level; ++l) levels.push_back(decode(patch, l, l > 0 ? levels.back() : none));
+    return levels;
+}
+
+PatchGrid AqpDataset::decode(uint32_t patch, int level) const {
+    if (level < 0 || level > finest_level()) fail("'%s' has no patch %u at level %d", path_.c_str(), patch, level);
+    return std::move(decode_levels(patch, level).back());
 }
 
 std::array<uint64_t, 3> AqpDataset::grid_position(const PatchGrid& grid, size_t index) const {

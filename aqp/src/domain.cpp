@@ -78,78 +78,97 @@ int walk_fan(const BaseDomain& d, uint32_t v, uint32_t to, uint32_t from, bool c
 
 }  // namespace
 
-bool BaseDomain::unfold(uint32_t from, uint32_t to, std::array<Lattice2, 3>& corners, int* steps_out) const {
+void BaseDomain::unfoldings(uint32_t from, uint32_t to, std::vector<Unfolding>& out) const {
     const std::array<Lattice2, 3> standard = {Lattice2{0, 0}, Lattice2{1, 0}, Lattice2{0, 1}};
+    out.clear();
     if (from == to) {
-        corners = standard;
-        if (steps_out) *steps_out = 0;
-        return true;
+        out.push_back({standard, 0});
+        return;
     }
-    // An edge neighbour is one step; otherwise the shortest walk round a shared corner.
-    for (uint32_t k = 0; k < 3; ++k)
-        if (neighbour[to][k] == from) {
-            corners = standard;
-            uint32_t t = to;
-            unfold_across(*this, t, k, corners);
-            if (steps_out) *steps_out = 1;
-            return true;
-        }
-    int best = -1;
+    auto add = [&](const std::array<Lattice2, 3>& c, int steps) {
+        for (Unfolding& u : out)
+            if (u.corners == c) {
+                u.steps = std::min(u.steps, steps);
+                return;
+            }
+        out.push_back({c, steps});
+    };
     for (int i = 0; i < 3; ++i) {
-        uint32_t v = triangles[to][i];
+        const uint32_t v = triangles[to][i];
         if (corner_of(*this, from, v) < 0) continue;
         for (bool ccw : {true, false}) {
             std::array<Lattice2, 3> c = standard;
-            int steps = walk_fan(*this, v, to, from, ccw, c);
-            if (steps > 0 && (best < 0 || steps < best)) {
-                best = steps;
-                corners = c;
-            }
+            const int steps = walk_fan(*this, v, to, from, ccw, c);
+            if (steps > 0) add(c, steps);
         }
     }
-    if (steps_out) *steps_out = best;
-    return best > 0;
 }
 
-bool BaseDomain::chart_position(const DomainPoint& p, uint32_t to, Vec2& out) const {
+bool BaseDomain::unfold(uint32_t from, uint32_t to, std::array<Lattice2, 3>& corners, int* steps_out) const {
+    std::vector<Unfolding> all;
+    unfoldings(from, to, all);
+    int best = -1;
+    for (const Unfolding& u : all)
+        if (best < 0 || u.steps < best) {
+            best = u.steps;
+            corners = u.corners;
+        }
+    if (steps_out) *steps_out = best;
+    return best >= 0;
+}
+
+bool BaseDomain::chart_position(const DomainPoint& p, uint32_t to, Vec2& out, const Vec2* near) const {
     const Lattice2 standard[3] = {{0, 0}, {1, 0}, {0, 1}};
-    // A base vertex is a corner of every triangle around it, however far its own triangle is.
+    // Candidates: where p lands through each unfolding. Fewest steps wins (the way round a cone
+    // point the short way); among as few, the one nearest `near`.
+    double best_steps = INFINITY, best_distance = INFINITY;
+    auto consider = [&](const Vec2& x, int steps) {
+        double distance = 0;
+        if (near) {
+            const Vec2 d = lattice_to_plane({x[0] - (*near)[0], x[1] - (*near)[1]});
+            distance = d[0] * d[0] + d[1] * d[1];
+        }
+        if (steps < best_steps || (steps == best_steps && distance < best_distance)) {
+            best_steps = steps;
+            best_distance = distance;
+            out = x;
+        }
+    };
+    std::vector<Unfolding> all;
     for (int i = 0; i < 3; ++i)
         if (p.bary[i] == 1.0) {
+            // A base vertex: a corner of every triangle around it, however far its own triangle.
             const uint32_t v = triangles[p.triangle][i];
-            int j = corner_of(*this, to, v);
+            const int j = corner_of(*this, to, v);
             if (j >= 0) {
                 out = {double(standard[j][0]), double(standard[j][1])};
                 return true;
             }
-            // Else unfold the triangle around v nearest to `to`.
-            int best = -1;
             for (bool ccw : {true, false}) {
                 uint32_t t = p.triangle;
                 for (int step = 0; step < 64; ++step) {
-                    std::array<Lattice2, 3> c;
-                    int steps;
-                    if (unfold(t, to, c, &steps) && (best < 0 || steps < best)) {
-                        best = steps;
-                        const Lattice2& corner = c[corner_of(*this, t, v)];
-                        out = {double(corner[0]), double(corner[1])};
+                    unfoldings(t, to, all);
+                    for (const Unfolding& u : all) {
+                        const Lattice2& c = u.corners[corner_of(*this, t, v)];
+                        consider({double(c[0]), double(c[1])}, u.steps);
                     }
-                    int k = corner_of(*this, t, v);
-                    uint32_t edge = ccw ? uint32_t(k + 2) % 3 : uint32_t(k);
-                    t = neighbour[t][edge];
+                    const int k = corner_of(*this, t, v);
+                    t = neighbour[t][ccw ? uint32_t(k + 2) % 3 : uint32_t(k)];
                     if (t == kNone || t == p.triangle) break;
                 }
             }
-            return best >= 0;
+            return best_steps < INFINITY;
         }
-    std::array<Lattice2, 3> c;
-    if (!unfold(p.triangle, to, c)) return false;
-    out = {0, 0};
-    for (int i = 0; i < 3; ++i) {
-        out[0] += p.bary[i] * c[i][0];
-        out[1] += p.bary[i] * c[i][1];
+    unfoldings(p.triangle, to, all);
+    for (const Unfolding& u : all) {
+        Vec2 x{0, 0};
+        for (int i = 0; i < 3; ++i) {
+            x[0] += p.bary[i] * u.corners[i][0];
+            x[1] += p.bary[i] * u.corners[i][1];
+        }
+        consider(x, u.steps);
     }
-    return true;
+    return best_steps < INFINITY;
 }
 
 bool BaseDomain::locate(uint32_t start, const Vec2& x, DomainPoint& out, int max_steps) const {
@@ -205,8 +224,12 @@ bool triangle_image(const Parameterization& param, const uint32_t tri[3], Vec2 o
         }
     }
     if (chart_out) *chart_out = chart;
+    // The chart's own vertex first; the others where they are nearest to it (the image is the
+    // short geodesic triangle, which also settles which way round a cone point they unfold).
+    const int own = first % 3;
+    if (!param.domain.chart_position(param.points[tri[own]], chart, out[own])) return false;
     for (int k = 0; k < 3; ++k)
-        if (!param.domain.chart_position(param.points[tri[k]], chart, out[k])) return false;
+        if (k != own && !param.domain.chart_position(param.points[tri[k]], chart, out[k], &out[own])) return false;
     return true;
 }
 
@@ -222,8 +245,9 @@ bool triangle_image_area(const Parameterization& param, const uint32_t tri[3], d
     for (int s = 0; s < 3; ++s) {
         const uint32_t other = param.points[tri[s]].triangle;
         if (param.base_vertex[tri[s]] != kNone || other == chart) continue;
+        if (!param.domain.chart_position(param.points[tri[s]], other, x[s])) return false;
         for (int k = 0; k < 3; ++k)
-            if (!param.domain.chart_position(param.points[tri[k]], other, x[k])) return false;
+            if (k != s && !param.domain.chart_position(param.points[tri[k]], other, x[k], &x[s])) return false;
         if (std::fabs(area_of(x) - area) > 1e-9 * (std::fabs(area) + 1e-6)) return false;
     }
     return true;

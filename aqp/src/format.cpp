@@ -109,89 +109,101 @@ std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
 
 namespace {
 
-void append_png(std::vector<uint8_t>& out, const PngImage& image, int compression) {
-    std::vector<uint8_t> png = png_encode(image, compression);
-    const uint32_t n = uint32_t(png.size());
-    for (int i = 0; i < 4; ++i) out.push_back(uint8_t(n >> (8 * i)));
-    out.insert(out.end(), png.begin(), png.end());
+// Channel c of sample s: 0-2 position, 3-4 normal bytes, 5-7 colour (0 without colours).
+int channel_value(const PatchGrid& g, size_t s, int c) {
+    if (c < 3) return g.position[s][c];
+    if (c < 5) return c == 3 ? g.normal[s] & 0xff : g.normal[s] >> 8;
+    return g.color.empty() ? 0 : g.color[s][c - 5];
 }
 
-PngImage image_of(const PatchGrid& g, int channels, int bit_depth) {
-    PngImage im;
-    im.width = im.height = g.size;
-    im.channels = channels;
-    im.bit_depth = bit_depth;
-    im.values.reserve(im.value_count());
-    return im;
+int channel_bits(int c) { return c < 3 ? 16 : 8; }
+
+// x modulo 2^bits as a signed value, zigzag coded (0, -1, 1, -2, ... -> 0, 1, 2, 3, ...).
+uint32_t zigzag(int x, int bits) {
+    const int mod = 1 << bits;
+    x &= mod - 1;
+    if (x >= mod / 2) x -= mod;
+    return x >= 0 ? uint32_t(2 * x) : uint32_t(-2 * x - 1);
 }
+
+int unzigzag(uint32_t z) { return (z & 1) ? -int(z >> 1) - 1 : int(z >> 1); }
 
 }  // namespace
 
-std::vector<uint8_t> encode_patch_node(const PatchGrid& g, bool colors, int compression) {
+int predict_from_coarser(const PatchGrid& c, int channel, int i, int j) {
+    const int ci = i / 2, cj = j / 2;
+    auto at = [&](int x, int y) { return channel_value(c, c.index(x, y), channel); };
+    if (i % 2 == 0 && j % 2 == 0) return at(ci, cj);
+    if (j % 2 == 0) return (at(ci, cj) + at(ci + 1, cj)) >> 1;
+    if (i % 2 == 0) return (at(ci, cj) + at(ci, cj + 1)) >> 1;
+    return (at(ci, cj) + at(ci + 1, cj + 1)) >> 1;
+}
+
+std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coarser, bool colors, int compression) {
     const size_t n = size_t(g.size) * g.size;
     assert(g.size == (1 << g.level) + 1 && g.position.size() == n && g.normal.size() == n);
     assert(!colors || g.color.size() == n);
-    std::vector<uint8_t> out;
-    ByteWriter header;
-    header.u32(g.patch);
-    header.u8(uint8_t(g.level));
-    header.u8(colors ? 1 : 0);
-    header.u16(0);
-    out = std::move(header.bytes());
-    PngImage positions = image_of(g, 3, 16);
-    for (const auto& p : g.position) positions.values.insert(positions.values.end(), p.begin(), p.end());
-    append_png(out, positions, compression);
-    PngImage normals = image_of(g, 2, 8);
-    for (uint16_t code : g.normal) {
-        normals.values.push_back(code & 0xff);
-        normals.values.push_back(code >> 8);
-    }
-    append_png(out, normals, compression);
-    if (colors) {
-        PngImage rgb = image_of(g, 3, 8);
-        for (const Rgb8& c : g.color) rgb.values.insert(rgb.values.end(), c.begin(), c.end());
-        append_png(out, rgb, compression);
-    }
-    return out;
+    assert((g.level == 0) == (coarser == nullptr));
+    assert(!coarser || coarser->size == g.size / 2 + 1);
+    PngImage image;
+    image.width = 2 * g.size;
+    image.height = g.size;
+    image.channels = 3;
+    image.bit_depth = 16;
+    image.values.resize(image.value_count());
+    for (int j = 0; j < g.size; ++j)
+        for (int i = 0; i < g.size; ++i) {
+            uint32_t v[8];
+            for (int c = 0; c < 8; ++c) {
+                const int value = channel_value(g, g.index(i, j), c);
+                v[c] = coarser ? zigzag(value - predict_from_coarser(*coarser, c, i, j), channel_bits(c)) : uint32_t(value);
+            }
+            uint16_t* left = &image.values[(size_t(j) * image.width + i) * 3];
+            uint16_t* right = &image.values[(size_t(j) * image.width + g.size + i) * 3];
+            for (int c = 0; c < 3; ++c) left[c] = uint16_t(v[c]);
+            right[0] = uint16_t(v[3] << 8 | v[4]);
+            right[1] = uint16_t(v[5] << 8 | v[6]);
+            right[2] = uint16_t(v[7] << 8);
+        }
+    return png_encode(image, compression);
 }
 
-std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, bool colors, PatchGrid& out) {
+std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, bool colors,
+                              const PatchGrid* coarser, PatchGrid& out) {
     if (level < 0 || level > kMaxPatchLevel) return strprintf("patch level %d out of range", level);
-    ByteReader r(data, size);
-    const uint32_t stored_patch = r.u32();
-    const int stored_level = r.u8();
-    const uint8_t flags = r.u8();
-    const uint16_t reserved = r.u16();
-    if (!r.ok()) return "AQP node truncated in its header";
-    if (stored_patch != patch || stored_level != level)
-        return strprintf("AQP node holds patch %u level %d, expected patch %u level %d", stored_patch, stored_level, patch, level);
-    if (flags != (colors ? 1 : 0) || reserved != 0) return "AQP node has unexpected flags";
+    if (level == 0) coarser = nullptr;
+    const int side = (1 << level) + 1;
+    if (level > 0 && (!coarser || coarser->size != side / 2 + 1 || coarser->position.size() != size_t(coarser->size) * coarser->size ||
+                      coarser->normal.size() != coarser->position.size() ||
+                      coarser->color.size() != (colors ? coarser->position.size() : 0)))
+        return strprintf("decoding level %d needs the patch's decoded level %d", level, level - 1);
+    PngImage image;
+    if (std::string e = png_decode(data, size, 2 * side, side, 3, 16, image); !e.empty()) return "AQP node image: " + e;
     out.patch = patch;
     out.level = level;
-    out.size = (1 << level) + 1;
-    const size_t n = size_t(out.size) * out.size;
-    PngImage image;
-    auto next_png = [&](int channels, int depth, const char* what) -> std::string {
-        const uint32_t bytes = r.u32();
-        const uint8_t* p = r.take(bytes);
-        if (!p) return strprintf("AQP node truncated in its %s image", what);
-        std::string e = png_decode(p, bytes, out.size, out.size, channels, depth, image);
-        return e.empty() ? e : strprintf("%s image: %s", what, e.c_str());
-    };
-    if (std::string e = next_png(3, 16, "position"); !e.empty()) return e;
+    out.size = side;
+    const size_t n = size_t(side) * side;
     out.position.resize(n);
-    for (size_t i = 0; i < n; ++i) out.position[i] = {image.values[3 * i], image.values[3 * i + 1], image.values[3 * i + 2]};
-    if (std::string e = next_png(2, 8, "normal"); !e.empty()) return e;
     out.normal.resize(n);
-    for (size_t i = 0; i < n; ++i) out.normal[i] = uint16_t(image.values[2 * i] | (image.values[2 * i + 1] << 8));
-    out.color.clear();
-    if (colors) {
-        if (std::string e = next_png(3, 8, "colour"); !e.empty()) return e;
-        out.color.resize(n);
-        for (size_t i = 0; i < n; ++i)
-            out.color[i] = {uint8_t(image.values[3 * i]), uint8_t(image.values[3 * i + 1]), uint8_t(image.values[3 * i + 2])};
-    }
-    if (r.remaining() != 0) return "trailing bytes after the AQP node's images";
+    out.color.assign(colors ? n : 0, Rgb8{0, 0, 0});
+    for (int j = 0; j < side; ++j)
+        for (int i = 0; i < side; ++i) {
+            const uint16_t* left = &image.values[(size_t(j) * image.width + i) * 3];
+            const uint16_t* right = &image.values[(size_t(j) * image.width + side + i) * 3];
+            const uint32_t v[8] = {left[0], left[1], left[2], uint32_t(right[0] >> 8), uint32_t(right[0] & 0xff),
+                                   uint32_t(right[1] >> 8), uint32_t(right[1] & 0xff), uint32_t(right[2] >> 8)};
+            if ((right[2] & 0xff) != 0 || (!colors && (right[1] != 0 || right[2] != 0)))
+                return strprintf("AQP node sample (%d, %d) has bits set outside its channels", i, j);
+            int value[8];
+            for (int c = 0; c < 8; ++c) {
+                const int mask = (1 << channel_bits(c)) - 1;
+                value[c] = coarser ? (predict_from_coarser(*coarser, c, i, j) + unzigzag(v[c])) & mask : int(v[c]);
+            }
+            const size_t s = out.index(i, j);
+            out.position[s] = {uint16_t(value[0]), uint16_t(value[1]), uint16_t(value[2])};
+            out.normal[s] = uint16_t(value[3] | (value[4] << 8));
+            if (colors) out.color[s] = {uint8_t(value[5]), uint8_t(value[6]), uint8_t(value[7])};
+        }
     return "";
 }
 

@@ -22,6 +22,7 @@ namespace catpaq::aqp {
 namespace {
 
 constexpr double kSqrt3Over2 = 0.86602540378443864676;
+constexpr double kSliver = 1e-4;  // triangle shape quality (1: equilateral) below which it is a sliver
 
 Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
@@ -42,6 +43,7 @@ struct Corner {
     Vec2 a, b;              // lattice coordinates in the vertex's chart
     double la, bx, by;      // surface: a at (la, 0), b at (bx, by)
     double area;            // surface area
+    bool sliver;
 };
 
 class VertexSmoother {
@@ -53,19 +55,29 @@ public:
     bool smooth(uint32_t v, const std::vector<uint32_t>& tris) {
         const uint32_t chart = param_.points[v].triangle;
         Vec2 here;
-        if (!param_.domain.chart_position(param_.points[v], chart, here) || !gather(v, chart, tris)) return false;
+        if (!param_.domain.chart_position(param_.points[v], chart, here) || !gather(v, chart, here, tris)) return false;
         // When everything around v lies in v's own base triangle, this chart is the one the
         // check uses: a finite energy means nothing is folded, and the slow test is not needed.
         const double energy_here = energy(here);
         const size_t folded_before = all_local_ && energy_here < INFINITY ? 0 : folded_around(surface_, param_, tris);
         const double energy_before = folded_before ? INFINITY : energy_here;
         // Directions: a Newton step on the energy (when it is convex here), then the mean-value
-        // centre (which also unfolds: it is inside the ring's kernel for a star-shaped ring).
-        Vec2 directions[2];
+        // centre (which also unfolds: it is inside the ring's kernel for a star-shaped ring), and
+        // where something is folded the centroid of the neighbours.
+        Vec2 directions[3];
         int count = 0;
         if (!folded_before && newton_step(here, energy_here, directions[count])) ++count;
         const Vec2 centre = mean_value_centre();
         directions[count++] = {centre[0] - here[0], centre[1] - here[1]};
+        if (folded_before) {
+            // Around a sliver (a vertex almost on its neighbours' edge) the mean-value centre
+            // lies on that edge; the plain centroid of the neighbours does not.
+            Vec2 centroid{0, 0};
+            for (const Corner& c : corners_) centroid[0] += c.a[0] + c.b[0], centroid[1] += c.a[1] + c.b[1];
+            centroid[0] /= 2.0 * double(corners_.size());
+            centroid[1] /= 2.0 * double(corners_.size());
+            directions[count++] = {centroid[0] - here[0], centroid[1] - here[1]};
+        }
         for (int d = 0; d < count; ++d)
             for (double step : {1.0, 0.5, 0.25, 0.125}) {
                 Vec2 x{here[0] + step * directions[d][0], here[1] + step * directions[d][1]};
@@ -87,7 +99,7 @@ public:
     }
 
 private:
-    bool gather(uint32_t v, uint32_t chart, const std::vector<uint32_t>& tris) {
+    bool gather(uint32_t v, uint32_t chart, const Vec2& here, const std::vector<uint32_t>& tris) {
         corners_.clear();
         all_local_ = true;
         const Vec3d& p = surface_.positions[v];
@@ -97,17 +109,22 @@ private:
             uint32_t a = tri[(i + 1) % 3], b = tri[(i + 2) % 3];
             all_local_ = all_local_ && local(a, chart) && local(b, chart);
             Corner c;
-            if (!param_.domain.chart_position(param_.points[a], chart, c.a) ||
-                !param_.domain.chart_position(param_.points[b], chart, c.b))
+            if (!param_.domain.chart_position(param_.points[a], chart, c.a, &here) ||
+                !param_.domain.chart_position(param_.points[b], chart, c.b, &here))
                 return false;
             Vec3d ea = sub(surface_.positions[a], p), eb = sub(surface_.positions[b], p);
             c.la = std::sqrt(dot(ea, ea));
-            if (!(c.la > 0)) return false;
+            const double lb = std::sqrt(dot(eb, eb));
+            if (!(c.la > 0) || !(lb > 0)) return false;
             c.bx = dot(eb, ea) / c.la;
-            double by2 = dot(eb, eb) - c.bx * c.bx;
-            if (!(by2 > 0)) return false;
-            c.by = std::sqrt(by2);
+            const Vec3d n{ea[1] * eb[2] - ea[2] * eb[1], ea[2] * eb[0] - ea[0] * eb[2], ea[0] * eb[1] - ea[1] * eb[0]};
+            c.by = std::sqrt(dot(n, n)) / c.la;  // (accurate for slivers, unlike |eb|^2 - bx^2)
             c.area = 0.5 * c.la * c.by;
+            // A sliver (shape quality below kSliver) gets neither energy nor a mean-value weight:
+            // it would pull its image flat, onto the edge it almost lies on, where rounding folds
+            // it. Any positive image of it will do.
+            const double e2 = dot(sub(eb, ea), sub(eb, ea));
+            c.sliver = 4 * std::sqrt(3.0) * c.area < kSliver * (c.la * c.la + lb * lb + e2);
             corners_.push_back(c);
         }
         return !corners_.empty();
@@ -126,6 +143,7 @@ private:
     Vec2 mean_value_centre() const {
         double wsum = 0, y[2] = {0, 0};
         for (const Corner& c : corners_) {
+            if (c.sliver) continue;
             double lb = std::sqrt(c.bx * c.bx + c.by * c.by);
             double half_tan = std::tan(0.5 * std::atan2(c.by, c.bx));
             double wa = half_tan / c.la, wb = half_tan / lb;
@@ -133,6 +151,7 @@ private:
             y[1] += wa * c.a[1] + wb * c.b[1];
             wsum += wa + wb;
         }
+        if (!(wsum > 0)) return {corners_[0].a[0], corners_[0].a[1]};
         return {y[0] / wsum, y[1] / wsum};
     }
 
@@ -168,6 +187,7 @@ private:
             Vec2 da = plane(c.a), db = plane(c.b);
             double det_image = da[0] * db[1] - da[1] * db[0];
             if (!(det_image > 0)) return INFINITY;
+            if (c.sliver) continue;
             // J = D E^-1, E = [la bx; 0 by].
             double j11 = da[0] / c.la, j21 = da[1] / c.la;
             double j12 = (db[0] - j11 * c.bx) / c.by, j22 = (db[1] - j21 * c.bx) / c.by;

@@ -44,7 +44,8 @@ double triangle_quality(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
 }
 constexpr double kMinBaseQuality = 0.3;
 constexpr double kMaxFlatAngle = 0.9 * kPi;
-constexpr size_t kSmallestSimplified = 64;  // triangles (about twice the vertices) of a component
+constexpr size_t kSmallestSimplified = 64;
+constexpr int kValenceOverDegree = 1;  // triangles (about twice the vertices) of a component
 
 double orient(const Vec2& a, const Vec2& b, const Vec2& c) {
     return (b[0] - a[0]) * (c[1] - a[1]) - (b[1] - a[1]) * (c[0] - a[0]);
@@ -110,7 +111,6 @@ private:
     bool collapse_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double& cost);
     void update(uint32_t v);
     void collapse(uint32_t v, uint32_t u);
-    bool edge_has_other_triangle(uint32_t a, uint32_t b, uint32_t except) const;
     double keep_penalty(uint32_t u) const;
     int corner(uint32_t t, uint32_t v) const {
         return tris_[t][0] == v ? 0 : tris_[t][1] == v ? 1 : tris_[t][2] == v ? 2 : -1;
@@ -300,12 +300,6 @@ bool DomainSimplifier::flatten(uint32_t v, const Ring& r, std::vector<Vec2>& fla
     return true;
 }
 
-bool DomainSimplifier::edge_has_other_triangle(uint32_t a, uint32_t b, uint32_t except) const {
-    for (uint32_t t : vtris_[a])
-        if (t != except && corner(t, b) >= 0) return true;
-    return false;
-}
-
 // The cost of collapsing v into u = ring.w[j], or false if the collapse is not allowed.
 bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double& cost) {
     const uint32_t u = r.w[j];
@@ -357,6 +351,11 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
     };
     const int u_after = valence(u) + int(n) - (border_edge ? 3 : 4);
     if (u_after < (border_[u] ? 2 : 4) && component_vertices_[c] > 12) return false;
+    // Around a base vertex the surface's triangles share a cone of 60 degrees per base triangle:
+    // with more base triangles than surface triangles there (a valence 8 base vertex with 6
+    // surface triangles spans 480 degrees) they are stretched past what the second ring of
+    // surface triangles can follow (folds seen on the bunny and a 200k scan).
+    if (u_after > int(original_degree_[u]) + kValenceOverDegree && component_vertices_[c] > 12) return false;
     double valence_change = deviation(u, u_after) - deviation(u, valence(u)) - deviation(v, int(n));
     for (size_t o : {j == 0 ? (r.open ? n : n - 1) : j - 1, j + 1}) {
         if (o >= n) continue;  // (the open ring's ends have one neighbour on the edge's side)
@@ -416,7 +415,7 @@ void DomainSimplifier::collapse(uint32_t v, uint32_t u) {
         Vec2 p[3];
     };
     std::vector<Corners> old_corners(d), new_fan;
-    std::vector<std::pair<size_t, int>> border_edges;  // (index in new_fan, edge k) after the collapse
+    std::vector<std::array<uint32_t, 3>> new_vertices;  // of each new triangle, v replaced by u
     for (size_t i = 0; i < d; ++i) {
         uint32_t t = r.t[i];
         int iv = corner(t, v);
@@ -428,12 +427,32 @@ void DomainSimplifier::collapse(uint32_t v, uint32_t u) {
         if (i == j || r.next(i) == j) continue;
         c.p[iv] = flat[j];
         new_fan.push_back(c);
-        // Border edges of the new triangle: its far edge if that was a border, and the edge
-        // that replaces a border edge of v.
-        if (!edge_has_other_triangle(r.w[i], r.w[r.next(i)], t)) border_edges.push_back({new_fan.size() - 1, (iv + 1) % 3});
-        if (r.open && j == 0 && r.next(i) == n - 1) border_edges.push_back({new_fan.size() - 1, (iv + 2) % 3});
-        if (r.open && j == n - 1 && i == 0) border_edges.push_back({new_fan.size() - 1, iv});
+        std::array<uint32_t, 3> w = tris_[t];
+        w[iv] = u;
+        new_vertices.push_back(w);
     }
+    // The new triangles' edges on the border after the collapse: no other new triangle and no
+    // triangle outside the ring has them. (Besides the ring's own border edges, the edge left
+    // where a dying triangle's far edge was a border, and the one replacing v's border edge.)
+    std::vector<std::pair<size_t, int>> border_edges;  // (index in new_fan, edge k)
+    for (size_t f = 0; f < new_fan.size(); ++f)
+        for (int k = 0; k < 3; ++k) {
+            const uint32_t a = new_vertices[f][k], b = new_vertices[f][(k + 1) % 3];
+            bool shared = false;
+            for (size_t g = 0; g < new_fan.size() && !shared; ++g)
+                if (g != f) {
+                    const auto& o = new_vertices[g];
+                    shared = (o[0] == a || o[1] == a || o[2] == a) && (o[0] == b || o[1] == b || o[2] == b);
+                }
+            const uint32_t outside = a == u ? b : a;  // (u's own list does not hold v's ring yet)
+            const uint32_t other = a == u ? a : b;
+            for (uint32_t s2 : vtris_[outside]) {
+                if (shared) break;
+                if (std::find(r.t.begin(), r.t.end(), s2) != r.t.end()) continue;
+                shared = corner(s2, other) >= 0;
+            }
+            if (!shared) border_edges.push_back({f, k});
+        }
 
     // Re-place every point of the old triangles, and v, in the new fan.
     std::vector<std::pair<uint32_t, Vec2>> moving;
@@ -478,9 +497,13 @@ void DomainSimplifier::collapse(uint32_t v, uint32_t u) {
                     placed.bary = b;
                 }
             }
-            double sum = 0;
-            for (double& b : placed.bary) sum += (b = std::max(b, 0.0));
-            for (double& b : placed.bary) b /= sum;
+            if (best < 0) {
+                // Rounding left x a hair outside: clamp it in, and a hair further inside, so that
+                // a point off the border never lands on a border edge or on another point there.
+                double sum = 0;
+                for (double& b : placed.bary) sum += (b = std::max(b, 0.0));
+                for (double& b : placed.bary) b = (1 - 1e-9) * b / sum + 1e-9 / 3;
+            }
         }
         point_[id] = placed;
         tri_points_[placed.triangle].push_back(id);
@@ -581,9 +604,11 @@ Parameterization DomainSimplifier::finish() const {
 }  // namespace
 
 size_t default_domain_triangles(size_t triangles) {
-    // About 1.5 sqrt(n): the bunny (70k) gets about 400, a 1M scan 1500, so patches stay a few
-    // thousand samples at the default resolution and the domain follows the shape's large parts.
-    double n = 1.5 * std::sqrt(double(triangles));
+    // About 0.6 sqrt(n): the bunny (75k) gets 164, a 200k scan 268, a 1M scan 600. Fewer, larger
+    // patches compress better (bench/aqp/node_bench: the PNG and per-node overhead; 200k scan at
+    // about 260k samples: 40 bits per sample with 670 base triangles, 28 with 170, 23 with 42);
+    // more follow the shape better (the bunny fails below about 100: its ears fold).
+    double n = 0.6 * std::sqrt(double(triangles));
     return size_t(std::clamp(n, 16.0, 4000.0)) & ~size_t(1);
 }
 

@@ -125,7 +125,8 @@ void add_edge(const Mesh& surface, const Parameterization& param, const QuadLayo
     for (int half = 0; half < (q.border() ? 1 : 2); ++half) {
         const PatchFrame f = patch_frame(q, half);
         Vec2 xa, xb;
-        if (!param.domain.chart_position(param.points[a], f.chart, xa) || !param.domain.chart_position(param.points[b], f.chart, xb))
+        if (!param.domain.chart_position(param.points[a], f.chart, xa) ||
+            !param.domain.chart_position(param.points[b], f.chart, xb, &xa))
             continue;
         if (!q.border()) {
             Segment s;

@@ -31,20 +31,33 @@ AqpVerifyReport verify_aqp(const AqpDataset& d) {
     AqpVerifyReport r;
     const AqpMeta& m = d.meta();
     const int k = d.finest_level();
+    // Every patch's levels, coarse to fine (a level decodes from the one below).
+    std::vector<std::vector<PatchGrid>> all(d.patch_count());
+    std::vector<int> decoded_levels(d.patch_count(), 0);  // levels that decoded
+    for (uint32_t p = 0; p < d.patch_count(); ++p) {
+        PatchGrid none;
+        for (int l = 0; l <= k; ++l) {
+            ++r.nodes;
+            try {
+                all[p].push_back(d.decode(p, l, l > 0 ? all[p].back() : none));
+                decoded_levels[p] = l + 1;
+            } catch (const Error& e) {
+                r.corrupt_nodes += size_t(k + 1 - l);
+                r.nodes += size_t(k - l);
+                note(r, e.what());
+                break;
+            }
+        }
+    }
     std::vector<PatchGrid> finer(d.patch_count());
     for (int l = k; l >= 0; --l) {
         std::vector<PatchGrid> grids(d.patch_count());
         std::vector<uint8_t> valid(d.patch_count(), 0);
-        for (uint32_t p = 0; p < d.patch_count(); ++p) {
-            ++r.nodes;
-            try {
-                grids[p] = d.decode(p, l);
+        for (uint32_t p = 0; p < d.patch_count(); ++p)
+            if (decoded_levels[p] > l) {
+                grids[p] = std::move(all[p][l]);
                 valid[p] = 1;
-            } catch (const Error& e) {
-                ++r.corrupt_nodes;
-                note(r, e.what());
             }
-        }
         for (uint32_t p = 0; p < d.patch_count(); ++p) {
             if (!valid[p]) continue;
             const PatchGrid& g = grids[p];
@@ -74,7 +87,7 @@ AqpVerifyReport verify_aqp(const AqpDataset& d) {
                 }
             }
             if (l < k) {
-                if (!finer[p].position.empty()) {
+                if (!finer[p].position.empty()) {  // (always equal now that finer levels decode from coarser ones)
                     for (int j = 0; j < g.size; ++j)
                         for (int i = 0; i < g.size; ++i) {
                             const size_t a = g.index(i, j), b = finer[p].index(2 * i, 2 * j);
@@ -102,7 +115,7 @@ Mesh aqp_level_mesh(const AqpDataset& d, int level, bool weld) {
     std::map<std::array<uint64_t, 3>, uint32_t> welded;
     const bool colors = d.meta().has_colors();
     for (uint32_t p = 0; p < d.patch_count(); ++p) {
-        const PatchGrid g = d.decode(p, level);
+        const PatchGrid g = d.decode(p, level);  // (decodes the coarser levels first)
         std::vector<uint32_t> vertex(g.position.size());
         for (size_t s = 0; s < g.position.size(); ++s) {
             const std::array<uint64_t, 3> key = d.grid_position(g, s);

@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
     o.patch_level = argc > 4 ? std::stoi(argv[4]) : -1;
     o.progress = false;
     if (getenv("SWEEPS")) o.smoothing_sweeps = atoi(getenv("SWEEPS"));
+    if (getenv("PREC")) o.precision.mean_edges = atof(getenv("PREC"));
     Mesh m = what == "sphere" ? make_sphere(n) : what == "torus" ? make_torus(n) : what == "scan" ? make_scan_like(n)
            : what == "bunny" ? read_mesh(std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply") : read_mesh(what);
     try {

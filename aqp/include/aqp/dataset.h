@@ -29,7 +29,13 @@ public:
     int finest_level() const { return int(meta_.patch_level); }
     // The index entry of a node (valid patch and level: caller bug otherwise).
     const ArchiveEntry& entry(uint32_t patch, int level) const;
-    // Decodes a node; throws Error naming the node on a checksum or format problem. Thread-safe.
+    // Decodes a node given the same patch's decoded coarser level (levels above 0 store
+    // differences from it); throws Error naming the node on a checksum or format problem.
+    // Thread-safe.
+    PatchGrid decode(uint32_t patch, int level, const PatchGrid& coarser) const;
+    // Decodes levels 0..level of a patch, coarse to fine (what a client streams in order).
+    std::vector<PatchGrid> decode_levels(uint32_t patch, int level) const;
+    // Decodes one level (through all the coarser ones).
     PatchGrid decode(uint32_t patch, int level) const;
 
     // Quantization grid coordinates of sample `index` of `grid`.

@@ -60,12 +60,21 @@ struct BaseDomain {
     // Steps from triangle t across its edge k: t becomes the neighbour and `corners` (t's corners
     // in some chart) the neighbour's corners in the same chart. False on the border.
     bool across(uint32_t& t, uint32_t k, std::array<Lattice2, 3>& corners) const;
-    // Where the corners of `from` lie in the chart of `to` (integer lattice points); false when
-    // `from` is not `to`, an edge neighbour or in the fan of a corner of `to`.
+    // Where the corners of `from` lie in the chart of `to` (integer lattice points), for every
+    // way of walking from `to` to `from` round a corner they share (an edge neighbour is one step
+    // either way). Round a cone point the ways differ: the domain is flat only piecewise.
+    struct Unfolding {
+        std::array<Lattice2, 3> corners;
+        int steps;
+    };
+    void unfoldings(uint32_t from, uint32_t to, std::vector<Unfolding>& out) const;
+    // The unfolding of fewest steps; false when `from` shares no corner with `to`.
     bool unfold(uint32_t from, uint32_t to, std::array<Lattice2, 3>& corners, int* steps = nullptr) const;
-    // The lattice coordinates of `p` in the chart of `to`; false as for unfold. A base vertex
-    // (one coordinate 1) unfolds from whichever triangle around it is nearest `to`.
-    bool chart_position(const DomainPoint& p, uint32_t to, Vec2& out) const;
+    // The lattice coordinates of `p` in the chart of `to`: through the unfolding of fewest steps,
+    // and of those the one putting it nearest `near` (lattice coordinates in the same chart). A
+    // base vertex (one coordinate 1) that is a corner of `to` is that corner; otherwise it unfolds
+    // from the triangles around it. False when no unfolding reaches.
+    bool chart_position(const DomainPoint& p, uint32_t to, Vec2& out, const Vec2* near = nullptr) const;
     // The domain point at lattice coordinates `x` of the chart of `start`, found by walking
     // across the edges x lies beyond (at most `max_steps` triangles); false if the walk leaves
     // the domain or does not arrive.

@@ -13,11 +13,15 @@
 //              u32 origin[3] (quantization grid) | u16 extent[3] (largest local coordinate)
 //
 // Node (key = patch << 8 | level, level = level, count = samples, error = bound in world units):
-//   u32 patch | u8 level | u8 flags (bit 0: colours) | u16 0
-//   u32 size | PNG RGB 16-bit: local grid position of each sample, (2^level + 1)^2 samples
-//   u32 size | PNG gray+alpha 8-bit: octahedral normal (u, v bytes of common_codec/octahedral.h)
-//   [u32 size | PNG RGB 8-bit: colour]            when the dataset has colours
-// Row j of a patch image is grid row j (v = j / 2^level), column i is u = i / 2^level.
+// the bytes of one PNG file, RGB 16-bit, 2n x n pixels for n = 2^level + 1 samples per side
+// (nothing else: the index names the node, the archive checksums it). Pixel (i, j) holds
+//   sample (i, j)'s local position x y z; pixel (n + i, j) holds normal u << 8 | v (the bytes of
+//   common_codec/octahedral.h), red << 8 | green, blue << 8 (0 without colours). Row j is grid
+//   row j (v = j / 2^level), column i is u = i / 2^level.
+// Level 0 stores the values; a finer level stores every channel's difference from its prediction
+// by the coarser level (predict_from_coarser), modulo 2^16 (8-bit channels modulo 2^8), zigzag
+// coded: decoding level l needs levels 0..l-1. (bench/aqp/node_bench: 40-48% smaller than one PNG
+// per attribute with full levels, docs/formats/aqp.md.)
 #include <array>
 #include <cstdint>
 #include <string>
@@ -80,11 +84,20 @@ struct PatchGrid {
     size_t index(int i, int j) const { return size_t(j) * size_t(size) + size_t(i); }
 };
 
-// The node payload of `grid` (PNG at zlib level `compression`).
-std::vector<uint8_t> encode_patch_node(const PatchGrid& grid, bool colors, int compression = 6);
-// Decodes a node, which must be patch `patch` at `level` (0 <= level <= kMaxPatchLevel) and carry
-// colours exactly when `colors`. Safe on untrusted bytes: empty string on success, else what is
-// wrong.
-std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, bool colors, PatchGrid& out);
+// The prediction of channel value `channel` (0-2 position, 3-4 normal bytes u and v, 5-7 colour)
+// of sample (i, j) of a level from `coarser` (the level below, every other sample): the coarse
+// sample itself at even (i, j), else the floor of the mean of its two coarse neighbours along the
+// row, the column or the (i,j)-(i+1,j+1) diagonal. Shared edges are predicted from edge samples
+// only, so patches sharing an edge decode it identically.
+int predict_from_coarser(const PatchGrid& coarser, int channel, int i, int j);
+
+// The node payload of `grid` (PNG at zlib level `compression`); `coarser` is the same patch one
+// level down (nullptr at level 0).
+std::vector<uint8_t> encode_patch_node(const PatchGrid& grid, const PatchGrid* coarser, bool colors, int compression = 6);
+// Decodes a node, which must be patch `patch` at `level` (0 <= level <= kMaxPatchLevel), carry
+// colours exactly when `colors`, and come with the patch's decoded coarser level when level > 0.
+// Safe on untrusted bytes: empty string on success, else what is wrong.
+std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, bool colors,
+                              const PatchGrid* coarser, PatchGrid& out);
 
 }  // namespace catpaq::aqp
