@@ -279,7 +279,7 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
     for (size_t s = 0; s < samples.size(); ++s)
         for (int a = 0; a < 3; ++a) exact[s][a] = samples[s].position[a] - centre[a];
     std::vector<std::vector<double>> error = measure_patch_errors(
-        surface, param, layout, numbering, exact,
+        surface, param, layout, map, numbering, exact,
         [&](uint32_t s) {
             Vec3d p = world_position(q, q.position[s]);
             for (int a = 0; a < 3; ++a) p[a] -= centre[a];

@@ -253,4 +253,60 @@ bool triangle_image_area(const Parameterization& param, const uint32_t tri[3], d
     return true;
 }
 
+bool triangles_overlap(const Vec2 a[3], const Vec2 b[3]) {
+    // Separating axis theorem: the two triangles' edge lines are the only candidate separating
+    // lines (in any affine frame). A tiny positive tolerance makes touching count as apart.
+    constexpr double kTouch = 1e-13;
+    auto separated = [](const Vec2 p[3], const Vec2 q[3]) {
+        for (int i = 0; i < 3; ++i) {
+            const Vec2& s = p[i];
+            const Vec2& e = p[(i + 1) % 3];
+            const double ex = e[0] - s[0], ey = e[1] - s[1];
+            bool all_outside = true;
+            for (int j = 0; j < 3 && all_outside; ++j) all_outside = ex * (q[j][1] - s[1]) - ey * (q[j][0] - s[0]) <= kTouch;
+            if (all_outside) return true;
+        }
+        return false;
+    };
+    return !separated(a, b) && !separated(b, a);
+}
+
+bool develop_image(const Parameterization& param, const uint32_t tri[3],
+                   const std::function<void(uint32_t base, const Vec2 image[3])>& fn) {
+    Vec2 x[3];
+    uint32_t chart;
+    if (!triangle_image(param, tri, x, &chart)) return false;
+    Vec2 image[3] = {x[0], x[1], x[2]};
+    const double area = (x[1][0] - x[0][0]) * (x[2][1] - x[0][1]) - (x[1][1] - x[0][1]) * (x[2][0] - x[0][0]);
+    if (area < 0) std::swap(image[1], image[2]);  // (for the overlap test; a valid map has none)
+    std::vector<std::pair<uint32_t, std::array<Lattice2, 3>>> queue;
+    queue.push_back({chart, {Lattice2{0, 0}, Lattice2{1, 0}, Lattice2{0, 1}}});
+    for (size_t q = 0; q < queue.size() && q < 32; ++q) {
+        const auto [base, corners] = queue[q];
+        const Vec2 cell[3] = {{double(corners[0][0]), double(corners[0][1])},
+                              {double(corners[1][0]), double(corners[1][1])},
+                              {double(corners[2][0]), double(corners[2][1])}};
+        if (!triangles_overlap(image, cell)) continue;
+        // The image in this triangle's chart: y = c0 + l1 (c1 - c0) + l2 (c2 - c0).
+        const double ax = cell[1][0] - cell[0][0], ay = cell[1][1] - cell[0][1];
+        const double bx = cell[2][0] - cell[0][0], by = cell[2][1] - cell[0][1];
+        const double det = ax * by - ay * bx;  // +-1: a lattice triangle of the unit's area
+        Vec2 here[3];
+        for (int k = 0; k < 3; ++k) {
+            const double qx = x[k][0] - cell[0][0], qy = x[k][1] - cell[0][1];
+            here[k] = {(qx * by - qy * bx) / det, (ax * qy - ay * qx) / det};
+        }
+        fn(base, here);
+        for (uint32_t k = 0; k < 3; ++k) {
+            uint32_t next = base;
+            std::array<Lattice2, 3> c = corners;
+            if (!param.domain.across(next, k, c)) continue;
+            bool seen = false;
+            for (const auto& v : queue) seen |= v.first == next;
+            if (!seen) queue.push_back({next, c});
+        }
+    }
+    return true;
+}
+
 }  // namespace catpaq::aqp

@@ -116,33 +116,41 @@ struct PatchInput {
     std::vector<Segment> segments;    // clipped input edges in affine patches
 };
 
-// Places input edge (a, b) in patch p: a clipped segment (affine patch) or samples along it
-// (border patch, every quarter of a finest cell).
-void add_edge(const Mesh& surface, const Parameterization& param, const QuadLayout& layout, uint32_t p, uint32_t a,
-              uint32_t b, int n, PatchInput& in) {
+// The third of base triangle t that edge k's patch covers, in t's chart: (barycentre, corner k,
+// corner k+1).
+void third_of(int k, Vec2 out[3]) {
+    static const Vec2 kCorner[3] = {{0, 0}, {1, 0}, {0, 1}};
+    out[0] = {kThird, kThird};
+    out[1] = kCorner[k];
+    out[2] = kCorner[(k + 1) % 3];
+}
+
+// The edges of a surface triangle's image (in the chart of base triangle `half` of patch p) inside
+// the patch: clipped segments in an affine patch, samples every quarter of a finest cell in a
+// border patch.
+void add_image_edges(const Mesh& surface, const QuadLayout& layout, uint32_t p, int half, const SurfaceMap::Image& im,
+                     int n, PatchInput& in) {
     const QuadPatch& q = layout.patches()[p];
-    const Vec3d &pa = surface.positions[a], &pb = surface.positions[b];
-    for (int half = 0; half < (q.border() ? 1 : 2); ++half) {
-        const PatchFrame f = patch_frame(q, half);
-        Vec2 xa, xb;
-        if (!param.domain.chart_position(param.points[a], f.chart, xa) ||
-            !param.domain.chart_position(param.points[b], f.chart, xb, &xa))
-            continue;
+    const PatchFrame f = patch_frame(q, half);
+    const uint32_t* tri = &surface.indices[3 * im.triangle];
+    for (int e = 0; e < 3; ++e) {
+        const Vec2 xa{im.x[e][0], im.x[e][1]}, xb{im.x[(e + 1) % 3][0], im.x[(e + 1) % 3][1]};
+        const Vec3d& pa = surface.positions[tri[e]];
+        const Vec3d& pb = surface.positions[tri[(e + 1) % 3]];
         if (!q.border()) {
             Segment s;
             f.to_uv(xa, s.u0, s.v0);
             f.to_uv(xb, s.u1, s.v1);
             double t0, t1;
-            if (!clip_to_square(s.u0, s.v0, s.u1, s.v1, t0, t1)) return;
+            if (!clip_to_square(s.u0, s.v0, s.u1, s.v1, t0, t1)) continue;
             const Segment whole = s;
             s.u0 = whole.u0 + t0 * (whole.u1 - whole.u0), s.v0 = whole.v0 + t0 * (whole.v1 - whole.v0);
             s.u1 = whole.u0 + t1 * (whole.u1 - whole.u0), s.v1 = whole.v0 + t1 * (whole.v1 - whole.v0);
             s.p0 = lerp(pa, pb, t0);
             s.p1 = lerp(pa, pb, t1);
             in.segments.push_back(s);
-            return;
+            continue;
         }
-        // Border patch: the triangle (barycentre, a, b) of T1's chart, sampled densely.
         const double length = std::hypot(xb[0] - xa[0], xb[1] - xa[1]);
         const int steps = std::clamp(int(std::ceil(length * 3 * n * 4)), 1, 1 << 16);
         for (int i = 0; i <= steps; ++i) {
@@ -157,30 +165,14 @@ void add_edge(const Mesh& surface, const Parameterization& param, const QuadLayo
             layout.locate(d, at, u, v);
             if (at == p) in.points.push_back({u, v, lerp(pa, pb, t)});
         }
-        return;
     }
-}
-
-// Every undirected edge once: (a, b) with a < b, and border edges whichever way they run.
-std::vector<std::pair<uint32_t, uint32_t>> undirected_edges(const Mesh& surface) {
-    std::vector<uint64_t> directed;
-    directed.reserve(surface.indices.size());
-    for (size_t t = 0; t < surface.triangle_count(); ++t)
-        for (int k = 0; k < 3; ++k)
-            directed.push_back((uint64_t(surface.indices[3 * t + k]) << 32) | surface.indices[3 * t + (k + 1) % 3]);
-    tbb::parallel_sort(directed.begin(), directed.end());
-    std::vector<std::pair<uint32_t, uint32_t>> edges;
-    for (uint64_t e : directed) {
-        const uint32_t a = uint32_t(e >> 32), b = uint32_t(e);
-        if (a < b || !std::binary_search(directed.begin(), directed.end(), (uint64_t(b) << 32) | a)) edges.push_back({a, b});
-    }
-    return edges;
 }
 
 }  // namespace
 
 std::vector<std::vector<double>> measure_patch_errors(const Mesh& surface, const Parameterization& param,
-                                                      const QuadLayout& layout, const SampleNumbering& numbering,
+                                                      const QuadLayout& layout, const SurfaceMap& map,
+                                                      const SampleNumbering& numbering,
                                                       const std::vector<Vec3d>& exact,
                                                       const std::function<Vec3d(uint32_t)>& decoded, Progress* progress) {
     const int k = numbering.level(), n = numbering.size() - 1;
@@ -193,17 +185,21 @@ std::vector<std::vector<double>> measure_patch_errors(const Mesh& surface, const
     });
     std::vector<std::vector<uint32_t>> vertices(patches);
     for (uint32_t v = 0; v < surface.vertex_count(); ++v) vertices[vertex_patch[v]].push_back(v);
-    std::vector<std::vector<std::pair<uint32_t, uint32_t>>> edges(patches);
-    for (auto [a, b] : undirected_edges(surface)) {
-        edges[vertex_patch[a]].push_back({a, b});
-        if (vertex_patch[b] != vertex_patch[a]) edges[vertex_patch[b]].push_back({a, b});
-    }
 
     std::vector<std::vector<double>> error(patches, std::vector<double>(size_t(k) + 1, 0.0));
     tbb::parallel_for(size_t(0), patches, [&](size_t p) {
         PatchInput in;
         for (uint32_t v : vertices[p]) in.points.push_back({vertex_uv[v][0], vertex_uv[v][1], surface.positions[v]});
-        for (auto [a, b] : edges[p]) add_edge(surface, param, layout, uint32_t(p), a, b, n, in);
+        // Every surface triangle whose image overlaps the patch contributes its edges.
+        const QuadPatch& q = layout.patches()[p];
+        for (int half = 0; half < (q.border() ? 1 : 2); ++half) {
+            Vec2 third[3];
+            third_of(q.edge[half], third);
+            for (const SurfaceMap::Image& im : map.images(q.triangle[half])) {
+                Vec2 image[3] = {{im.x[0][0], im.x[0][1]}, {im.x[1][0], im.x[1][1]}, {im.x[2][0], im.x[2][1]}};
+                if (triangles_overlap(image, third)) add_image_edges(surface, layout, uint32_t(p), half, im, n, in);
+            }
+        }
         std::vector<Vec3d> grid;
         std::vector<double> ts;
         for (int l = k; l >= 0; --l) {

@@ -9,15 +9,16 @@
 // (quantization included: the level's surface is made of decoded positions). Then each level's
 // bound becomes at least its finer level's (monotone).
 //
-// Approximations, documented in docs/formats/aqp.md: an input edge contributes only to the
-// patches holding one of its ends (an edge crossing a whole patch without an end in it is not
-// seen); in border patches (bilinear, not affine) an input edge is sampled every quarter of a
-// finest cell instead of at its exact crossings.
+// Every surface triangle whose image overlaps a patch (SurfaceMap's images of the patch's base
+// triangles) contributes its three edges. One approximation, documented in docs/formats/aqp.md:
+// in border patches (bilinear, not affine) an input edge is sampled every quarter of a finest
+// cell instead of at its exact crossings.
 #include <functional>
 #include <vector>
 
 #include "aqp/domain.h"
 #include "aqp/quad_layout.h"
+#include "aqp/surface_map.h"
 #include "mesh/mesh.h"
 
 namespace catpaq {
@@ -29,7 +30,8 @@ namespace catpaq::aqp {
 // error[p][l] for every patch p and level 0..k. `exact` is each distinct finest sample's true
 // surface position, `decoded(s)` its decoded world position.
 std::vector<std::vector<double>> measure_patch_errors(const Mesh& surface, const Parameterization& param,
-                                                      const QuadLayout& layout, const SampleNumbering& numbering,
+                                                      const QuadLayout& layout, const SurfaceMap& map,
+                                                      const SampleNumbering& numbering,
                                                       const std::vector<Vec3d>& exact,
                                                       const std::function<Vec3d(uint32_t)>& decoded, Progress* progress);
 

@@ -23,6 +23,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <functional>
 #include <string>
 #include <vector>
 
@@ -99,6 +100,19 @@ bool triangle_image(const Parameterization& param, const uint32_t tri[3], Vec2 o
 // in the chart of every vertex that is not a base vertex: false if a chart cannot hold it or the
 // charts disagree (the image would wrap around a cone point).
 bool triangle_image_area(const Parameterization& param, const uint32_t tri[3], double& area);
+
+// Whether two 2D triangles (counter-clockwise, any affine frame) overlap with area: touching at a
+// point or along an edge does not count.
+bool triangles_overlap(const Vec2 a[3], const Vec2 b[3]);
+
+// The image of surface triangle `tri` developed across the base edges it overlaps, breadth first
+// from its own chart, each base triangle once: calls fn(base triangle, image corners in that
+// triangle's chart) for every base triangle the image overlaps with area. Returns false (calling
+// nothing) if the image has no chart. An image with a corner at a base vertex touches every
+// triangle round it, and developed round the cone the far ones would be wrong copies: only
+// overlaps with area continue the development.
+bool develop_image(const Parameterization& param, const uint32_t tri[3],
+                   const std::function<void(uint32_t base, const Vec2 image[3])>& fn);
 
 struct DomainOptions {
     // Base triangles to simplify to (the simplification may stop above it: each closed

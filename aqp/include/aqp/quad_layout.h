@@ -58,6 +58,8 @@ public:
     size_t quad_vertex_count() const { return domain_->vertex_count() + domain_->triangle_count() + border_edges_; }
     size_t border_edges() const { return border_edges_; }
 
+    // The patch of edge k of base triangle t (covering the third of t beside that edge).
+    uint32_t patch_of_edge(uint32_t t, int k) const { return patch_of_edge_[t][k]; }
     // The domain point at (u, v) in [0,1]^2 of patch p.
     DomainPoint point(uint32_t p, double u, double v) const;
     // The patch holding domain point x and x's (u, v) in it (the inverse of point()).

@@ -31,6 +31,13 @@ struct SurfaceSample {
 
 class SurfaceMap {
 public:
+    // A surface triangle's image in a base triangle's chart (lattice coordinates).
+    struct Image {
+        uint32_t triangle;
+        float box[4];    // x0 y0 x1 y1, rounded outwards
+        double x[3][2];  // corners
+    };
+
     // `surface` must have normals (compute_vertex_normals otherwise) and outlive the map.
     // Builds the buckets in parallel.
     SurfaceMap(const Mesh& surface, const Parameterization& param);
@@ -42,13 +49,10 @@ public:
 
     // Queries whose point was farther than the tolerance from every candidate image.
     size_t misses() const { return misses_.load(); }
+    // The images overlapping base triangle `base`, in its chart.
+    const std::vector<Image>& images(uint32_t base) const { return buckets_[base].images; }
 
 private:
-    struct Image {
-        uint32_t triangle;
-        float box[4];   // x0 y0 x1 y1, lattice coordinates
-        double x[3][2];  // corners, lattice coordinates of the base triangle's chart
-    };
     struct Buckets {
         int size = 1;                 // size x size cells over [0,1]^2
         std::vector<uint32_t> start;  // size * size + 1 offsets into `items`
