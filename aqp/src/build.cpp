@@ -133,6 +133,24 @@ Quantization quantize(const QuadLayout& layout, const SampleNumbering& numbering
     }
 }
 
+// Finest-level grid triangles (cells split along (i,j)-(i+1,j+1)) with two corners at the same
+// quantized position.
+size_t count_collapsed_triangles(const QuadLayout& layout, const SampleNumbering& numbering, const Quantization& q) {
+    const int n = numbering.size() - 1;
+    std::vector<size_t> per_patch(layout.patch_count(), 0);
+    tbb::parallel_for(size_t(0), layout.patch_count(), [&](size_t p) {
+        auto at = [&](int i, int j) -> const Quantized& { return q.position[numbering.id(uint32_t(p), i, j)]; };
+        for (int j = 0; j < n; ++j)
+            for (int i = 0; i < n; ++i) {
+                const Quantized &a = at(i, j), &b = at(i + 1, j), &c = at(i + 1, j + 1), &d = at(i, j + 1);
+                per_patch[p] += (a == b || b == c || a == c) + (a == c || c == d || a == d);
+            }
+    });
+    size_t total = 0;
+    for (size_t c : per_patch) total += c;
+    return total;
+}
+
 // World position of a quantized sample (what a reader decodes).
 Vec3d world_position(const Quantization& q, const Quantized& x) {
     return {q.origin[0] + q.step * double(x[0]), q.origin[1] + q.step * double(x[1]), q.origin[2] + q.step * double(x[2])};
@@ -266,6 +284,11 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
         r.warnings.push_back(strprintf("precision %.3g asked for, %.3g reached: a patch spans more than 65535 steps of "
                                        "the finer grid (ask for more domain triangles to reach it)",
                                        r.precision_asked, r.precision));
+    r.collapsed_triangles = count_collapsed_triangles(layout, numbering, q);
+    if (r.collapsed_triangles)
+        r.warnings.push_back(strprintf("%zu of the finest level's %zu triangles have no area once quantized (parts thinner "
+                                       "than the step %.3g draw as lines; a finer --precision keeps them)",
+                                       r.collapsed_triangles, 2 * layout.patch_count() * size_t(n) * size_t(n), q.step));
     std::vector<uint16_t> normals(samples.size());
     tbb::parallel_for(size_t(0), samples.size(), [&](size_t s) {
         normals[s] = oct_encode_precise(samples[s].normal[0], samples[s].normal[1], samples[s].normal[2]);

@@ -85,6 +85,15 @@ void BaseDomain::unfoldings(uint32_t from, uint32_t to, std::vector<Unfolding>& 
         out.push_back({standard, 0});
         return;
     }
+    // An edge neighbour is one step away (the other ways round are longer).
+    for (uint32_t k = 0; k < 3; ++k)
+        if (neighbour[to][k] == from) {
+            std::array<Lattice2, 3> c = standard;
+            uint32_t t = to;
+            unfold_across(*this, t, k, c);
+            out.push_back({c, 1});
+            return;
+        }
     auto add = [&](const std::array<Lattice2, 3>& c, int steps) {
         for (Unfolding& u : out)
             if (u.corners == c) {

@@ -97,7 +97,7 @@ private:
     struct Ring {
         std::vector<uint32_t> w, t;
         bool open = false;
-        double quality = 1;  // of its worst triangle (triangle_quality)
+        mutable double quality = -1;  // of its worst triangle (triangle_quality), -1 until computed
         size_t next(size_t i) const { return (i + 1) % w.size(); }
     };
     struct Entry {
@@ -112,6 +112,7 @@ private:
     void update(uint32_t v);
     void collapse(uint32_t v, uint32_t u);
     double keep_penalty(uint32_t u) const;
+    double ring_quality(uint32_t v, const Ring& r) const;
     int corner(uint32_t t, uint32_t v) const {
         return tris_[t][0] == v ? 0 : tris_[t][1] == v ? 1 : tris_[t][2] == v ? 2 : -1;
     }
@@ -138,6 +139,7 @@ private:
     // Scratch.
     Ring ring_;
     std::vector<Vec2> flat_;
+    std::vector<std::pair<double, size_t>> order_;
 };
 
 DomainSimplifier::DomainSimplifier(const Mesh& mesh) : mesh_(mesh) {
@@ -240,9 +242,7 @@ bool DomainSimplifier::ring_of(uint32_t v, Ring& r) const {
         r.w.push_back(cur);
     else if (cur != start)
         return false;
-    r.quality = 1;
-    for (size_t i = 0; i < d; ++i)
-        r.quality = std::min(r.quality, triangle_quality(mesh_.positions[v], mesh_.positions[r.w[i]], mesh_.positions[r.w[r.next(i)]]));
+    r.quality = -1;  // computed when needed (ring_quality)
     return true;
 }
 
@@ -341,7 +341,7 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
     // (every base triangle is equilateral in the domain): an angle of 20 degrees is stretched
     // threefold, and a surface triangle there can end up spanning more than 180 degrees, which
     // no straight image can. Such collapses are refused unless the ring is that bad already.
-    if (min_quality < std::min(kMinBaseQuality, r.quality)) return false;
+    if (min_quality < kMinBaseQuality && min_quality < ring_quality(v, r)) return false;
     // Valences near 6 (4 on the border): a base vertex of valence 3 is a cone of 180 degrees in
     // the domain, where the surface around it must be squeezed to half its angle.
     auto valence = [&](uint32_t w) { return int(vtris_[w].size()) + border_[w]; };
@@ -379,6 +379,16 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
 // vertex, spread over its cone of 60 degrees per base triangle, so one may have to span more than
 // 180 degrees there, which no straight image can (seen on a 200k scan: a degree-4 base vertex).
 // Collapsing into them costs more, so they are removed rather than kept.
+double DomainSimplifier::ring_quality(uint32_t v, const Ring& r) const {
+    if (r.quality < 0) {
+        r.quality = 1;
+        for (size_t i = 0; i < r.t.size(); ++i)
+            r.quality = std::min(r.quality, triangle_quality(mesh_.positions[v], mesh_.positions[r.w[i]],
+                                                             mesh_.positions[r.w[r.next(i)]]));
+    }
+    return r.quality;
+}
+
 double DomainSimplifier::keep_penalty(uint32_t u) const {
     const uint32_t degree = original_degree_[u];
     return degree <= 4 ? 8.0 : degree == 5 ? 2.0 : 1.0;
@@ -388,8 +398,19 @@ void DomainSimplifier::update(uint32_t v) {
     ++stamp_[v];
     target_[v] = kNone;
     if (!alive_[v] || !ring_of(v, ring_) || !flatten(v, ring_, flat_)) return;
-    double best = INFINITY;
+    // Candidates by increasing edge length: a collapse costs at least its squared length (the
+    // other terms only add or multiply by at least 1), so once that passes the best cost found,
+    // no longer edge can win.
+    const Vec3d& p = mesh_.positions[v];
+    order_.clear();
     for (size_t j = 0; j < ring_.w.size(); ++j) {
+        const Vec3d e = sub(mesh_.positions[ring_.w[j]], p);
+        order_.push_back({dot(e, e), j});
+    }
+    std::sort(order_.begin(), order_.end());
+    double best = INFINITY;
+    for (const auto& [length2, j] : order_) {
+        if (length2 >= best) break;
         double cost;
         if (collapse_cost(v, ring_, flat_, j, cost) && cost < best) {
             best = cost;

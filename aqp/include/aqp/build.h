@@ -78,6 +78,9 @@ struct AqpBuildReport {
     uint64_t file_bytes = 0, payload_bytes = 0;
     double bits_per_sample = 0;  // payload bits over distinct finest samples
     size_t location_misses = 0;  // samples placed on the nearest image (see SurfaceMap)
+    // Finest-level grid triangles left without area by quantization (geometry thinner than the
+    // step: they draw as lines or points; the bounds still hold, measured on decoded positions).
+    size_t collapsed_triangles = 0;
     std::vector<AqpLevelStats> levels;  // coarse to fine
     std::vector<std::string> warnings;
     uint64_t memory_estimate = 0, peak_rss = 0;
