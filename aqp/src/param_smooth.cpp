@@ -16,6 +16,9 @@
 #include <cstdio>
 #include <vector>
 
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+
 #include "aqp/domain.h"
 
 namespace catpaq::aqp {
@@ -304,6 +307,29 @@ bool reset_base_ring(const Mesh& surface, Parameterization& param, const std::ve
     return true;
 }
 
+// Greedy colouring of the free vertices: each takes the smallest colour none of its neighbours
+// has. Returns the vertices of each colour.
+std::vector<std::vector<uint32_t>> colour_free_vertices(const Mesh& surface, const std::vector<std::vector<uint32_t>>& vtris,
+                                                        const std::vector<uint8_t>& fixed) {
+    std::vector<uint8_t> colour(surface.vertex_count(), 0xff);
+    std::vector<std::vector<uint32_t>> out;
+    for (uint32_t v = 0; v < surface.vertex_count(); ++v) {
+        if (fixed[v]) continue;
+        uint64_t used = 0;
+        for (uint32_t t : vtris[v])
+            for (int k = 0; k < 3; ++k) {
+                const uint8_t c = colour[surface.indices[3 * t + k]];
+                if (c < 64) used |= uint64_t(1) << c;
+            }
+        uint8_t c = 0;
+        while (c < 63 && (used >> c & 1)) ++c;
+        colour[v] = c;
+        if (out.size() <= c) out.resize(size_t(c) + 1);
+        out[c].push_back(v);
+    }
+    return out;
+}
+
 }  // namespace
 
 void smooth_parameterization(const Mesh& surface, Parameterization& param, int sweeps) {
@@ -331,10 +357,18 @@ void smooth_parameterization(const Mesh& surface, Parameterization& param, int s
             if (!twin) fixed[a] = fixed[b] = 1;
         }
     const double domain_area = double(param.domain.triangle_count()) * kSqrt3Over2 / 2;
-    VertexSmoother smoother(surface, param, std::sqrt(surface_area / domain_area));
+    const double scale = std::sqrt(surface_area / domain_area);
+    VertexSmoother smoother(surface, param, scale);
+    // Sweeps by colour: no two vertices of a colour share a triangle, so a colour's vertices move
+    // in parallel without seeing each other's moves (and the result does not depend on threads).
+    const std::vector<std::vector<uint32_t>> colours = colour_free_vertices(surface, vtris, fixed);
+    tbb::enumerable_thread_specific<VertexSmoother> smoothers([&] { return VertexSmoother(surface, param, scale); });
     for (int sweep = 0; sweep < sweeps; ++sweep)
-        for (uint32_t v = 0; v < nv; ++v)
-            if (!fixed[v]) smoother.smooth(v, vtris[v]);
+        for (const std::vector<uint32_t>& colour : colours)
+            tbb::parallel_for(tbb::blocked_range<size_t>(0, colour.size(), 256), [&](const tbb::blocked_range<size_t>& r) {
+                VertexSmoother& local = smoothers.local();
+                for (size_t i = r.begin(); i != r.end(); ++i) local.smooth(colour[i], vtris[colour[i]]);
+            });
     // The vertices within `rings` rings of v.
     auto neighbourhood = [&](uint32_t v, int rings) {
         std::vector<uint32_t> out{v};
