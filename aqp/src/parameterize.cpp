@@ -3,8 +3,9 @@
 // at a time, and every removed vertex keeps its place in the simplified mesh as a base triangle
 // and barycentric coordinates.
 //
-// A collapse of v into its neighbour u flattens v's 1-ring (geodesic polar map: the angles at v
-// scaled to sum to 2 pi, or pi on the border, the radii kept), so the old triangles around v and
+// A collapse of v into its neighbour u flattens v's 1-ring (MAPS's z^a map: the angles at v
+// scaled to sum to 2 pi, or pi on the border, the radii raised to the same power), so the old
+// triangles around v and
 // the new fan around u tile the same polygon. Every point that lay in the old triangles (and v
 // itself, at the origin) is placed by its barycentric coordinates in the flattened old triangle
 // and re-expressed in the new triangle holding it. A collapse is allowed only when the new fan is

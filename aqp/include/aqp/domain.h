@@ -15,7 +15,7 @@
 // shorter way round.
 //
 // The parameterization gives every surface vertex a DomainPoint (build_parameterization: MAPS,
-// Lee et al. 1998, with half-edge collapses and geodesic polar flattening of 1-rings). A surface
+// Lee et al. 1998, with half-edge collapses and conformal z^a flattening of 1-rings). A surface
 // triangle's image is the straight triangle between its vertices' points in an unfolding of the
 // base triangles they lie in (a geodesic triangle of the piecewise flat domain). The map is
 // bijective when every image is positively oriented and the images' areas sum to the domain's
