@@ -656,7 +656,12 @@ Parameterization build_parameterization(const Mesh& surface, const DomainOptions
         for (uint32_t t : n) report.base_border_edges += t == kNone;
     report.check = check_parameterization(surface, param);
     const ParamCheck& check = report.check;
-    if (!check.bijective()) fail("the parameterization is not bijective (%s): refusing to build folded patches", check.describe().c_str());
+    if (!check.bijective()) {
+        const char* hint = check.unfold_failures
+                               ? ": input triangles span more base triangles than a chart holds; ask for fewer domain triangles"
+                               : ": folds the smoothing could not undo, usually needle-thin parts; more domain triangles may help";
+        fail("the parameterization is not bijective (%s): refusing to build folded patches%s", check.describe().c_str(), hint);
+    }
     if (report_out) *report_out = report;
     return param;
 }
