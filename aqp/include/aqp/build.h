@@ -48,7 +48,7 @@ struct AqpBuildOptions {
     int smoothing_sweeps = 4;     // parameter smoothing (DomainOptions)
     double min_component_area_fraction = 1e-3;  // CleanOptions
     AqpPrecision precision;
-    int png_compression = 9;      // zlib level of the node images (9: 2% smaller than 6, encoding 1.8x slower)
+    int png_compression = 6;      // zlib level of the node images (9: 4% smaller, encoding 7.6x slower on a 1M scan)
     // Refuse to start when the estimated working memory exceeds this many bytes (0: no limit).
     uint64_t memory_budget = 0;
     unsigned threads = 0;         // 0: all cores
