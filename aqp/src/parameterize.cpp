@@ -5,13 +5,16 @@
 //
 // A collapse of v into its neighbour u flattens v's 1-ring (MAPS's z^a map: the angles at v
 // scaled to sum to 2 pi, or pi on the border, the radii raised to the same power), so the old
-// triangles around v and
-// the new fan around u tile the same polygon. Every point that lay in the old triangles (and v
-// itself, at the origin) is placed by its barycentric coordinates in the flattened old triangle
-// and re-expressed in the new triangle holding it. A collapse is allowed only when the new fan is
-// positively oriented in the flattening (so the tiling is exact and the map stays bijective), the
-// topology stays a manifold (link condition; border vertices move along the border) and no new
-// triangle folds over in space.
+// triangles around v and the new fan around u tile the same polygon. Every point that lay in the
+// old triangles (and v itself, at the origin) is placed by its barycentric coordinates in the
+// flattened old triangle and re-expressed in the new triangle holding it. A collapse is allowed
+// only when the new fan is positively oriented in the flattening (so the tiling is exact and the
+// map stays bijective), the topology stays a manifold (link condition; border vertices move along
+// the border), no new triangle folds over in space, base triangles keep their shape and base
+// valences stay within one of the surface degree (see collapse_cost).
+//
+// Then smooth_parameterization (param_smooth.cpp) improves the map in the final domain and
+// check_parameterization (param_check.cpp) must find it bijective.
 #include <algorithm>
 #include <cassert>
 #include <chrono>

@@ -3,11 +3,11 @@
 // surface triangle whose image holds the point, and barycentric coordinates in it), and the
 // surface's attributes interpolated there. Used to resample patches.
 //
-// Each base triangle keeps the images (in its chart) of the surface triangles that can reach it
-// (those with a vertex in it or in one of its edge neighbours) in a uniform grid of buckets. A
-// query tests the triangles of the point's bucket and takes the one holding it; when rounding
-// leaves a point a hair outside every image (on an edge between two), it takes the nearest one,
-// clamped onto it, and counts a miss when that is farther than 1e-9 of a base triangle.
+// Each base triangle keeps the images (in its chart) of the surface triangles overlapping it
+// (develop_image in aqp/domain.h) in a uniform grid of buckets. A query tests the images of the
+// point's bucket and takes the one holding it; when rounding leaves a point a hair outside every
+// image (on an edge between two), it takes the one it is least outside of, clamped onto it, and
+// counts a miss when that is more than 1e-9 (in barycentric terms) outside.
 #include <array>
 #include <atomic>
 #include <cstdint>
