@@ -1,0 +1,103 @@
+#pragma once
+// The AQP dataset: an archive (common_codec/archive.h) of kind Aqp whose nodes are (patch, level)
+// pairs. Byte tables: docs/formats/aqp.md. All integers little-endian.
+//
+// Meta:
+//   char[8] "AQPMETA\0" | u32 version (1) | u32 finest level k | u32 patch count
+//   u32 base vertices | u32 base triangles | u32 border edges | u32 flags (bit 0: colours)
+//   f64 origin[3] | f64 step        world = origin + step * (patch origin + local), per axis
+//   f64 bounds_min[3] | f64 bounds_max[3]   (world, of the samples)
+//   u64 input vertices | u64 input triangles | f64 precision | f64 mean edge | u32 atlas columns
+//   per patch: u32 corner[4] (quad vertex ids)
+//              4 x (u32 neighbour patch or 0xFFFFFFFF, u8 its edge, u8 reversed)
+//              u32 origin[3] (quantization grid) | u16 extent[3] (largest local coordinate)
+//
+// Node (key = patch << 8 | level, level = level, count = samples, error = bound in world units):
+// the bytes of one PNG file, RGB 16-bit, 2n x n pixels for n = 2^level + 1 samples per side
+// (nothing else: the index names the node, the archive checksums it). Pixel (i, j) holds
+//   sample (i, j)'s local position x y z; pixel (n + i, j) holds normal u << 8 | v (the bytes of
+//   common_codec/octahedral.h), red << 8 | green, blue << 8 (0 without colours). Row j is grid
+//   row j (v = j / 2^level), column i is u = i / 2^level.
+// Level 0 stores the values; a finer level stores every channel's difference from its prediction
+// by the coarser level (predict_from_coarser), modulo 2^16 (8-bit channels modulo 2^8), zigzag
+// coded: decoding level l needs levels 0..l-1. (bench/aqp/node_bench: 40-48% smaller than one PNG
+// per attribute with full levels, docs/formats/aqp.md.)
+#include <array>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "aqp/quad_layout.h"
+#include "mesh/mesh.h"
+
+namespace catpaq::aqp {
+
+constexpr uint32_t kAqpMetaVersion = 1;
+constexpr int kMaxPatchLevel = 10;
+constexpr uint32_t kAqpColorFlag = 1;
+
+struct AqpPatchInfo {
+    std::array<uint32_t, 4> corner{};
+    std::array<PatchLink, 4> link;
+    std::array<uint32_t, 3> origin{};  // in quantization steps from the dataset's origin
+    std::array<uint16_t, 3> extent{};  // largest local coordinate per axis
+};
+
+struct AqpMeta {
+    uint32_t patch_level = 0;  // finest level k: patches of (2^k + 1)^2 samples
+    uint32_t base_vertices = 0, base_triangles = 0, border_edges = 0;
+    uint32_t flags = 0;
+    double origin[3] = {0, 0, 0};
+    double step = 1;
+    double bounds_min[3] = {0, 0, 0}, bounds_max[3] = {0, 0, 0};
+    uint64_t input_vertices = 0, input_triangles = 0;
+    double precision = 0;  // the quantization's largest distance, world units
+    double mean_edge = 0;  // the input's mean edge length
+    uint32_t atlas_columns = 1;  // patch p's images sit at column p % columns, row p / columns
+    std::vector<AqpPatchInfo> patches;
+
+    bool has_colors() const { return flags & kAqpColorFlag; }
+    // World coordinate `axis` of local coordinate `local` of patch p.
+    double world(uint32_t p, int axis, uint32_t local) const {
+        return origin[axis] + step * double(uint64_t(patches[p].origin[axis]) + local);
+    }
+};
+
+std::vector<uint8_t> encode_aqp_meta(const AqpMeta& meta);
+// Empty string on success, else what is wrong. Checks every field a reader relies on (levels,
+// counts, links pointing at patches that link back).
+std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& out);
+
+inline uint64_t aqp_node_key(uint32_t patch, int level) { return (uint64_t(patch) << 8) | uint64_t(level); }
+inline uint32_t aqp_key_patch(uint64_t key) { return uint32_t(key >> 8); }
+inline int aqp_key_level(uint64_t key) { return int(key & 0xff); }
+
+// One patch at one level: (2^level + 1)^2 samples, row-major (index j * size + i).
+struct PatchGrid {
+    uint32_t patch = 0;
+    int level = 0;
+    int size = 1;  // samples per side
+    std::vector<std::array<uint16_t, 3>> position;  // local quantized coordinates
+    std::vector<uint16_t> normal;                   // octahedral code
+    std::vector<Rgb8> color;                        // empty without colours
+
+    size_t index(int i, int j) const { return size_t(j) * size_t(size) + size_t(i); }
+};
+
+// The prediction of channel value `channel` (0-2 position, 3-4 normal bytes u and v, 5-7 colour)
+// of sample (i, j) of a level from `coarser` (the level below, every other sample): the coarse
+// sample itself at even (i, j), else the floor of the mean of its two coarse neighbours along the
+// row, the column or the (i,j)-(i+1,j+1) diagonal. Shared edges are predicted from edge samples
+// only, so patches sharing an edge decode it identically.
+int predict_from_coarser(const PatchGrid& coarser, int channel, int i, int j);
+
+// The node payload of `grid` (PNG at zlib level `compression`); `coarser` is the same patch one
+// level down (nullptr at level 0).
+std::vector<uint8_t> encode_patch_node(const PatchGrid& grid, const PatchGrid* coarser, bool colors, int compression = 6);
+// Decodes a node, which must be patch `patch` at `level` (0 <= level <= kMaxPatchLevel), carry
+// colours exactly when `colors`, and come with the patch's decoded coarser level when level > 0.
+// Safe on untrusted bytes: empty string on success, else what is wrong.
+std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, bool colors,
+                              const PatchGrid* coarser, PatchGrid& out);
+
+}  // namespace catpaq::aqp

@@ -1,0 +1,210 @@
+// AQP metadata and node payloads (aqp/format.h).
+#include "aqp/format.h"
+
+#include <cassert>
+#include <cmath>
+#include <cstring>
+
+#include "aqp/png_codec.h"
+#include "base/bytes.h"
+#include "base/error.h"
+
+namespace catpaq::aqp {
+
+std::vector<uint8_t> encode_aqp_meta(const AqpMeta& m) {
+    ByteWriter w;
+    w.raw("AQPMETA\0", 8);
+    w.u32(kAqpMetaVersion);
+    w.u32(m.patch_level);
+    w.u32(uint32_t(m.patches.size()));
+    w.u32(m.base_vertices);
+    w.u32(m.base_triangles);
+    w.u32(m.border_edges);
+    w.u32(m.flags);
+    for (double v : m.origin) w.f64(v);
+    w.f64(m.step);
+    for (double v : m.bounds_min) w.f64(v);
+    for (double v : m.bounds_max) w.f64(v);
+    w.u64(m.input_vertices);
+    w.u64(m.input_triangles);
+    w.f64(m.precision);
+    w.f64(m.mean_edge);
+    w.u32(m.atlas_columns);
+    for (const AqpPatchInfo& p : m.patches) {
+        for (uint32_t c : p.corner) w.u32(c);
+        for (const PatchLink& l : p.link) {
+            w.u32(l.patch);
+            w.u8(l.edge);
+            w.u8(l.reversed ? 1 : 0);
+        }
+        for (uint32_t o : p.origin) w.u32(o);
+        for (uint16_t e : p.extent) w.u16(e);
+    }
+    return std::move(w.bytes());
+}
+
+std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
+    if (size < 8 || std::memcmp(data, "AQPMETA\0", 8) != 0) return "not AQP metadata";
+    ByteReader r(data + 8, size - 8);
+    const uint32_t version = r.u32();
+    if (!r.ok()) return "AQP metadata truncated";
+    if (version != kAqpMetaVersion)
+        return strprintf("unsupported AQP metadata version %u (this build reads %u)", version, kAqpMetaVersion);
+    m.patch_level = r.u32();
+    const uint32_t patch_count = r.u32();
+    m.base_vertices = r.u32();
+    m.base_triangles = r.u32();
+    m.border_edges = r.u32();
+    m.flags = r.u32();
+    for (double& v : m.origin) v = r.f64();
+    m.step = r.f64();
+    for (double& v : m.bounds_min) v = r.f64();
+    for (double& v : m.bounds_max) v = r.f64();
+    m.input_vertices = r.u64();
+    m.input_triangles = r.u64();
+    m.precision = r.f64();
+    m.mean_edge = r.f64();
+    m.atlas_columns = r.u32();
+    if (!r.ok()) return "AQP metadata truncated";
+    constexpr size_t kPatchBytes = 16 + 4 * 6 + 12 + 6;
+    if (r.remaining() != size_t(patch_count) * kPatchBytes)
+        return strprintf("AQP metadata holds %zu bytes of patches, %u patches need %zu", r.remaining(), patch_count,
+                         size_t(patch_count) * kPatchBytes);
+    if (m.patch_level > uint32_t(kMaxPatchLevel)) return strprintf("AQP patch level %u is above %d", m.patch_level, kMaxPatchLevel);
+    if (patch_count == 0) return "AQP metadata has no patches";
+    if (!(m.step > 0) || !std::isfinite(m.step)) return "AQP metadata has an invalid quantization step";
+    for (int i = 0; i < 3; ++i)
+        if (!std::isfinite(m.origin[i]) || !std::isfinite(m.bounds_min[i]) || !std::isfinite(m.bounds_max[i]))
+            return "AQP metadata has a non-finite origin or bound";
+    if (!(m.precision >= 0) || !std::isfinite(m.precision) || !(m.mean_edge >= 0) || !std::isfinite(m.mean_edge))
+        return "AQP metadata has an invalid precision or mean edge";
+    if (m.atlas_columns == 0 || m.atlas_columns > patch_count) return "AQP metadata has an invalid atlas width";
+    const uint64_t quad_vertices = uint64_t(m.base_vertices) + m.base_triangles + m.border_edges;
+    m.patches.assign(patch_count, {});
+    for (AqpPatchInfo& p : m.patches) {
+        for (uint32_t& c : p.corner) c = r.u32();
+        for (PatchLink& l : p.link) {
+            l.patch = r.u32();
+            l.edge = r.u8();
+            uint8_t reversed = r.u8();
+            if (reversed > 1 || l.edge > 3) return "AQP metadata has an invalid patch link";
+            l.reversed = reversed != 0;
+        }
+        for (uint32_t& o : p.origin) o = r.u32();
+        for (uint16_t& e : p.extent) e = r.u16();
+        for (uint32_t c : p.corner)
+            if (c >= quad_vertices) return "AQP metadata has a patch corner out of range";
+    }
+    for (uint32_t p = 0; p < patch_count; ++p)
+        for (uint8_t e = 0; e < 4; ++e) {
+            const PatchLink& l = m.patches[p].link[e];
+            if (l.patch == kNone) continue;
+            if (l.patch >= patch_count) return "AQP metadata links to a patch out of range";
+            const PatchLink& back = m.patches[l.patch].link[l.edge];
+            if (back.patch != p || back.edge != e || back.reversed != l.reversed)
+                return strprintf("AQP metadata: patch %u edge %u links to a patch that does not link back", p, e);
+        }
+    return "";
+}
+
+namespace {
+
+// Channel c of sample s: 0-2 position, 3-4 normal bytes, 5-7 colour (0 without colours).
+int channel_value(const PatchGrid& g, size_t s, int c) {
+    if (c < 3) return g.position[s][c];
+    if (c < 5) return c == 3 ? g.normal[s] & 0xff : g.normal[s] >> 8;
+    return g.color.empty() ? 0 : g.color[s][c - 5];
+}
+
+int channel_bits(int c) { return c < 3 ? 16 : 8; }
+
+// x modulo 2^bits as a signed value, zigzag coded (0, -1, 1, -2, ... -> 0, 1, 2, 3, ...).
+uint32_t zigzag(int x, int bits) {
+    const int mod = 1 << bits;
+    x &= mod - 1;
+    if (x >= mod / 2) x -= mod;
+    return x >= 0 ? uint32_t(2 * x) : uint32_t(-2 * x - 1);
+}
+
+int unzigzag(uint32_t z) { return (z & 1) ? -int(z >> 1) - 1 : int(z >> 1); }
+
+}  // namespace
+
+int predict_from_coarser(const PatchGrid& c, int channel, int i, int j) {
+    const int ci = i / 2, cj = j / 2;
+    auto at = [&](int x, int y) { return channel_value(c, c.index(x, y), channel); };
+    if (i % 2 == 0 && j % 2 == 0) return at(ci, cj);
+    if (j % 2 == 0) return (at(ci, cj) + at(ci + 1, cj)) >> 1;
+    if (i % 2 == 0) return (at(ci, cj) + at(ci, cj + 1)) >> 1;
+    return (at(ci, cj) + at(ci + 1, cj + 1)) >> 1;
+}
+
+std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coarser, bool colors, int compression) {
+    const size_t n = size_t(g.size) * g.size;
+    assert(g.size == (1 << g.level) + 1 && g.position.size() == n && g.normal.size() == n);
+    assert(!colors || g.color.size() == n);
+    assert((g.level == 0) == (coarser == nullptr));
+    assert(!coarser || coarser->size == g.size / 2 + 1);
+    PngImage image;
+    image.width = 2 * g.size;
+    image.height = g.size;
+    image.channels = 3;
+    image.bit_depth = 16;
+    image.values.resize(image.value_count());
+    for (int j = 0; j < g.size; ++j)
+        for (int i = 0; i < g.size; ++i) {
+            uint32_t v[8];
+            for (int c = 0; c < 8; ++c) {
+                const int value = channel_value(g, g.index(i, j), c);
+                v[c] = coarser ? zigzag(value - predict_from_coarser(*coarser, c, i, j), channel_bits(c)) : uint32_t(value);
+            }
+            uint16_t* left = &image.values[(size_t(j) * image.width + i) * 3];
+            uint16_t* right = &image.values[(size_t(j) * image.width + g.size + i) * 3];
+            for (int c = 0; c < 3; ++c) left[c] = uint16_t(v[c]);
+            right[0] = uint16_t(v[3] << 8 | v[4]);
+            right[1] = uint16_t(v[5] << 8 | v[6]);
+            right[2] = uint16_t(v[7] << 8);
+        }
+    return png_encode(image, compression);
+}
+
+std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, bool colors,
+                              const PatchGrid* coarser, PatchGrid& out) {
+    if (level < 0 || level > kMaxPatchLevel) return strprintf("patch level %d out of range", level);
+    if (level == 0) coarser = nullptr;
+    const int side = (1 << level) + 1;
+    if (level > 0 && (!coarser || coarser->size != side / 2 + 1 || coarser->position.size() != size_t(coarser->size) * coarser->size ||
+                      coarser->normal.size() != coarser->position.size() ||
+                      coarser->color.size() != (colors ? coarser->position.size() : 0)))
+        return strprintf("decoding level %d needs the patch's decoded level %d", level, level - 1);
+    PngImage image;
+    if (std::string e = png_decode(data, size, 2 * side, side, 3, 16, image); !e.empty()) return "AQP node image: " + e;
+    out.patch = patch;
+    out.level = level;
+    out.size = side;
+    const size_t n = size_t(side) * side;
+    out.position.resize(n);
+    out.normal.resize(n);
+    out.color.assign(colors ? n : 0, Rgb8{0, 0, 0});
+    for (int j = 0; j < side; ++j)
+        for (int i = 0; i < side; ++i) {
+            const uint16_t* left = &image.values[(size_t(j) * image.width + i) * 3];
+            const uint16_t* right = &image.values[(size_t(j) * image.width + side + i) * 3];
+            const uint32_t v[8] = {left[0], left[1], left[2], uint32_t(right[0] >> 8), uint32_t(right[0] & 0xff),
+                                   uint32_t(right[1] >> 8), uint32_t(right[1] & 0xff), uint32_t(right[2] >> 8)};
+            if ((right[2] & 0xff) != 0 || (!colors && (right[1] != 0 || right[2] != 0)))
+                return strprintf("AQP node sample (%d, %d) has bits set outside its channels", i, j);
+            int value[8];
+            for (int c = 0; c < 8; ++c) {
+                const int mask = (1 << channel_bits(c)) - 1;
+                value[c] = coarser ? (predict_from_coarser(*coarser, c, i, j) + unzigzag(v[c])) & mask : int(v[c]);
+            }
+            const size_t s = out.index(i, j);
+            out.position[s] = {uint16_t(value[0]), uint16_t(value[1]), uint16_t(value[2])};
+            out.normal[s] = uint16_t(value[3] | (value[4] << 8));
+            if (colors) out.color[s] = {uint8_t(value[5]), uint8_t(value[6]), uint8_t(value[7])};
+        }
+    return "";
+}
+
+}  // namespace catpaq::aqp

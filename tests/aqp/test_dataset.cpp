@@ -1,0 +1,218 @@
+// AQP datasets end to end (aqp/build.h, aqp/dataset.h, aqp/verify.h): shared edge and corner
+// samples bit-identical in every patch at every level, coarse levels exact subsets of fine ones,
+// closed inputs giving closed welded meshes at every level, stored error bounds that hold against
+// the input both ways and are monotone, and verify catching a dataset that breaks any of it.
+#include <gtest/gtest.h>
+
+#include <cmath>
+
+#include "aqp/dataset.h"
+#include "aqp/verify.h"
+#include "base/error.h"
+#include "common_codec/archive.h"
+#include "mesh/generators.h"
+#include "mesh/io.h"
+#include "support.h"
+
+using namespace catpaq;
+using namespace catpaq::aqp;
+using test::build;
+using test::Built;
+
+namespace {
+
+const Built& sphere_dataset() {
+    static const Built b = build(make_sphere(20000, 7), "sphere");
+    return b;
+}
+
+const Built& bunny_dataset() {
+    static const Built b = build(read_mesh(std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply"), "bunny");
+    return b;
+}
+
+const Built& torus_dataset() {
+    AqpBuildOptions options;
+    options.patch_level = 4;  // deeper than the default, for more levels
+    static const Built b = build(make_torus(12000, 3), "torus", options);
+    return b;
+}
+
+// Rewrites `from` into `to` with node (patch, level) changed by `edit` (which gets the decoded
+// grid, then the node is re-encoded against the same coarser level).
+void rewrite_with_edit(const std::string& from, const std::string& to, uint32_t patch, int level,
+                       const std::function<void(PatchGrid&)>& edit) {
+    AqpDataset d(from);
+    ArchiveWriter w(to, ArchiveKind::Aqp);
+    const std::vector<ArchiveEntry>& entries = d.archive().entries();
+    for (size_t i = 0; i < entries.size(); ++i) {
+        std::string error;
+        const uint8_t* bytes = d.archive().node(i, &error);
+        ASSERT_NE(bytes, nullptr) << error;
+        if (aqp_key_patch(entries[i].key) != patch || aqp_key_level(entries[i].key) != level) {
+            w.add_node(entries[i], bytes, entries[i].size);
+            continue;
+        }
+        std::vector<PatchGrid> levels = d.decode_levels(patch, level);
+        edit(levels.back());
+        std::vector<uint8_t> node =
+            encode_patch_node(levels.back(), level > 0 ? &levels[level - 1] : nullptr, d.meta().has_colors());
+        w.add_node(entries[i], node.data(), node.size());
+    }
+    w.finish(d.archive().meta());
+}
+
+}  // namespace
+
+TEST(AqpDataset, SharedEdgeAndCornerSamplesAreBitIdenticalAtEveryLevel) {
+    for (const Built* b : {&sphere_dataset(), &torus_dataset(), &bunny_dataset()}) {
+        AqpDataset d(b->path);
+        AqpVerifyReport r = verify_aqp(d);
+        EXPECT_EQ(r.shared_sample_mismatches, 0u) << b->path;
+        EXPECT_EQ(r.corrupt_nodes, 0u) << (r.problems.empty() ? "" : r.problems[0]);
+        EXPECT_EQ(r.nodes, d.patch_count() * size_t(d.finest_level() + 1));
+        EXPECT_TRUE(r.ok());
+    }
+}
+
+TEST(AqpDataset, CoarseLevelsAreExactSubsetsOfFineOnes) {
+    for (const Built* b : {&sphere_dataset(), &torus_dataset()}) {
+        AqpDataset d(b->path);
+        EXPECT_EQ(verify_aqp(d).nesting_mismatches, 0u);
+        // And directly: level l's samples are level k's at stride 2^(k-l), in every patch.
+        const int k = d.finest_level();
+        for (uint32_t p = 0; p < d.patch_count(); p += 7) {
+            const std::vector<PatchGrid> levels = d.decode_levels(p, k);
+            for (int l = 0; l < k; ++l)
+                for (int j = 0; j < levels[l].size; ++j)
+                    for (int i = 0; i < levels[l].size; ++i) {
+                        const int s = 1 << (k - l);
+                        ASSERT_EQ(levels[l].position[levels[l].index(i, j)], levels[k].position[levels[k].index(i * s, j * s)]);
+                        ASSERT_EQ(levels[l].normal[levels[l].index(i, j)], levels[k].normal[levels[k].index(i * s, j * s)]);
+                    }
+        }
+    }
+}
+
+TEST(AqpDataset, AClosedInputWeldsIntoAClosedMeshAtEveryLevel) {
+    for (const Built* b : {&sphere_dataset(), &torus_dataset(), &bunny_dataset()}) {
+        AqpDataset d(b->path);
+        for (int l = 0; l <= d.finest_level(); ++l) {
+            const Mesh m = aqp_level_mesh(d, l);
+            const EdgeCounts e = count_edges(m.indices);
+            EXPECT_EQ(e.border, 0u) << b->path << " level " << l;
+            EXPECT_EQ(e.nonmanifold, 0u) << b->path << " level " << l;
+            // Welding merged every shared sample: without it the same mesh has borders.
+            EXPECT_GT(count_edges(aqp_level_mesh(d, l, false).indices).border, 0u);
+        }
+    }
+}
+
+TEST(AqpDataset, StoredBoundsHoldAgainstTheInputBothWays) {
+    test::expect_bounds_hold(make_sphere(20000, 7), sphere_dataset().path);
+    test::expect_bounds_hold(read_mesh(std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply"), bunny_dataset().path);
+}
+
+TEST(AqpDataset, StoredBoundsAreMonotoneAndShrinkTowardsTheFinestLevel) {
+    const Built& b = torus_dataset();
+    AqpDataset d(b.path);
+    EXPECT_EQ(verify_aqp(d).monotonicity_violations, 0u);
+    const int k = d.finest_level();
+    ASSERT_GE(k, 3);
+    for (uint32_t p = 0; p < d.patch_count(); ++p)
+        for (int l = 0; l < k; ++l) ASSERT_GE(d.entry(p, l).error, d.entry(p, l + 1).error);
+    // Refinement pays: the finest level's largest bound is well below the coarsest's.
+    EXPECT_LT(b.report.levels[k].max_error, 0.25 * b.report.levels[0].max_error);
+    // And the finest level is within a few quantization steps of the input where the input is
+    // smooth and finely sampled.
+    EXPECT_LT(b.report.levels[k].max_error, 0.01 * b.report.diagonal);
+}
+
+TEST(AqpDataset, TheReportAgreesWithTheDataset) {
+    const Built& b = sphere_dataset();
+    AqpDataset d(b.path);
+    EXPECT_EQ(d.patch_count(), b.report.patches);
+    EXPECT_EQ(d.finest_level(), b.report.patch_level);
+    EXPECT_EQ(d.meta().input_triangles, 20000u);
+    EXPECT_TRUE(d.meta().has_colors());
+    EXPECT_EQ(d.meta().step, b.report.step);
+    EXPECT_LE(b.report.precision, b.report.precision_asked * (1 + 1e-12));
+    uint64_t payload = 0;
+    for (const ArchiveEntry& e : d.archive().entries()) payload += e.size;
+    EXPECT_EQ(payload, b.report.payload_bytes);
+    EXPECT_NEAR(b.report.bits_per_sample, 8.0 * double(payload) / double(b.report.samples), 1e-9);
+    EXPECT_EQ(b.report.location_misses, 0u);
+}
+
+TEST(AqpDataset, VerifyCatchesAMovedSharedEdgeSample) {
+    const Built& b = sphere_dataset();
+    const std::string broken = (test::scratch_dir() / "moved_edge.cpq").string();
+    const int k = AqpDataset(b.path).finest_level();
+    rewrite_with_edit(b.path, broken, 3, k, [](PatchGrid& g) { g.position[g.index(1, 0)][0] ^= 1; });
+    AqpVerifyReport r = verify_aqp(AqpDataset(broken));
+    EXPECT_EQ(r.shared_sample_mismatches, 1u);
+    EXPECT_FALSE(r.ok());
+    // ... and the welded mesh opens there.
+    EXPECT_GT(count_edges(aqp_level_mesh(AqpDataset(broken), k).indices).border, 0u);
+}
+
+TEST(AqpDataset, VerifyCatchesACoarseSampleThatIsNotTheFineOne) {
+    const Built& b = sphere_dataset();
+    const std::string broken = (test::scratch_dir() / "not_nested.cpq").string();
+    const int k = AqpDataset(b.path).finest_level();
+    rewrite_with_edit(b.path, broken, 5, k, [](PatchGrid& g) { g.normal[g.index(2, 2)] ^= 0x0101; });
+    AqpVerifyReport r = verify_aqp(AqpDataset(broken));
+    EXPECT_EQ(r.nesting_mismatches, 1u);
+    EXPECT_FALSE(r.ok());
+}
+
+TEST(AqpDataset, ACorruptNodeIsReportedNotACrash) {
+    const Built& b = sphere_dataset();
+    const std::string broken = (test::scratch_dir() / "corrupt.cpq").string();
+    std::filesystem::copy_file(b.path, broken, std::filesystem::copy_options::overwrite_existing);
+    {
+        AqpDataset d(broken);
+        const ArchiveEntry& e = d.entry(0, 1);
+        FILE* f = std::fopen(broken.c_str(), "r+b");
+        ASSERT_NE(f, nullptr);
+        std::fseek(f, long(e.offset + e.size / 2), SEEK_SET);
+        std::fputc(0x5a, f);
+        std::fclose(f);
+    }
+    AqpDataset d(broken);
+    EXPECT_THROW(d.decode(0, 1), Error);
+    AqpVerifyReport r = verify_aqp(d);
+    EXPECT_GT(r.corrupt_nodes, 0u);
+    EXPECT_FALSE(r.ok());
+}
+
+TEST(AqpDataset, BadInputIsRefusedWithAMessageAndLeavesNoFile) {
+    const std::string path = (test::scratch_dir() / "bad.cpq").string();
+    std::filesystem::remove(path);
+    Mesh empty;
+    try {
+        build(empty, "bad");
+        FAIL() << "an empty mesh was converted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("no triangles"), std::string::npos) << e.what();
+    }
+    Mesh nan = make_sphere(500, 1);
+    nan.positions[3][0] = std::nan("");
+    EXPECT_THROW(build(nan, "bad"), Error);
+    Mesh infinite = make_sphere(500, 1);
+    infinite.positions[5][2] = INFINITY;
+    EXPECT_THROW(build(infinite, "bad"), Error);
+    EXPECT_THROW(build(test::moebius_band(40), "bad"), Error);
+    AqpBuildOptions too_deep;
+    too_deep.patch_level = kMaxPatchLevel + 1;
+    EXPECT_THROW(build(make_sphere(500, 1), "bad", too_deep), Error);
+    AqpBuildOptions tight;
+    tight.memory_budget = 1 << 20;
+    try {
+        build(make_sphere(500, 1), "bad", tight);
+        FAIL() << "a 1 MiB budget was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("budget"), std::string::npos) << e.what();
+    }
+    EXPECT_FALSE(std::filesystem::exists(path));
+}
