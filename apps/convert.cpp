@@ -11,17 +11,32 @@
 #include "catp/lattice.h"
 #include "mesh/io.h"
 
+#include <nlohmann/json.hpp>
+
+#include "apps/convert_formats.h"
+
 namespace catpaq {
 
 static const char* kConvertUsage =
-    "usage: catpaq convert INPUT -o OUTPUT.cpq [options]\n"
-    "  Converts a mesh (PLY, OBJ, OFF, STL) into a streamable multiresolution dataset.\n"
+    "usage: catpaq convert INPUT -o OUTPUT.cpq [--format catp|aqp|points] [options]\n"
+    "  Converts a mesh (PLY, OBJ, OFF, STL) into a streamable multiresolution dataset: CATP\n"
+    "  (default) or AQP; or a point cloud (PLY, XYZ, PTS, LAS; or a mesh's vertices or surface\n"
+    "  samples) into a point dataset.\n"
     "options:\n"
     "  -o, --output FILE        output dataset (.cpq), written atomically\n"
-    "  --format catp            output format (catp: Compact Adaptive TetraPuzzles)\n"
-    "  --precision P            the finest level's largest distance from the input: P in model\n"
-    "                           units, or Pe in mean input edges (default 0.1e); the vertex layout's\n"
-    "                           grid and the leaf level are chosen so that quantization stays within it\n"
+    "  --format F               catp (Compact Adaptive TetraPuzzles), aqp (Adaptive Quad Patches)\n"
+    "                           or points (a kd-tree of splats)\n"
+    "  --threads N              worker threads (default: all cores)\n"
+    "  --json                   the report as one JSON object on stdout (progress stays on stderr)\n"
+    "  --quiet                  no progress bar or report\n"
+    "catp and aqp:\n"
+    "  --precision P            the finest level's largest quantization distance: P in model\n"
+    "                           units, or Pe in mean input edges (default 0.1e)\n"
+    "  --memory SIZE            memory budget, e.g. 512M or 4G (catp: default half the physical\n"
+    "                           memory, PLY input is streamed and scratch data beyond the budget goes\n"
+    "                           to anonymous files next to the output; aqp: works in core and\n"
+    "                           refuses at once when its estimate exceeds the budget)\n"
+    "catp:\n"
     "  --vertex-layout L        auto (default: position48 without colours; with colours rgb24 when\n"
     "                           its grid reaches the precision, else rgb18), rgb24 (8-bit colour,\n"
     "                           deeper leaves if needed), rgb18 (6-bit colour, 4x finer positions),\n"
@@ -29,11 +44,17 @@ static const char* kConvertUsage =
     "  --up AXIS                the model's up axis, stored for viewers: x, y, z, -x, -y, -z (default y)\n"
     "  --leaf-triangles N       target triangles per leaf fragment (default 2000)\n"
     "  --leaf-level L           force the leaf level of the diamond hierarchy\n"
-    "  --threads N              worker threads (default: all cores)\n"
-    "  --memory SIZE            memory budget, e.g. 512M or 4G (default: half the physical memory);\n"
-    "                           PLY input is streamed, scratch data beyond the budget goes to\n"
-    "                           anonymous files next to the output\n"
-    "  --quiet                  no progress bar or report\n";
+    "aqp:\n"
+    "  --patch-level K          finest level: patches of (2^K+1)^2 samples, 1 to 10 (default: about\n"
+    "                           twice the input's vertices in samples)\n"
+    "  --domain-triangles N     base domain triangles (default 0.6 sqrt(input triangles)); fewer\n"
+    "                           when patches outgrow their charts, more for folds\n"
+    "points:\n"
+    "  --node-points N          the most points in a node (default 4096)\n"
+    "  --split RULE             balanced (default; seed 000) or midpoint (seed 002)\n"
+    "  --error-fraction F       position error over the node's smallest splat radius (default 0.25)\n"
+    "  --normals ORIENT         orientation of estimated normals: auto (default), outward, up\n"
+    "  --surface-samples N      for a mesh input: N points sampled on its surface instead of its vertices\n";
 
 // Thin geometry the quantization grid cannot hold is drawn at no level: say how much, and what
 // it does to the error bounds (which include it) or to levels that draw nothing at all.
@@ -59,24 +80,88 @@ static void warn_about_lost_geometry(const CatpBuildReport& r) {
                      empty.find(',') != std::string::npos ? "them" : "it");
 }
 
+// The options only some formats take, and which: given to another format they are refused by
+// name rather than ignored.
+struct FormatOption {
+    const char* name;
+    const char* formats;
+};
+static const FormatOption kFormatOptions[] = {
+    {"precision", "catp aqp"},      {"memory", "catp aqp"},       {"vertex-layout", "catp"},
+    {"up", "catp"},                 {"leaf-triangles", "catp"},   {"leaf-level", "catp"},
+    {"patch-level", "aqp"},         {"domain-triangles", "aqp"},  {"node-points", "points"},
+    {"split", "points"},            {"error-fraction", "points"}, {"normals", "points"},
+    {"surface-samples", "points"},
+};
+
+// The CATP report as JSON (convert --json): the same figures as the table.
+static void print_catp_json(const CatpBuildReport& r, const ConvertJob& job, uint64_t own) {
+    nlohmann::json levels = nlohmann::json::array();
+    for (const CatpLevelStats& l : r.levels)
+        if (l.diamonds)
+            levels.push_back({{"level", l.level}, {"diamonds", l.diamonds}, {"fragments", l.fragments},
+                              {"triangles", l.triangles}, {"vertices", l.vertices}, {"bytes", l.bytes},
+                              {"max_error", l.max_error}});
+    nlohmann::json out{{"format", "catp"},
+                       {"input", {{"path", job.input}, {"vertices", r.input_vertices}, {"triangles", r.input_triangles}}},
+                       {"output", {{"path", job.output}, {"bytes", r.file_bytes}, {"diamonds", r.nodes}}},
+                       {"leaf_level", r.leaf_level},
+                       {"precision", r.precision},
+                       {"mean_edge", r.mean_edge},
+                       {"vertex_layout", r.layout.name()},
+                       {"grid", r.layout.grid},
+                       {"leaf_step", r.leaf_step},
+                       {"seconds", r.seconds},
+                       {"peak_rss", r.peak_rss},
+                       {"memory_budget", r.memory_budget + own},
+                       {"bytes_spilled", r.bytes_spilled},
+                       {"diagonal", r.diagonal},
+                       {"dropped_input", r.dropped_input},
+                       {"warnings", r.warnings},
+                       {"levels", levels}};
+    std::printf("%s\n", out.dump().c_str());
+}
+
 int cmd_convert(int argc, char** argv) {
     // Accept -o as an alias of --output.
     std::vector<char*> args(argv, argv + argc);
     std::string output_flag = "--output";
     for (auto& a : args)
         if (std::string(a) == "-o") a = output_flag.data();
-    Options options(int(args.size()), args.data(), kConvertUsage, {"quiet"});
+    Options options(int(args.size()), args.data(), kConvertUsage, {"quiet", "json"});
     if (options.help()) {
         std::printf("%s", kConvertUsage);
         return 0;
     }
-    if (options.positional().size() != 1) usage_error("expected one input mesh");
-    std::string input = options.positional()[0];
-    std::string output = options.require("output");
+    if (options.positional().size() != 1) usage_error("expected one input file");
+    ConvertJob job;
+    job.input = options.positional()[0];
+    job.output = options.require("output");
     // Refused at once, before reading anything: a directory, a missing or read-only directory.
-    check_output_file(output, "-o");
-    std::string format = options.get("format", "catp");
-    if (format != "catp") usage_error("unknown --format '%s' (available: catp)", format.c_str());
+    check_output_file(job.output, "-o");
+    const std::string format = options.get("format", "catp");
+    if (format != "catp" && format != "aqp" && format != "points")
+        usage_error("unknown --format '%s' (available: catp, aqp, points)", format.c_str());
+    for (const FormatOption& o : kFormatOptions)
+        if (options.has(o.name) && (" " + std::string(o.formats) + " ").find(" " + format + " ") == std::string::npos) {
+            std::string applies = o.formats;
+            if (size_t space = applies.find(' '); space != std::string::npos) applies.replace(space, 1, " and ");
+            usage_error("--%s applies to --format %s, not %s", o.name, applies.c_str(), format.c_str());
+        }
+    job.quiet = options.flag("quiet");
+    job.json = options.flag("json");
+    if (format == "aqp") return convert_aqp(options, job);
+    if (format == "points") return convert_points(options, job);
+    return convert_catp(options, job);
+}
+
+void prepare_output(const ConvertJob& job) {
+    for (const std::string& stale : remove_stale_temporaries(job.output))
+        std::fprintf(stderr, "catpaq convert: removed '%s', left by an interrupted run\n", stale.c_str());
+}
+
+// CATP: build_catp_file (catp/builder.h) with the options above; the report as a table or JSON.
+int convert_catp(Options& options, const ConvertJob& job) {
     CatpBuildSettings settings;
     settings.leaf_triangles = size_t(options.integer("leaf-triangles", 2000, 50, 1000000));
     settings.leaf_level = int(options.integer("leaf-level", -1, -1, kMaxLevel - 3));
@@ -119,18 +204,22 @@ int cmd_convert(int argc, char** argv) {
         }
         settings.memory_budget = process_budget - own;
     }
-    bool quiet = options.flag("quiet");
-    settings.progress = !quiet;
+    settings.progress = !job.quiet;
     options.finish();
 
-    for (const std::string& stale : remove_stale_temporaries(output))
-        std::fprintf(stderr, "catpaq convert: removed '%s', left by an interrupted run\n", stale.c_str());
+    prepare_output(job);
+    const std::string& input = job.input;
+    const std::string& output = job.output;
     CatpBuildReport r = build_catp_file(input, output, settings);
     for (const std::string& w : r.warnings) std::fprintf(stderr, "catpaq convert: warning: %s\n", w.c_str());
     for (const std::string& d : r.dropped_input)
         std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", input.c_str(), d.c_str());
     warn_about_lost_geometry(r);
-    if (quiet) return 0;
+    if (job.json) {
+        print_catp_json(r, job, own);
+        return 0;
+    }
+    if (job.quiet) return 0;
     size_t vertices = 0, triangles = 0;
     for (const CatpLevelStats& l : r.levels) {
         vertices += l.vertices;

@@ -5,6 +5,7 @@
 #include <fstream>
 
 #include "apps/commands.h"
+#include "apps/verify_formats.h"
 #include "base/error.h"
 #include "base/options.h"
 #include "catp/verify.h"
@@ -15,22 +16,34 @@ namespace catpaq {
 
 static const char* kVerifyUsage =
     "usage: catpaq verify DATASET.cpq [--mesh ORIGINAL] [--samples N]\n"
-    "  Decodes every node and checks checksums, slot masks, triangle counts, monotone errors and\n"
+    "  Runs the checks of the dataset's format. CATP: decodes every node and checks checksums,\n"
+    "  slot masks, triangle counts, monotone errors and\n"
     "  that the fragments on both sides of every shared face have identical borders (on each\n"
     "  uniform level cut and a random mixed cut). With --mesh, measures per level the distance\n"
     "  between the level's surface and the original (both directions, largest and root mean\n"
     "  square over surface samples), in model units and relative to the bounding-box diagonal,\n"
     "  fails a level whose measured distance exceeds its stored error bound, and fails border\n"
     "  edges of the cuts that are not on the original's border (cracks, missing geometry).\n"
+    "  AQP: decodes every node and checks that shared edges and corners are identical in both\n"
+    "  patches at every level, levels nest, bounds are monotone; with --mesh, measures each level\n"
+    "  against the original (cleaned as convert cleans it) in both directions and fails a level\n"
+    "  beyond its stored bound. Points: decodes every node and checks monotone errors, nested\n"
+    "  boxes, splats inside their boxes and that the leaves hold every input point; with --mesh\n"
+    "  (the original point file), that every input point is within each depth's bound of a splat.\n"
     "  Exit status 1 if any check fails.\n"
     "options:\n"
-    "  --mesh FILE     the original mesh (PLY, OBJ, OFF, STL)\n"
+    "  --mesh FILE     the original input (a mesh: PLY, OBJ, OFF, STL; for points any point file)\n"
     "  --samples N     surface samples per level and direction (default 50000)\n"
     "  --quiet         no progress display\n";
 
 // CATP: decodes every diamond, checks the invariants and, with the original, measures each
 // level's distance to it (catp/verify.h); prints the report.
-static int verify_catp_dataset(const std::string& dataset, const std::string& mesh_path, const VerifySettings& settings) {
+int verify_catp_dataset(const VerifyJob& job) {
+    const std::string& dataset = job.dataset;
+    const std::string& mesh_path = job.original;
+    VerifySettings settings;
+    settings.samples_per_level = job.samples;
+    settings.progress = job.progress;
     Mesh original;
     if (!mesh_path.empty()) original = read_mesh(mesh_path);
     VerifyReport r = verify_catp(dataset, mesh_path.empty() ? nullptr : &original, settings);
@@ -94,9 +107,13 @@ static int verify_catp_dataset(const std::string& dataset, const std::string& me
 // checksums are one of them).
 struct Verifier {
     ArchiveKind kind;
-    int (*run)(const std::string& dataset, const std::string& mesh_path, const VerifySettings& settings);
+    int (*run)(const VerifyJob& job);
 };
-static const Verifier kVerifiers[] = {{ArchiveKind::Catp, verify_catp_dataset}};
+static const Verifier kVerifiers[] = {
+    {ArchiveKind::Catp, verify_catp_dataset},
+    {ArchiveKind::Aqp, verify_aqp_dataset},
+    {ArchiveKind::Points, verify_points_dataset},
+};
 
 // The kind named in a dataset's header; CATP when the header cannot be read, so that its verifier
 // reports the problem (a missing file, a corrupt header) as it always has.
@@ -116,16 +133,17 @@ int cmd_verify(int argc, char** argv) {
         return 0;
     }
     if (options.positional().size() != 1) usage_error("expected one dataset");
-    std::string mesh_path = options.get("mesh", "");
-    VerifySettings settings;
-    settings.samples_per_level = size_t(options.integer("samples", 50000, 100, 100000000));
-    settings.progress = !options.flag("quiet");
+    VerifyJob job;
+    job.dataset = options.positional()[0];
+    job.original = options.get("mesh", "");
+    job.samples = size_t(options.integer("samples", 50000, 100, 100000000));
+    job.progress = !options.flag("quiet");
     options.finish();
-    const std::string& dataset = options.positional()[0];
-    const ArchiveKind kind = dataset_kind(dataset);
+    const ArchiveKind kind = dataset_kind(job.dataset);
     for (const Verifier& v : kVerifiers)
-        if (v.kind == kind) return v.run(dataset, mesh_path, settings);
-    fail("'%s' holds a dataset of kind %s: this build has no verifier for it", dataset.c_str(), archive_kind_name(kind));
+        if (v.kind == kind) return v.run(job);
+    fail("'%s' holds a dataset of kind %s: this build has no verifier for it", job.dataset.c_str(),
+         archive_kind_name(kind));
 }
 
 }  // namespace catpaq

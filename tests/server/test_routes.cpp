@@ -47,7 +47,7 @@ TEST_F(Routes, CatalogListsValidDatasetsWithKindSizeNodeCountBoundsAndUrls) {
 
     const json& beta = by_name["sub/beta"];
     EXPECT_EQ(beta.at("kind"), "aqp");
-    EXPECT_FALSE(beta.contains("bounds"));  // only CATP meta is decoded
+    EXPECT_FALSE(beta.contains("bounds"));  // its meta is not AQP's: served without a description
     EXPECT_EQ(beta.at("urls").at("file"), "/files/sub/beta.cpq");
 }
 

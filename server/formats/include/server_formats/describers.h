@@ -1,5 +1,5 @@
 #pragma once
-// The dataset describers of this build (server/describe.h), one per format it knows: CATP now.
+// The dataset describers of this build (server/describe.h), one per format it knows: CATP, AQP, points.
 // `catpaq serve` gives them to the server; a format without one is served all the same.
 #include "server/describe.h"
 

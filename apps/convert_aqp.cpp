@@ -1,0 +1,145 @@
+// catpaq convert --format aqp: a mesh in, an Adaptive Quad Patches dataset out (aqp/build.h).
+#include <cstdio>
+#include <string>
+
+#include <nlohmann/json.hpp>
+
+#include "apps/convert_formats.h"
+#include "aqp/build.h"
+#include "aqp/format.h"
+#include "base/error.h"
+#include "mesh/io.h"
+
+namespace catpaq {
+
+namespace {
+
+// What cleaning did to the input (aqp/clean.h), as JSON: every count, zero or not, so that a
+// script can rely on the keys.
+nlohmann::json clean_json(const aqp::CleanReport& c) {
+    return {{"input_vertices", c.input_vertices},
+            {"input_triangles", c.input_triangles},
+            {"welded_vertices", c.welded_vertices},
+            {"degenerate_triangles", c.degenerate_triangles},
+            {"duplicate_triangles", c.duplicate_triangles},
+            {"nonmanifold_edges", c.nonmanifold_edges},
+            {"nonmanifold_vertices", c.nonmanifold_vertices},
+            {"split_vertices", c.split_vertices},
+            {"nonmanifold_triangles_removed", c.nonmanifold_triangles_removed},
+            {"flipped_triangles", c.flipped_triangles},
+            {"dropped_components", c.dropped_components},
+            {"dropped_component_triangles", c.dropped_component_triangles},
+            {"unreferenced_vertices", c.unreferenced_vertices},
+            {"vertices", c.vertices},
+            {"triangles", c.triangles},
+            {"components", c.components},
+            {"border_edges", c.border_edges},
+            {"border_loops", c.border_loops},
+            {"genus", c.genus},
+            {"summary", c.summary()}};
+}
+
+void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::vector<std::string>& dropped) {
+    const aqp::ParamCheck& pc = r.domain.check;
+    nlohmann::json levels = nlohmann::json::array();
+    for (const aqp::AqpLevelStats& l : r.levels)
+        levels.push_back({{"level", l.level}, {"nodes", l.nodes}, {"samples", l.samples}, {"bytes", l.bytes},
+                          {"max_error", l.max_error}, {"mean_error", l.mean_error}});
+    nlohmann::json out{
+        {"format", "aqp"},
+        {"input", {{"path", job.input}, {"vertices", r.clean.input_vertices}, {"triangles", r.clean.input_triangles}}},
+        {"output", {{"path", job.output}, {"bytes", r.file_bytes}, {"payload_bytes", r.payload_bytes}}},
+        {"clean", clean_json(r.clean)},
+        {"domain",
+         {{"base_vertices", r.domain.base_vertices},
+          {"base_triangles", r.domain.base_triangles},
+          {"base_border_edges", r.domain.base_border_edges},
+          {"bijective", pc.bijective()},
+          {"angle_distortion_mean", pc.angle_distortion_mean},
+          {"angle_distortion_p99", pc.angle_distortion_p99},
+          {"angle_distortion_max", pc.angle_distortion_max},
+          {"area_distortion_mean", pc.area_distortion_mean},
+          {"area_distortion_p99", pc.area_distortion_p99},
+          {"area_distortion_max", pc.area_distortion_max}}},
+        {"patches", r.patches},
+        {"patch_level", r.patch_level},
+        {"samples", r.samples},
+        {"bits_per_sample", r.bits_per_sample},
+        {"step", r.step},
+        {"precision", r.precision},
+        {"precision_asked", r.precision_asked},
+        {"mean_edge", r.mean_edge},
+        {"diagonal", r.diagonal},
+        {"collapsed_triangles", r.collapsed_triangles},
+        {"seconds", r.seconds},
+        {"peak_rss", r.peak_rss},
+        {"memory_estimate", r.memory_estimate},
+        {"dropped_input", dropped},
+        {"warnings", r.warnings},
+        {"levels", levels}};
+    std::printf("%s\n", out.dump().c_str());
+}
+
+void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job) {
+    const aqp::ParamCheck& pc = r.domain.check;
+    std::printf("input:      %s: %zu vertices, %zu triangles\n", job.input.c_str(), r.clean.input_vertices,
+                r.clean.input_triangles);
+    std::printf("cleaned:    %zu vertices, %zu triangles, %zu component%s, genus %d, %zu border loops\n",
+                r.clean.vertices, r.clean.triangles, r.clean.components, r.clean.components == 1 ? "" : "s",
+                r.clean.genus, r.clean.border_loops);
+    for (const std::string& line : r.clean.summary()) std::printf("            %s\n", line.c_str());
+    std::printf("output:     %s: %llu bytes, %zu patches of %d x %d samples (level %d)\n", job.output.c_str(),
+                (unsigned long long)r.file_bytes, r.patches, (1 << r.patch_level) + 1, (1 << r.patch_level) + 1,
+                r.patch_level);
+    std::printf("domain:     %zu base triangles; angle distortion mean %.3g, 99%% %.3g; area distortion mean %.3g, "
+                "99%% %.3g\n",
+                r.domain.base_triangles, pc.angle_distortion_mean, pc.angle_distortion_p99, pc.area_distortion_mean,
+                pc.area_distortion_p99);
+    std::printf("precision:  %.4g model units (%.3g mean edges of %.4g), step %.4g\n", r.precision,
+                r.mean_edge > 0 ? r.precision / r.mean_edge : 0.0, r.mean_edge, r.step);
+    std::printf("build:      %.2f s (reading excluded), %.0f input triangles/s, peak memory %.1f MiB\n", r.seconds,
+                r.seconds > 0 ? double(r.clean.input_triangles) / r.seconds : 0.0, double(r.peak_rss) / (1 << 20));
+    std::printf("phases:     clean %.2f s, parameterize %.2f s, resample %.2f s, errors %.2f s, encode %.2f s\n",
+                r.seconds_clean, r.seconds_parameterize, r.seconds_resample, r.seconds_errors, r.seconds_encode);
+    std::printf("size:       %.2f bits per finest sample over all levels (%zu distinct samples)\n", r.bits_per_sample,
+                r.samples);
+    std::printf("%6s %8s %12s %12s %14s %12s %12s\n", "level", "patches", "samples", "bytes", "bits/sample",
+                "max error", "mean error");
+    for (const aqp::AqpLevelStats& l : r.levels)
+        std::printf("%6d %8zu %12zu %12llu %14.2f %12.4g %12.4g\n", l.level, l.nodes, l.samples,
+                    (unsigned long long)l.bytes, l.samples ? 8.0 * double(l.bytes) / double(l.samples) : 0.0,
+                    l.max_error, l.mean_error);
+    std::printf("error is in model units; the bounding-box diagonal is %.6g\n", r.diagonal);
+}
+
+}  // namespace
+
+int convert_aqp(Options& options, const ConvertJob& job) {
+    aqp::AqpBuildOptions o;
+    const std::string precision = options.get("precision", "0.1e");
+    if (!aqp::parse_aqp_precision(precision, o.precision))
+        usage_error("--precision: '%s' is not a positive distance in model units (0.001) or in mean edges (0.1e)",
+                    precision.c_str());
+    o.patch_level = int(options.integer("patch-level", -1, 1, aqp::kMaxPatchLevel));
+    o.domain_triangles = size_t(options.integer("domain-triangles", 0, 4, 10000000));
+    o.threads = unsigned(options.integer("threads", 0, 0, 1024));
+    o.memory_budget = options.bytes("memory", 0);
+    o.progress = !job.quiet;
+    options.finish();
+
+    prepare_output(job);
+    std::vector<std::string> dropped;
+    const Mesh input = read_mesh(job.input, &dropped);
+    for (const std::string& d : dropped)
+        std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", job.input.c_str(), d.c_str());
+    aqp::AqpBuildReport r;
+    aqp::build_aqp_dataset(input, job.output, o, &r);
+    for (const std::string& w : r.warnings) std::fprintf(stderr, "catpaq convert: warning: %s\n", w.c_str());
+    if (job.json)
+        print_json(r, job, dropped);
+    else if (!job.quiet)
+        print_table(r, job);
+    return 0;
+}
+
+}  // namespace catpaq

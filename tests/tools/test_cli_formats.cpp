@@ -1,0 +1,159 @@
+// The catpaq tool on the AQP and point formats: convert --format aqp|points with the table and
+// --json reports, verify dispatching to each format's checks (passing on a faithful original,
+// failing on a moved one), and the options of one format refused by name for another.
+#include <gtest/gtest.h>
+
+#include <nlohmann/json.hpp>
+
+#include "cli_support.h"
+#include "common_codec/archive.h"
+#include "mesh/generators.h"
+#include "mesh/io.h"
+#include "points/sampling.h"
+
+using namespace catpaq;
+using namespace catpaq::cli_test;
+
+namespace {
+
+// The tool's standard output alone (its stderr goes to the test's), and the exit status.
+ToolRun run_stdout(const std::string& args) {
+    std::string command = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq " + args;
+    ToolRun r;
+    FILE* pipe = popen(command.c_str(), "r");
+    char buffer[4096];
+    size_t n;
+    while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
+    int status = pclose(pipe);
+    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    return r;
+}
+
+void write_xyz(const fs::path& path, const PointCloud& cloud) {
+    std::ofstream out(path);
+    out.precision(17);
+    for (const Vec3d& p : cloud.positions) out << p[0] << ' ' << p[1] << ' ' << p[2] << '\n';
+}
+
+Mesh translated(Mesh m, double dx) {
+    for (Vec3d& p : m.positions) p[0] += dx;
+    return m;
+}
+
+}  // namespace
+
+// convert --format aqp writes an AQP dataset, reports cleaning and levels as JSON, and verify
+// --mesh measures every level within its stored bound against the original.
+TEST(CliFormats, AqpConvertsReportsJsonAndVerifiesAgainstTheOriginal) {
+    fs::path in = scratch() / "aqp_sphere.ply", out = scratch() / "aqp_sphere.cpq";
+    write_ply(in.string(), make_sphere(8000, 5));
+    ToolRun c = run_stdout("convert " + in.string() + " -o " + out.string() + " --format aqp --json --quiet");
+    ASSERT_EQ(c.status, 0) << c.output;
+    const nlohmann::json report = nlohmann::json::parse(c.output);
+    EXPECT_EQ(report.at("format"), "aqp");
+    EXPECT_EQ(report.at("clean").at("dropped_components").get<size_t>(), 0u);
+    EXPECT_EQ(report.at("clean").at("genus").get<int>(), 0);
+    EXPECT_TRUE(report.at("domain").at("bijective").get<bool>());
+    const int k = report.at("patch_level").get<int>();
+    ASSERT_EQ(report.at("levels").size(), size_t(k + 1));
+    EXPECT_EQ(report.at("output").at("bytes").get<uint64_t>(), fs::file_size(out));
+    EXPECT_EQ(ArchiveReader(out.string()).header().kind, ArchiveKind::Aqp);
+
+    ToolRun v = run("verify " + out.string() + " --mesh " + in.string() + " --samples 3000 --quiet");
+    EXPECT_EQ(v.status, 0) << v.output;
+    EXPECT_NE(v.output.find("shared edges and corners ok"), std::string::npos) << v.output;
+    EXPECT_NE(v.output.find("level->original max"), std::string::npos) << v.output;
+    EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
+}
+
+// Against an original moved by far more than the coarsest bound, verify fails naming the level.
+TEST(CliFormats, AqpVerifyFailsAgainstAMovedOriginal) {
+    fs::path in = scratch() / "aqp_moved.ply", moved = scratch() / "aqp_moved_by.ply", out = scratch() / "aqp_moved.cpq";
+    const Mesh sphere = make_sphere(4000, 2);
+    write_ply(in.string(), sphere);
+    write_ply(moved.string(), translated(sphere, 0.5));
+    ASSERT_EQ(run("convert " + in.string() + " -o " + out.string() + " --format aqp --quiet").status, 0);
+    ToolRun v = run("verify " + out.string() + " --mesh " + moved.string() + " --samples 2000 --quiet");
+    EXPECT_EQ(v.status, 1) << v.output;
+    EXPECT_NE(v.output.find("above its stored bound"), std::string::npos) << v.output;
+    EXPECT_NE(v.output.find("verify: FAILED"), std::string::npos) << v.output;
+}
+
+// convert --format points on an XYZ file; verify finds every input point within each depth's
+// bound of a splat, and fails when one input point is moved away.
+TEST(CliFormats, PointsConvertAndVerifyEveryInputPointIsCovered) {
+    fs::path in = scratch() / "cloud.xyz", moved = scratch() / "cloud_moved.xyz", out = scratch() / "cloud.cpq";
+    PointCloud cloud = sample_surface(make_sphere(4000, 3), 30000, 9, false, false);
+    write_xyz(in, cloud);
+    ToolRun c = run_stdout("convert " + in.string() + " -o " + out.string() +
+                           " --format points --node-points 2000 --json --quiet");
+    ASSERT_EQ(c.status, 0) << c.output;
+    const nlohmann::json report = nlohmann::json::parse(c.output);
+    EXPECT_EQ(report.at("format"), "points");
+    EXPECT_EQ(report.at("input").at("points").get<size_t>(), 30000u);
+    EXPECT_TRUE(report.at("normals_estimated").get<bool>());
+    EXPECT_LE(report.at("worst_error_to_radius").get<double>(), 0.25 + 1e-9);
+    EXPECT_GT(report.at("levels").size(), 2u);
+
+    ToolRun v = run("verify " + out.string() + " --mesh " + in.string() + " --quiet");
+    EXPECT_EQ(v.status, 0) << v.output;
+    EXPECT_NE(v.output.find("leaves hold the input ok"), std::string::npos) << v.output;
+    EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
+
+    cloud.positions[12345][2] += 10.0;  // the sphere's radius is about 1
+    write_xyz(moved, cloud);
+    ToolRun f = run("verify " + out.string() + " --mesh " + moved.string() + " --quiet");
+    EXPECT_EQ(f.status, 1) << f.output;
+    EXPECT_NE(f.output.find("1 input points are farther than the bound"), std::string::npos) << f.output;
+}
+
+// A mesh becomes a point dataset from its vertices (saying that its faces are left out), or from
+// points sampled on its surface.
+TEST(CliFormats, PointsFromAMeshTakeItsVerticesOrSurfaceSamples) {
+    fs::path in = scratch() / "points_mesh.ply", out = scratch() / "points_mesh.cpq";
+    const Mesh sphere = make_sphere(6000, 4);
+    write_ply(in.string(), sphere);
+    ToolRun vertices = run("convert " + in.string() + " -o " + out.string() + " --format points --quiet");
+    ASSERT_EQ(vertices.status, 0) << vertices.output;
+    EXPECT_NE(vertices.output.find("left out: " + std::to_string(sphere.triangle_count()) + " faces"), std::string::npos)
+        << vertices.output;
+    ToolRun sampled = run_stdout("convert " + in.string() + " -o " + out.string() +
+                                 " --format points --surface-samples 7000 --json --quiet");
+    ASSERT_EQ(sampled.status, 0) << sampled.output;
+    EXPECT_EQ(nlohmann::json::parse(sampled.output).at("input").at("points").get<size_t>(), 7000u);
+}
+
+// An option of one format given to another is refused by name before anything is read or
+// written; so are unknown formats.
+TEST(CliFormats, OptionsOfAnotherFormatAreRefusedByName) {
+    fs::path in = scratch() / "refuse.ply", out = scratch() / "refuse.cpq";
+    write_ply(in.string(), make_sphere(500, 1));
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --format aqp --vertex-layout rgb24",
+                   "--vertex-layout applies to --format catp, not aqp");
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --node-points 100",
+                   "--node-points applies to --format points, not catp");
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --format points --memory 1G",
+                   "--memory applies to --format catp and aqp, not points");
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --format quads",
+                   "unknown --format 'quads' (available: catp, aqp, points)");
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --format points --split halves",
+                   "--split: 'halves' is not one of balanced, midpoint");
+    expect_nothing_written(out);
+}
+
+// What AQP cannot map is refused with a message and leaves nothing behind: a mesh without
+// triangles, and a memory budget below the converter's estimate.
+TEST(CliFormats, AqpRefusesWhatItCannotConvertAndWritesNothing) {
+    fs::path in = scratch() / "aqp_refused.ply", cloud = scratch() / "aqp_cloud.ply", out = scratch() / "aqp_refused.cpq";
+    write_ply(in.string(), make_sphere(20000, 1));
+    Mesh points_only = make_sphere(200, 1);
+    points_only.indices.clear();
+    write_ply(cloud.string(), points_only);
+    ToolRun none = run("convert " + cloud.string() + " -o " + out.string() + " --format aqp --quiet");
+    EXPECT_EQ(none.status, 1) << none.output;
+    EXPECT_NE(none.output.find("triangles"), std::string::npos) << none.output;
+    ToolRun budget = run("convert " + in.string() + " -o " + out.string() + " --format aqp --memory 1M --quiet");
+    EXPECT_EQ(budget.status, 1) << budget.output;
+    EXPECT_NE(budget.output.find("above the budget of 1 MiB"), std::string::npos) << budget.output;
+    expect_nothing_written(out);
+}
