@@ -1,5 +1,7 @@
 // catpaq convert --format aqp: a mesh in, an Adaptive Quad Patches dataset out (aqp/build.h).
+#include <cctype>
 #include <cstdio>
+#include <memory>
 #include <string>
 
 #include <nlohmann/json.hpp>
@@ -7,8 +9,10 @@
 #include "apps/convert_formats.h"
 #include "aqp/build.h"
 #include "aqp/format.h"
+#include "aqp_reconstruct/poisson.h"
 #include "base/error.h"
 #include "mesh/io.h"
+#include "points/point_cloud.h"
 
 namespace catpaq {
 
@@ -39,7 +43,24 @@ nlohmann::json clean_json(const aqp::CleanReport& c) {
             {"summary", c.summary()}};
 }
 
-void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::vector<std::string>& dropped) {
+// True for files read as point clouds: the point formats by extension, and a PLY without faces.
+bool is_point_input(const std::string& path, const Mesh* mesh) {
+    std::string ext = path.substr(path.find_last_of('.') == std::string::npos ? path.size() : path.find_last_of('.'));
+    for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    if (ext == ".xyz" || ext == ".txt" || ext == ".pts" || ext == ".las" || ext == ".laz") return true;
+    return mesh && mesh->triangle_count() == 0;
+}
+
+nlohmann::json poisson_json(const aqp::PoissonReport* p) {
+    if (!p) return nullptr;
+    return {{"input_points", p->input_points},       {"normals_estimated", p->normals_estimated},
+            {"unoriented_dropped", p->unoriented_dropped}, {"average_spacing", p->average_spacing},
+            {"vertices", p->vertices},               {"triangles", p->triangles},
+            {"seconds", p->seconds}};
+}
+
+void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::vector<std::string>& dropped,
+                const aqp::PoissonReport* poisson) {
     const aqp::ParamCheck& pc = r.domain.check;
     nlohmann::json levels = nlohmann::json::array();
     for (const aqp::AqpLevelStats& l : r.levels)
@@ -49,6 +70,7 @@ void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::
         {"format", "aqp"},
         {"input", {{"path", job.input}, {"vertices", r.clean.input_vertices}, {"triangles", r.clean.input_triangles}}},
         {"output", {{"path", job.output}, {"bytes", r.file_bytes}, {"payload_bytes", r.payload_bytes}}},
+        {"poisson", poisson_json(poisson)},
         {"clean", clean_json(r.clean)},
         {"domain",
          {{"base_vertices", r.domain.base_vertices},
@@ -80,8 +102,17 @@ void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::
     std::printf("%s\n", out.dump().c_str());
 }
 
-void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job) {
+void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job, const aqp::PoissonReport* poisson) {
     const aqp::ParamCheck& pc = r.domain.check;
+    if (poisson) {
+        std::printf("points:     %s: %zu points; Poisson surface (CGAL) of %zu vertices, %zu triangles in %.2f s "
+                    "(spacing %.4g",
+                    job.input.c_str(), poisson->input_points, poisson->vertices, poisson->triangles, poisson->seconds,
+                    poisson->average_spacing);
+        if (poisson->normals_estimated)
+            std::printf("; normals estimated, %zu points left out unoriented", poisson->unoriented_dropped);
+        std::printf(")\n");
+    }
     std::printf("input:      %s: %zu vertices, %zu triangles\n", job.input.c_str(), r.clean.input_vertices,
                 r.clean.input_triangles);
     std::printf("cleaned:    %zu vertices, %zu triangles, %zu component%s, genus %d, %zu border loops\n",
@@ -128,17 +159,31 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     options.finish();
 
     prepare_output(job);
+    // A mesh is converted as it is; a point cloud (with normals, or they are estimated) becomes a
+    // closed surface by Poisson reconstruction first, as the paper does for scans.
     std::vector<std::string> dropped;
-    const Mesh input = read_mesh(job.input, &dropped);
+    Mesh input;
+    std::unique_ptr<aqp::PoissonReport> poisson;
+    if (!is_point_input(job.input, nullptr)) input = read_mesh(job.input, &dropped);
+    if (is_point_input(job.input, &input)) {
+        PointReadInfo info;
+        const PointCloud cloud = read_point_cloud(job.input, &info);
+        dropped = info.dropped;
+        if (!job.quiet) std::fprintf(stderr, "catpaq convert: %zu points: Poisson reconstruction...\n", cloud.size());
+        poisson = std::make_unique<aqp::PoissonReport>();
+        input = aqp::poisson_reconstruct(cloud.positions, cloud.normals, aqp::PoissonOptions{}, poisson.get());
+        if (cloud.has_colors())
+            dropped.push_back("point colours (the reconstructed surface has none)");
+    }
     for (const std::string& d : dropped)
         std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", job.input.c_str(), d.c_str());
     aqp::AqpBuildReport r;
     aqp::build_aqp_dataset(input, job.output, o, &r);
     for (const std::string& w : r.warnings) std::fprintf(stderr, "catpaq convert: warning: %s\n", w.c_str());
     if (job.json)
-        print_json(r, job, dropped);
+        print_json(r, job, dropped, poisson.get());
     else if (!job.quiet)
-        print_table(r, job);
+        print_table(r, job, poisson.get());
     return 0;
 }
 

@@ -157,3 +157,21 @@ TEST(CliFormats, AqpRefusesWhatItCannotConvertAndWritesNothing) {
     EXPECT_NE(budget.output.find("above the budget of 1 MiB"), std::string::npos) << budget.output;
     expect_nothing_written(out);
 }
+
+// A point cloud given to convert --format aqp becomes a closed surface by Poisson reconstruction
+// (normals estimated when the file has none), reported in the JSON, and then an AQP dataset.
+TEST(CliFormats, AqpFromAPointCloudReconstructsAClosedSurfaceFirst) {
+    fs::path in = scratch() / "aqp_cloud.xyz", out = scratch() / "aqp_cloud.cpq";
+    write_xyz(in, sample_surface(make_sphere(4000, 3), 6000, 11, false, false));
+    ToolRun c = run_stdout("convert " + in.string() + " -o " + out.string() + " --format aqp --json --quiet");
+    ASSERT_EQ(c.status, 0) << c.output;
+    const nlohmann::json report = nlohmann::json::parse(c.output);
+    EXPECT_EQ(report.at("poisson").at("input_points").get<size_t>(), 6000u);
+    EXPECT_EQ(report.at("poisson").at("normals_estimated").get<size_t>(), 6000u);
+    EXPECT_GT(report.at("poisson").at("triangles").get<size_t>(), 1000u);
+    EXPECT_EQ(report.at("clean").at("border_edges").get<size_t>(), 0u);
+    EXPECT_EQ(report.at("clean").at("components").get<size_t>(), 1u);
+    EXPECT_EQ(ArchiveReader(out.string()).header().kind, ArchiveKind::Aqp);
+    ToolRun v = run("verify " + out.string() + " --quiet");
+    EXPECT_EQ(v.status, 0) << v.output;
+}
