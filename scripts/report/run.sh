@@ -73,6 +73,8 @@ need rd_bench bench/catp/rd_bench
 need gen_mesh bench/catp/gen_mesh
 need memory_budget_bench bench/catp/memory_budget_bench
 need fetch_bench bench/client/fetch_bench
+need aqp_bench bench/aqp/aqp_bench
+need points_bench bench/points/points_bench
 
 # required NAME OUTFILE CMD...: runs a step the report needs, output to OUTFILE; on failure names
 # the step, shows the end of its output and stops the run (exit 1), so nothing half-measured is
@@ -276,6 +278,31 @@ else
 fi
 echo "$?" > "$RAW/render_bench_rc.txt"
 set -e
+
+# ---- (6) AQP beside CATP -------------------------------------------------------------------
+# The AQP converter on the bunny and a scan-like mesh with the CATP converter on the same meshes
+# in the same process (aqp_bench), and the bunny in AQP at its default finest level and one finer,
+# measured against the original by verify as CATP is in (1).
+if [[ $MODE == short ]]; then AQP_TRIS=200000; else AQP_TRIS=1000000; fi
+log "aqp_bench --scan $AQP_TRIS"
+required "aqp_bench" "$RAW/aqp_bench.txt" "$BUILD/bench/aqp/aqp_bench" --scan "$AQP_TRIS"
+for level in default 5; do
+    extra=(); [[ $level != default ]] && extra=(--patch-level "$level")
+    log "convert bunny --format aqp ($level)"
+    required "convert bunny aqp $level" "$RAW/aqp_bunny_$level.json" "$CATPAQ" convert "$BUNNY" \
+        -o "$WORK/root/bunny_aqp_$level.cpq" --format aqp --json --quiet "${extra[@]}"
+    log "verify --mesh bunny aqp ($level)"
+    required "verify bunny aqp $level" "$RAW/aqp_verify_bunny_$level.txt" "$CATPAQ" verify \
+        "$WORK/root/bunny_aqp_$level.cpq" --mesh "$BUNNY" --quiet
+done
+
+# ---- (7) points ----------------------------------------------------------------------------
+# The point converter and codec on random samples of the scan-like surface (points_bench: each
+# conversion in a child process for its own peak memory; meshoptimizer as the same-run baseline).
+if [[ $MODE == short ]]; then PT_SIZES=200000; PT_RUNS=2; else PT_SIZES=1000000,10000000; PT_RUNS=5; fi
+log "points_bench --sizes $PT_SIZES"
+required "points_bench" "$RAW/points_bench.txt" "$BUILD/bench/points/points_bench" --sizes "$PT_SIZES" \
+    --decode-runs "$PT_RUNS"
 
 T1=$(date +%s)
 echo "total_seconds: $((T1 - T0))" >> "$RAW/machine.txt"

@@ -1,0 +1,194 @@
+"""Sections 6 (AQP beside CATP) and 7 (points) of docs/RESULTS.md, from the raw outputs of
+aqp_bench, `catpaq convert --format aqp --json`, `catpaq verify` on AQP datasets and points_bench
+(scripts/report/run.sh). report.py calls aqp_section and points_section."""
+import json
+import os
+import re
+
+NUM = r"[-+0-9.eE]+"
+
+
+class ReportError(Exception):
+    pass
+
+
+def need(cond, what):
+    if not cond:
+        raise ReportError(what)
+
+
+def read(path):
+    with open(path) as f:
+        return f.read()
+
+
+def md_table(header, rows):
+    out = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    out += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(out)
+
+
+def parse_aqp_bench(text):
+    """aqp_bench output -> list of models with build, size, levels and the CATP reference."""
+    models = []
+    for block in re.split(r"^(?=model )", text, flags=re.M):
+        m = re.match(r"model (\S+): (\d+) triangles, (\d+) vertices", block)
+        if not m:
+            continue
+        d = {"name": m.group(1), "triangles": int(m.group(2)), "vertices": int(m.group(3))}
+        b = re.search(r"build (%s) s wall, (%s) s cpu .*?, (%s) input triangles/s, peak (%s) MiB" % (NUM, NUM, NUM, NUM), block)
+        need(b, "aqp_bench: no build line for %s" % d["name"])
+        d.update(wall=float(b.group(1)), cpu=float(b.group(2)), rate=float(b.group(3)), peak=float(b.group(4)))
+        s = re.search(r"size: (\d+) bytes file, (\d+) payload, (%s) bits/sample" % NUM, block)
+        need(s, "aqp_bench: no size line for %s" % d["name"])
+        d.update(file_bytes=int(s.group(1)), payload=int(s.group(2)), bits_per_sample=float(s.group(3)))
+        p = re.search(r"domain: (\d+) base triangles, (\d+) patches of (\d+)x\d+ samples, (\d+) samples", block)
+        need(p, "aqp_bench: no domain line for %s" % d["name"])
+        d.update(base=int(p.group(1)), patches=int(p.group(2)), side=int(p.group(3)), samples=int(p.group(4)))
+        a = re.search(r"distortion: angle mean (%s) p99 (%s) max (%s); area mean (%s) p99 (%s)" % ((NUM,) * 5), block)
+        need(a, "aqp_bench: no distortion line for %s" % d["name"])
+        d.update(angle_mean=float(a.group(1)), angle_p99=float(a.group(2)), area_mean=float(a.group(4)),
+                 area_p99=float(a.group(5)))
+        d["levels"] = [{"level": int(r[0]), "samples": int(r[1]), "bytes": int(r[2]), "bits": float(r[3]),
+                        "max_rel": float(r[4]), "mean_rel": float(r[5])}
+                       for r in re.findall(r"^\s+(\d+)\s+(\d+)\s+(\d+)\s+(%s)\s+(%s)\s+(%s)$" % (NUM, NUM, NUM), block, re.M)]
+        need(d["levels"], "aqp_bench: no level rows for %s" % d["name"])
+        c = re.search(r"reference, CATP on the same mesh: (%s) s wall, (%s) s cpu, (\d+) bytes, (\d+) levels, "
+                      r"bounds/diag finest (%s) coarsest (%s)" % (NUM, NUM, NUM, NUM), block)
+        need(c, "aqp_bench: no CATP reference for %s" % d["name"])
+        d["catp"] = {"wall": float(c.group(1)), "cpu": float(c.group(2)), "bytes": int(c.group(3)),
+                     "levels": int(c.group(4)), "finest_rel": float(c.group(5)), "coarsest_rel": float(c.group(6))}
+        models.append(d)
+    need(models, "aqp_bench.txt: no models parsed")
+    return models
+
+
+def parse_aqp_verify(text):
+    """verify on an AQP dataset -> per-level measured distances (relative to the diagonal)."""
+    need("verify: OK" in text, "AQP verify did not pass:\n" + text[-2000:])
+    rows = []
+    for r in re.findall(r"^\s*(\d+)\s+(\d+)\s+(%s)\s+(%s) \((%s)\)\s+(%s) \((%s)\)" % ((NUM,) * 5), text, re.M):
+        rows.append({"level": int(r[0]), "triangles": int(r[1]), "bound": float(r[2]), "l2o": float(r[3]),
+                     "l2o_rel": float(r[4]), "o2l": float(r[5]), "o2l_rel": float(r[6])})
+    need(rows, "AQP verify: no level rows")
+    return rows
+
+
+def parse_points_bench(text):
+    out = {"conversion": [], "splits": [], "rate": []}
+    for r in re.findall(r"^\s+(\d+)\s+(%s)\s+(%s)\s+(%s)\s+(\d+)\s+(%s)\s+(\d+)\s+(%s)\s+(%s)\s+(%s)\s+(%s)\s+(\S+)$"
+                        % ((NUM,) * 8), text, re.M):
+        out["conversion"].append({"points": int(r[0]), "wall": float(r[1]), "cpu": float(r[2]), "mpts": float(r[3]),
+                                  "peak": int(r[4]), "bpt": float(r[5]), "nodes": int(r[6]),
+                                  "b_stored": float(r[7]), "err_r": float(r[8]), "meshopt_mpts": float(r[9]),
+                                  "ratio": float(r[10]), "split": r[11]})
+    need(out["conversion"], "points_bench: no conversion rows")
+    d = re.search(r"^ours:\s+(%s) M points/s\s+(%s) B/point" % (NUM, NUM), text, re.M)
+    mo = re.search(r"^meshopt:\s+(%s) M points/s\s+(%s) B/point" % (NUM, NUM), text, re.M)
+    need(d and mo, "points_bench: no decode lines")
+    out["decode"] = {"ours": float(d.group(1)), "ours_b": float(d.group(2)), "meshopt": float(mo.group(1)),
+                     "meshopt_b": float(mo.group(2))}
+    for r in re.findall(r"^(scan|uneven)\s+(midpoint|balanced)\s+(\d+)\s+(\d+)\s+(\d+)\s+(\d+)\s+(%s)\s+(%s)$"
+                        % (NUM, NUM), text, re.M):
+        out["splits"].append(list(r))
+    for r in re.findall(r"^ (\d/\d)\s+(%s)\s+(%s)\s+(%s)\s+(%s)$" % ((NUM,) * 4), text, re.M):
+        out["rate"].append(list(r))
+    return out
+
+
+def aqp_section(raw, catp_verify_levels, catp_bunny_bytes, catp_convert_s, bunny_vertices, w):
+    """Section 6. `catp_verify_levels`: report.py's parse_verify rows of the CATP bunny."""
+    models = parse_aqp_bench(read(os.path.join(raw, "aqp_bench.txt")))
+    w("## 6. AQP beside CATP (aqp_bench, convert --format aqp, verify)")
+    w("")
+    w("The bunny converted both ways and measured by `verify --mesh` against the original (largest "
+      "two-sided distance of the finest level over surface samples, relative to the bounding-box "
+      "diagonal): CATP keeps the input's triangles at its finest level, AQP resamples the surface on "
+      "regular grids over its patches, so at a given size its error is that of the sampling. "
+      "Bits are per input vertex over all levels (the whole file).")
+    w("")
+    rows = []
+    fin = catp_verify_levels[-1]
+    rows.append(["CATP (default)", "%d levels" % len(catp_verify_levels), f"{catp_bunny_bytes:,}",
+                 "%.1f" % (8 * catp_bunny_bytes / bunny_vertices), "%.2g" % max(fin["l2o_rel"], fin["o2l_rel"]),
+                 catp_convert_s])
+    for level in ("default", "5"):
+        rep = json.loads(read(os.path.join(raw, "aqp_bunny_%s.json" % level)).strip().splitlines()[-1])
+        ver = parse_aqp_verify(read(os.path.join(raw, "aqp_verify_bunny_%s.txt" % level)))
+        f = ver[-1]
+        side = (1 << rep["patch_level"]) + 1
+        rows.append(["AQP (%s)" % ("default" if level == "default" else "--patch-level " + level),
+                     "%d patches of %dx%d, %s samples" % (rep["patches"], side, side, f"{rep['samples']:,}"),
+                     f"{rep['output']['bytes']:,}", "%.1f" % (8 * rep["output"]["bytes"] / bunny_vertices),
+                     "%.2g" % max(f["l2o_rel"], f["o2l_rel"]), "%.2f" % rep["seconds"]])
+    w(md_table(["bunny", "layout", "bytes", "bits / input vertex", "finest level, max distance / diagonal",
+                "convert s"], rows))
+    w("")
+    w("The converters on the same meshes in one process (`aqp_bench`; CATP as its reference): build "
+      "time, bytes, and the stored bounds of the finest level (AQP's are exact bounds of the parametric "
+      "distance, CATP's of the quantization and simplification), with AQP's bits per finest sample and "
+      "the parameterization's distortion (angle: singular value ratio; area-weighted mean and 99th "
+      "percentile).")
+    w("")
+    w(md_table(["mesh", "AQP build s", "CATP build s", "AQP / CATP time", "AQP bytes", "CATP bytes",
+                "AQP finest bound / diag", "CATP finest bound / diag", "AQP bits / finest sample (all levels)",
+                "AQP finest level alone", "angle distortion mean / p99"],
+               [[m["name"] + " (%s tri)" % f"{m['triangles']:,}", "%.2f" % m["wall"], "%.2f" % m["catp"]["wall"],
+                 "%.1f" % (m["wall"] / max(m["catp"]["wall"], 1e-9)), f"{m['file_bytes']:,}",
+                 f"{m['catp']['bytes']:,}", "%.2g" % m["levels"][-1]["max_rel"], "%.2g" % m["catp"]["finest_rel"],
+                 "%.1f" % m["bits_per_sample"], "%.1f" % m["levels"][-1]["bits"],
+                 "%.2f / %.2f" % (m["angle_mean"], m["angle_p99"])] for m in models]))
+    w("")
+    big = models[-1]
+    w("Per level on %s: bits per sample %s (coarse to fine): a coarse node's PNG costs its fixed "
+      "overhead (signature, header chunk, zlib stream: about 60 bytes) for a few samples, so levels 0-1 "
+      "cost more per sample than the finest. The paper's 24 bits per sample is %s here over all levels "
+      "(%.1f at the finest level alone)." %
+      (big["name"], ", ".join("%.0f" % l["bits"] for l in big["levels"]),
+       "met" if big["bits_per_sample"] <= 24 else "not met", big["levels"][-1]["bits"]))
+    w("")
+
+
+def points_section(raw, w):
+    """Section 7."""
+    pb = parse_points_bench(read(os.path.join(raw, "points_bench.txt")))
+    w("## 7. Points (points_bench)")
+    w("")
+    w("Random samples of the scan-like surface with colours; normals and radii estimated by the "
+      "converter. Each conversion runs in a child process reading a binary PLY, so its peak memory is "
+      "its own (reading included). Baseline in the same run: meshoptimizer's `meshopt_simplifyPoints` "
+      "halving the same cloud (one pass, one thread); *ratio* is our input points/s over its.")
+    w("")
+    w(md_table(["input points", "wall s", "CPU s", "M points/s", "peak MiB", "bytes / input point", "nodes",
+                "bytes / stored point", "error / radius", "meshopt M points/s", "ratio"],
+               [[f"{c['points']:,}", "%.2f" % c["wall"], "%.2f" % c["cpu"], "%.3f" % c["mpts"], c["peak"],
+                 "%.2f" % c["bpt"], c["nodes"], "%.2f" % c["b_stored"], "%.3f" % c["err_r"],
+                 "%.2f" % c["meshopt_mpts"], "%.2f" % c["ratio"]] for c in pb["conversion"]]))
+    w("")
+    d = pb["decode"]
+    w("Decoding every node of the first dataset on one thread: **%.1f M points/s** at %.2f bytes per "
+      "point; meshoptimizer's vertex codec on the same decoded points (24-byte vertices) %.1f M points/s "
+      "at %.2f bytes: ours is %.2f times its speed at %.2f times its size." %
+      (d["ours"], d["ours_b"], d["meshopt"], d["meshopt_b"], d["ours"] / d["meshopt"], d["ours_b"] / d["meshopt_b"]))
+    w("")
+    if pb["splits"]:
+        w("Split rules (seed 002's midpoint against seed 000's balanced split):")
+        w("")
+        w(md_table(["cloud", "split", "nodes", "depth", "smallest leaf", "mean leaf", "bytes / point", "CPU s"],
+                   pb["splits"]))
+        w("")
+    if pb["rate"]:
+        w("Bytes per point against the colour precision (luma/chroma bits) and the position error "
+          "allowed (a fraction of the node's smallest splat radius):")
+        w("")
+        w(md_table(["colour bits", "error / radius allowed", "bytes / input point", "bytes / stored point",
+                    "error / radius measured"], pb["rate"]))
+        w("")
+    best = max(c["mpts"] for c in pb["conversion"])
+    w("Targets (issue 18): conversion at least 1M points/s on 2 cores: %s (best %.2f M points/s); "
+      "at most 3.6 bytes per stored point at a quarter radius error: %s (%.2f with lossless colour); "
+      "decoding at least 100 M points/s per core: not met (%.0f)." %
+      ("met" if best >= 1 else "not met", best,
+       "met" if min(c["b_stored"] for c in pb["conversion"]) <= 3.6 else "not met with lossless colour",
+       min(c["b_stored"] for c in pb["conversion"]), d["ours"]))
+    w("")
