@@ -1,0 +1,357 @@
+// AQP behind the format seam, CPU side: the hierarchy adapter's invariants on real datasets,
+// decoding against the coarser level (equal to aqp::AqpDataset's samples; a missing or wrong
+// parent is an error, never a wrong decode), and crack-free stitched geometry for random
+// per-patch levels and views.
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <map>
+#include <random>
+#include <set>
+
+#include "aqp_client/stitch.h"
+#include "aqp_support.h"
+#include "base/error.h"
+#include "client/cut_engine.h"
+
+using namespace catpaq;
+using test::AqpModel;
+
+namespace {
+
+const AqpModel kModels[] = {AqpModel::Sphere, AqpModel::Torus, AqpModel::Bunny};
+
+TEST(AqpHierarchy, EveryPatchIsAChainOfLevelsWithMonotoneErrorsAndBoxesHoldingTheSamples) {
+    for (AqpModel m : kModels) {
+        const std::string& path = test::aqp_dataset_path(m);
+        test::OpenedAqp o = test::open_aqp(path);
+        aqp::AqpDataset dataset(path);
+        const Hierarchy& h = o.format->hierarchy();
+        const size_t patches = dataset.patch_count(), levels = size_t(dataset.finest_level()) + 1;
+        SCOPED_TRACE(test::aqp_model_name(m));
+        EXPECT_EQ(h.check(), "");
+        EXPECT_EQ(h.size(), patches * levels);
+        EXPECT_EQ(h.roots().size(), patches);
+        EXPECT_EQ(h.virtual_count(), 0u);
+        EXPECT_TRUE(h.decodes_against_parents());
+        for (uint32_t i = 0; i < h.size(); ++i) {
+            const HierarchyNode& n = h.node(i);
+            const uint32_t patch = aqp::aqp_key_patch(n.key);
+            const int level = aqp::aqp_key_level(n.key);
+            ASSERT_LT(patch, patches);
+            EXPECT_EQ(n.level, level);
+            EXPECT_EQ(n.error, double(dataset.entry(patch, level).error));  // the stored bounds are monotone already
+            ASSERT_EQ(n.parts.size(), 1u);
+            EXPECT_EQ(n.primitives, uint32_t(2) << (2 * level));
+            if (level == 0) {
+                EXPECT_TRUE(n.parents.empty());
+                EXPECT_EQ(n.decode_parent, kNoNode);
+            } else {
+                ASSERT_EQ(n.parents.size(), 1u);
+                EXPECT_EQ(h.node(n.parents[0]).key, aqp::aqp_node_key(patch, level - 1));
+                EXPECT_EQ(n.decode_parent, n.parents[0]);
+                EXPECT_EQ(n.parts[0].parent, n.parents[0]);
+                EXPECT_GE(h.node(n.parents[0]).error, n.error);
+            }
+            EXPECT_EQ(n.leaf, level == dataset.finest_level());
+        }
+        // Boxes hold the decoded samples (world) of every level of a sample of patches.
+        for (uint32_t p = 0; p < patches; p += 7) {
+            const std::vector<aqp::PatchGrid> grids = dataset.decode_levels(p, dataset.finest_level());
+            for (const aqp::PatchGrid& g : grids) {
+                const Aabb& box = h.node(h.find(aqp::aqp_node_key(p, g.level))).bounds;
+                for (size_t s = 0; s < g.position.size(); ++s) {
+                    Aabb point;
+                    point.extend(dataset.world_position(g, s));
+                    ASSERT_TRUE(box.contains(point)) << "patch " << p << " level " << g.level;
+                }
+            }
+        }
+    }
+}
+
+TEST(AqpDecode, DecodingThroughTheChainGivesTheDatasetsSamples) {
+    for (AqpModel m : {AqpModel::Sphere, AqpModel::Bunny}) {
+        const std::string& path = test::aqp_dataset_path(m);
+        test::OpenedAqp o = test::open_aqp(path);
+        aqp::AqpDataset dataset(path);
+        const Hierarchy& h = o.format->hierarchy();
+        for (uint32_t p = 0; p < dataset.patch_count(); p += 5) {
+            const std::vector<aqp::PatchGrid> expected = dataset.decode_levels(p, dataset.finest_level());
+            std::shared_ptr<const DecodedNode> parent;
+            for (int l = 0; l <= dataset.finest_level(); ++l) {
+                const uint32_t node = h.find(aqp::aqp_node_key(p, l));
+                std::shared_ptr<const DecodedNode> out;
+                const std::string problem =
+                    l == 0 ? o.format->decode(node, o.node_bytes(node), o.node_size(node), out)
+                           : o.format->decode_with_parent(node, *parent, o.node_bytes(node), o.node_size(node), out);
+                ASSERT_EQ(problem, "") << "patch " << p << " level " << l;
+                const aqp::PatchGrid& g = aqp_grid(*out);
+                EXPECT_EQ(g.position, expected[size_t(l)].position);
+                EXPECT_EQ(g.normal, expected[size_t(l)].normal);
+                EXPECT_EQ(g.color, expected[size_t(l)].color);
+                EXPECT_EQ(out->part_primitives, std::vector<uint32_t>{h.node(node).primitives});
+                EXPECT_TRUE(h.node(node).bounds.contains(out->data_bounds));
+                EXPECT_FALSE(out->data_bounds.empty());
+                EXPECT_EQ(out->bytes.gpu, aqp_gpu_bytes(l, dataset.meta().has_colors()));
+                parent = out;
+            }
+        }
+    }
+}
+
+TEST(AqpDecode, AFinerLevelWithoutItsParentOrWithAnotherIsAClearError) {
+    test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Sphere));
+    const Hierarchy& h = o.format->hierarchy();
+    const uint32_t p0l0 = h.find(aqp::aqp_node_key(0, 0)), p0l1 = h.find(aqp::aqp_node_key(0, 1));
+    const uint32_t p1l0 = h.find(aqp::aqp_node_key(1, 0)), p0l2 = h.find(aqp::aqp_node_key(0, 2));
+    std::shared_ptr<const DecodedNode> out;
+    // Without a parent.
+    std::string problem = o.format->decode(p0l1, o.node_bytes(p0l1), o.node_size(p0l1), out);
+    EXPECT_NE(problem.find("difference from level 0, which was not given"), std::string::npos) << problem;
+    EXPECT_FALSE(out);
+    // Another patch's level 0, or the same patch two levels down.
+    std::shared_ptr<const DecodedNode> other = test::decode_chain(o, p1l0), own = test::decode_chain(o, p0l0);
+    problem = o.format->decode_with_parent(p0l1, *other, o.node_bytes(p0l1), o.node_size(p0l1), out);
+    EXPECT_NE(problem.find("not the same patch one level down"), std::string::npos) << problem;
+    problem = o.format->decode_with_parent(p0l2, *own, o.node_bytes(p0l2), o.node_size(p0l2), out);
+    EXPECT_NE(problem.find("not the same patch one level down"), std::string::npos) << problem;
+    EXPECT_FALSE(out);
+    // Damaged bytes: an error, not a crash.
+    std::vector<uint8_t> bytes(o.node_bytes(p0l1), o.node_bytes(p0l1) + o.node_size(p0l1));
+    for (size_t i = 40; i < bytes.size(); i += 17) bytes[i] ^= 0x5a;
+    problem = o.format->decode_with_parent(p0l1, *own, bytes.data(), bytes.size(), out);
+    EXPECT_NE(problem, "");
+    problem = o.format->decode_with_parent(p0l1, *own, bytes.data(), 10, out);
+    EXPECT_NE(problem, "");
+    // The seam's default for formats that decode alone, and the session's guard: the fetcher's
+    // decoder only calls decode_with_parent when the request carries the parent.
+    EXPECT_TRUE(o.format->decode(p0l0, o.node_bytes(p0l0), o.node_size(p0l0), out).empty());
+}
+
+TEST(AqpDecode, ThroughputOfTheChain) {
+    test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Bunny));
+    const Hierarchy& h = o.format->hierarchy();
+    const int k = int(o.format->meta().patch_level);
+    const auto start = std::chrono::steady_clock::now();
+    uint64_t bytes = 0, samples = 0;
+    for (uint32_t p = 0; p < o.format->meta().patches.size(); ++p) {
+        std::shared_ptr<const DecodedNode> parent;
+        for (int l = 0; l <= k; ++l) {
+            const uint32_t node = h.find(aqp::aqp_node_key(p, l));
+            std::shared_ptr<const DecodedNode> out;
+            ASSERT_EQ(l == 0 ? o.format->decode(node, o.node_bytes(node), o.node_size(node), out)
+                             : o.format->decode_with_parent(node, *parent, o.node_bytes(node), o.node_size(node), out),
+                      "");
+            bytes += o.node_size(node);
+            samples += aqp_grid(*out).position.size();
+            parent = out;
+        }
+    }
+    const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    std::printf("bunny: decoded %zu patches x %d levels, %.2f MB compressed, %.2f M samples in %.3f s: %.1f MB/s, %.1f M samples/s, "
+                "%.2f bytes per sample compressed, %.1f GPU bytes per sample\n",
+                o.format->meta().patches.size(), k + 1, bytes / 1e6, samples / 1e6, seconds, bytes / 1e6 / seconds,
+                samples / 1e6 / seconds, double(bytes) / double(samples), double(aqp_gpu_bytes(k, o.format->meta().has_colors())) / double(((1 << k) + 1) * ((1 << k) + 1)));
+    EXPECT_GT(samples, 0u);
+}
+
+// ---- stitching ------------------------------------------------------------------------------
+
+// Twice the signed area of triangle (a, b, c) of sample indices in the (i, j) plane.
+long signed_area2(uint32_t a, uint32_t b, uint32_t c, int size) {
+    const long ai = long(a % size), aj = long(a / size), bi = long(b % size), bj = long(b / size), ci = long(c % size),
+               cj = long(c / size);
+    return (bi - ai) * (cj - aj) - (ci - ai) * (bj - aj);
+}
+
+TEST(AqpStitch, StitchedTemplatesTileThePatchWithoutFolds) {
+    for (int level = 0; level <= 5; ++level) {
+        const int size = (1 << level) + 1;
+        const long full = 2L * (size - 1) * (size - 1);
+        for (int e0 = 0; e0 <= level; ++e0)
+            for (int e1 = 0; e1 <= level; ++e1)
+                for (int e2 = 0; e2 <= level; e2 += std::max(1, level / 2))
+                    for (int e3 = 0; e3 <= level; e3 += std::max(1, level / 3)) {
+                        const std::array<int, 4> edges{e0, e1, e2, e3};
+                        const std::vector<uint32_t> t = stitched_triangles(level, edges);
+                        long area = 0;
+                        std::map<std::pair<uint32_t, uint32_t>, int> directed;
+                        for (size_t i = 0; i < t.size(); i += 3) {
+                            const long a = signed_area2(t[i], t[i + 1], t[i + 2], size);
+                            ASSERT_GT(a, 0) << "level " << level << " edges " << e0 << e1 << e2 << e3;
+                            area += a;
+                            for (int k = 0; k < 3; ++k) directed[{t[i + size_t(k)], t[i + size_t(k + 1) % 3]}]++;
+                        }
+                        // Covers the square exactly once (positive triangles summing to its area).
+                        ASSERT_EQ(area, full);
+                        // The boundary is the coarse edges: a boundary half-edge joins samples
+                        // 2^(level - e) apart on edge e.
+                        for (const auto& [he, count] : directed) {
+                            ASSERT_EQ(count, 1);
+                            if (directed.count({he.second, he.first})) continue;
+                            const int ai = int(he.first % size), aj = int(he.first / size), bi = int(he.second % size),
+                                      bj = int(he.second / size);
+                            const int e = aj == 0 && bj == 0 ? 0 : ai == size - 1 && bi == size - 1 ? 1 : aj == size - 1 && bj == size - 1 ? 2 : 3;
+                            ASSERT_EQ(std::abs(bi - ai) + std::abs(bj - aj), 1 << (level - edges[size_t(e)]));
+                        }
+                    }
+    }
+    // Uniform edges: the template grid itself.
+    EXPECT_EQ(stitched_triangles(3, {3, 3, 3, 3}), grid_triangles(3));
+}
+
+// Edges (by welded position) used by one triangle only, that are not on the surface's border.
+struct CrackCount {
+    size_t triangles = 0, border_edges = 0, cracks = 0;
+};
+CrackCount count_cracks(const DrawnGeometry& g, const std::set<std::array<double, 3>>& surface_border) {
+    std::map<std::array<double, 3>, uint32_t> weld;
+    std::vector<uint32_t> id(g.mesh.positions.size());
+    for (size_t v = 0; v < id.size(); ++v) id[v] = weld.emplace(g.mesh.positions[v], uint32_t(weld.size())).first->second;
+    std::vector<std::array<double, 3>> position(weld.size());
+    for (const auto& [p, i] : weld) position[i] = p;
+    std::map<std::pair<uint32_t, uint32_t>, int> edges;
+    CrackCount c;
+    for (size_t t = 0; t + 2 < g.mesh.indices.size(); t += 3) {
+        ++c.triangles;
+        for (int k = 0; k < 3; ++k) {
+            uint32_t a = id[g.mesh.indices[t + size_t(k)]], b = id[g.mesh.indices[t + size_t(k + 1) % 3]];
+            if (a == b) continue;  // flattened by quantization
+            edges[{std::min(a, b), std::max(a, b)}]++;
+        }
+    }
+    for (const auto& [e, count] : edges) {
+        if (count != 1) continue;
+        ++c.border_edges;
+        if (!surface_border.count(position[e.first]) || !surface_border.count(position[e.second])) ++c.cracks;
+    }
+    return c;
+}
+
+// Positions (in `g`'s frame) of the samples on patch edges without a neighbour, at every level.
+std::set<std::array<double, 3>> surface_border_positions(const test::OpenedAqp& o, const aqp::AqpDataset& d,
+                                                         const std::array<double, 3>& eye) {
+    std::set<std::array<double, 3>> out;
+    const aqp::AqpMeta& meta = d.meta();
+    const Hierarchy& h = o.format->hierarchy();
+    for (uint32_t p = 0; p < meta.patches.size(); ++p) {
+        bool border = false;
+        for (const aqp::PatchLink& l : meta.patches[p].link) border |= l.patch >= meta.patches.size();
+        if (!border) continue;
+        // The finest level's edge samples hold every coarser level's.
+        const uint32_t node = h.find(aqp::aqp_node_key(p, d.finest_level()));
+        std::shared_ptr<const DecodedNode> decoded = test::decode_chain(o, node);
+        const DrawnGeometry g = o.format->drawn_geometry({{node, decoded.get(), 0}}, eye);
+        const int size = aqp_grid(*decoded).size;
+        for (int e = 0; e < 4; ++e) {
+            if (meta.patches[p].link[size_t(e)].patch < meta.patches.size()) continue;
+            for (int t = 0; t < size; ++t) {
+                const int i = e == 0 ? t : e == 1 ? size - 1 : e == 2 ? t : 0;
+                const int j = e == 0 ? 0 : e == 1 ? t : e == 2 ? size - 1 : t;
+                out.insert(g.mesh.positions[size_t(j * size + i)]);
+            }
+        }
+    }
+    return out;
+}
+
+void expect_random_cuts_are_crack_free(AqpModel m) {
+    const std::string& path = test::aqp_dataset_path(m);
+    test::OpenedAqp o = test::open_aqp(path);
+    aqp::AqpDataset dataset(path);
+    const Hierarchy& h = o.format->hierarchy();
+    const size_t patches = dataset.patch_count();
+    const int k = dataset.finest_level();
+    // Every level of every patch, decoded once.
+    std::vector<std::vector<std::shared_ptr<const DecodedNode>>> decoded(patches);
+    for (uint32_t p = 0; p < patches; ++p) {
+        std::shared_ptr<const DecodedNode> parent;
+        for (int l = 0; l <= k; ++l) {
+            const uint32_t node = h.find(aqp::aqp_node_key(p, l));
+            std::shared_ptr<const DecodedNode> out;
+            ASSERT_EQ(l == 0 ? o.format->decode(node, o.node_bytes(node), o.node_size(node), out)
+                             : o.format->decode_with_parent(node, *parent, o.node_bytes(node), o.node_size(node), out),
+                      "");
+            decoded[p].push_back(out);
+            parent = out;
+        }
+    }
+    const Aabb bounds = o.format->world_bounds();
+    std::mt19937_64 rng(uint64_t(m) * 7919 + 1);
+    size_t unstitched_cracks = 0;
+    for (int trial = 0; trial < 12; ++trial) {
+        // A random view (the frame's anchor moves with it) and random per-patch levels: uniform,
+        // or spatially coherent around a random focus, as view-dependent cuts are.
+        std::array<double, 3> eye;
+        for (int a = 0; a < 3; ++a)
+            eye[size_t(a)] = bounds.min[size_t(a)] + (bounds.max[size_t(a)] - bounds.min[size_t(a)]) *
+                                                         std::uniform_real_distribution<double>(-1.0, 2.0)(rng);
+        const std::set<std::array<double, 3>> border = surface_border_positions(o, dataset, eye);
+        const uint32_t focus = uint32_t(rng() % patches);
+        const Aabb& fbox = h.node(h.find(aqp::aqp_node_key(focus, 0))).bounds;
+        std::vector<DecodedPart> parts;
+        std::set<int> levels;
+        for (uint32_t p = 0; p < patches; ++p) {
+            int level = int(rng() % uint64_t(k + 1));
+            if (trial % 2 == 1) {  // finer near the focus
+                const Aabb& box = h.node(h.find(aqp::aqp_node_key(p, 0))).bounds;
+                double d = 0;
+                for (int a = 0; a < 3; ++a) d = std::max(d, std::abs((box.min[size_t(a)] + box.max[size_t(a)]) - (fbox.min[size_t(a)] + fbox.max[size_t(a)])) / 2);
+                const double diag = bounds.max[0] - bounds.min[0];
+                level = std::clamp(k - int(d / diag * 2.0 * k), 0, k);
+            }
+            levels.insert(level);
+            parts.push_back({h.find(aqp::aqp_node_key(p, level)), decoded[p][size_t(level)].get(), 0});
+        }
+        const DrawnGeometry g = o.format->drawn_geometry(parts, eye);
+        const CrackCount c = count_cracks(g, border);
+        std::printf("%s trial %d: %zu levels, %zu triangles, %zu border edges, %zu cracks\n", test::aqp_model_name(m), trial,
+                    levels.size(), c.triangles, c.border_edges, c.cracks);
+        EXPECT_GT(levels.size(), 1u);
+        EXPECT_EQ(c.cracks, 0u) << test::aqp_model_name(m) << " trial " << trial;
+        if (dataset.meta().border_edges == 0) {  // a closed surface (the bunny's holes are filled by cleaning)
+            EXPECT_EQ(c.border_edges, 0u);
+        }
+        // The negative control: each patch alone (its edges at its own level) cracks.
+        DrawnGeometry apart;
+        apart.origin = g.origin;
+        for (const DecodedPart& part : parts) {
+            const DrawnGeometry one = o.format->drawn_geometry({part}, eye);
+            EXPECT_EQ(one.origin, g.origin);
+            const uint32_t base = uint32_t(apart.mesh.positions.size());
+            apart.mesh.positions.insert(apart.mesh.positions.end(), one.mesh.positions.begin(), one.mesh.positions.end());
+            for (uint32_t v : one.mesh.indices) apart.mesh.indices.push_back(base + v);
+        }
+        unstitched_cracks += count_cracks(apart, border).cracks;
+    }
+    EXPECT_GT(unstitched_cracks, 0u) << "the detector finds the cracks of unstitched patches";
+}
+
+TEST(AqpStitch, RandomMixedLevelsOfAClosedSphereAreCrackFree) { expect_random_cuts_are_crack_free(AqpModel::Sphere); }
+TEST(AqpStitch, RandomMixedLevelsOfAClosedTorusAreCrackFree) { expect_random_cuts_are_crack_free(AqpModel::Torus); }
+TEST(AqpStitch, RandomMixedLevelsOfTheBunnyCrackNowhereButOnItsBorder) { expect_random_cuts_are_crack_free(AqpModel::Bunny); }
+
+TEST(AqpFormat, OpeningRejectsBadMetadataAndIndexWithAClearError) {
+    const std::string& path = test::aqp_dataset_path(AqpModel::Sphere);
+    std::vector<uint8_t> file = test::read_file_bytes(path);
+    DatasetPrefix prefix = DatasetPrefix::parse(file.data(), file.size(), path);
+    DatasetPrefix bad_meta = prefix;
+    bad_meta.meta[0] = 'X';
+    EXPECT_THROW(AqpFormat{bad_meta}, Error);
+    DatasetPrefix short_index = prefix;
+    short_index.entries.pop_back();
+    try {
+        AqpFormat f(short_index);
+        ADD_FAILURE() << "an index missing a node was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+    }
+    AqpFormat ok(prefix);
+    EXPECT_EQ(ok.summary().lines.size(), 6u);
+    EXPECT_FALSE(ok.world_bounds().empty());
+}
+
+}  // namespace
