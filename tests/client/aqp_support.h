@@ -24,13 +24,19 @@ namespace catpaq::test {
 enum class AqpModel { Sphere, Torus, Bunny };
 inline const char* aqp_model_name(AqpModel m) { return m == AqpModel::Sphere ? "sphere" : m == AqpModel::Torus ? "torus" : "bunny"; }
 
+// A scratch directory per process, removed at exit.
 inline std::string aqp_scratch_dir() {
-    static const std::string dir = [] {
-        std::filesystem::path d = std::filesystem::temp_directory_path() / ("catpaq_aqp_client_" + std::to_string(getpid()));
-        std::filesystem::create_directories(d);
-        return d.string();
-    }();
-    return dir;
+    struct Scratch {
+        std::filesystem::path dir =
+            std::filesystem::temp_directory_path() / ("catpaq_aqp_client_" + std::to_string(getpid()));
+        Scratch() { std::filesystem::create_directories(dir); }
+        ~Scratch() {
+            std::error_code ignored;
+            std::filesystem::remove_all(dir, ignored);
+        }
+    };
+    static Scratch scratch;
+    return scratch.dir.string();
 }
 
 // The input of a model: the sphere and torus are closed; the bunny (data/bunny.ply) has holes in its

@@ -158,6 +158,48 @@ TEST(AqpDecode, ThroughputOfTheChain) {
     EXPECT_GT(samples, 0u);
 }
 
+// The cut engine with level skipping on (skip_factor 8, the session's default) over the AQP
+// hierarchy: every node it asks for has its decode parent resident, so the session can always
+// decode it. The control: the same hierarchy without decode parents skips, and then asks for
+// nodes whose parent is not resident.
+size_t requests_without_resident_parent(const Hierarchy& h, const std::array<double, 3>& eye,
+                                        const std::array<double, 3>& target) {
+    PartDrawCounter counter(h);
+    ResidencyTable residency(h);
+    CutEngine engine(h, counter);
+    ViewParams view = ViewParams::look_at(eye, target, {0, 0, 1}, 0.8, 640, 480, 0.01, 100);
+    view.tolerance_px = 0.5;
+    view.skip_factor = 8;
+    size_t orphans = 0;
+    for (int frame = 0; frame < 200; ++frame) {
+        const CutFrame& f = engine.update(view, residency);
+        EXPECT_EQ(engine.check(residency), "");
+        if (f.requests.empty()) break;
+        // Up to 8 arrive per frame; the parent (the chain's level below) decides decodability.
+        size_t arrived = 0;
+        for (const CutRequest& r : f.requests) {
+            const uint32_t parent = h.node(r.node).parents.empty() ? kNoNode : h.node(r.node).parents[0];
+            if (parent != kNoNode && !residency.resident(parent)) ++orphans;
+            if (arrived++ < 8) residency.set_resident(r.node, NodeBytes{64, 64});
+        }
+    }
+    return orphans;
+}
+
+TEST(AqpHierarchy, TheCutEngineNeverAsksForALevelWhoseParentIsNotResidentEvenWhenSkipping) {
+    test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Bunny));
+    const Hierarchy& h = o.format->hierarchy();
+    const Aabb b = o.format->world_bounds();
+    const std::array<double, 3> target{(b.min[0] + b.max[0]) / 2, (b.min[1] + b.max[1]) / 2, (b.min[2] + b.max[2]) / 2};
+    const std::array<double, 3> eye{target[0] + 0.9 * (b.max[0] - b.min[0]), target[1] + 0.2, target[2] + 0.3};
+    EXPECT_EQ(requests_without_resident_parent(h, eye, target), 0u);
+    Hierarchy skippable = h;
+    for (uint32_t i = 0; i < skippable.size(); ++i) skippable.mutable_node(i).decode_parent = kNoNode;
+    skippable.finalize();
+    ASSERT_FALSE(skippable.decodes_against_parents());
+    EXPECT_GT(requests_without_resident_parent(skippable, eye, target), 0u) << "without decode parents the engine skips levels";
+}
+
 // ---- stitching ------------------------------------------------------------------------------
 
 // Twice the signed area of triangle (a, b, c) of sample indices in the (i, j) plane.

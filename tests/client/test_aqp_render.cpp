@@ -113,6 +113,9 @@ void expect_mixed_cuts_have_no_holes(AqpModel m) {
             test::maybe_save(std::string("aqp_") + test::aqp_model_name(m) + "_" + std::to_string(ci) + "_" + std::to_string(trial),
                              image, kSize, kSize);
             EXPECT_EQ(stats.missing, 0u);
+            if (trial == 0)
+                std::printf("%s camera %zu: %zu pixels inside the silhouette, %zu holes, %zu triangles drawn\n",
+                            test::aqp_model_name(m), ci, h.inside, h.holes, stats.triangles);
             EXPECT_EQ(h.holes, 0u) << test::aqp_model_name(m) << " camera " << ci << " trial " << trial;
             ++checked;
         }
@@ -167,6 +170,45 @@ TEST(AqpRenderSanity, ShadedImagesShowTheModelWithItsColoursAndLight) {
     EXPECT_GT(covered, 3000u);
     EXPECT_GT(shades.size(), 20u) << "lighting varies over the surface";
     EXPECT_EQ(stats.draws, scene.dataset.patch_count());
+}
+
+TEST(AqpRenderSanity, GlesContextRendersTheSameImage) {
+    GL_TEST_CONTEXT();
+    const std::string& path = test::aqp_dataset_path(AqpModel::Torus);
+    RenderSettings settings;
+    settings.light_direction = {0.3f, -0.5f, 0.8f};
+    auto render = [&] {
+        AqpScene scene(path);
+        const Camera camera = cameras_around(*scene.opened.format, kSize, kSize)[2];
+        Framebuffer fb(kSize, kSize);
+        fb.bind();
+        // A mixed cut: stitching must agree too.
+        std::vector<AqpDrawItem> items;
+        for (uint32_t p = 0; p < scene.dataset.patch_count(); ++p) items.push_back({aqp::aqp_node_key(p, 1 + int(p % 4))});
+        scene.renderer->render(camera, items, settings);
+        return fb.read_pixels();
+    };
+    const std::vector<uint8_t> desktop = render();
+    GlContextOptions options;
+    options.api = GlApi::Gles;
+    std::unique_ptr<HeadlessGlContext> es;
+    try {
+        es = std::make_unique<HeadlessGlContext>(options);
+    } catch (const Error& e) {
+        test::gl_context(nullptr);
+        GTEST_SKIP() << "no OpenGL ES context: " << e.what();
+    }
+    const std::vector<uint8_t> gles = render();
+    es.reset();
+    test::gl_context(nullptr);
+    size_t differing = 0, covered = 0;
+    for (size_t i = 0; i < gles.size(); i += 4) {
+        differing += std::abs(int(gles[i]) - int(desktop[i])) > 1 || std::abs(int(gles[i + 1]) - int(desktop[i + 1])) > 1;
+        covered += desktop[i] != 255 || desktop[i + 1] != 255 || desktop[i + 2] != 255;
+    }
+    std::printf("desktop vs ES: %zu of %d pixels differ (%zu covered)\n", differing, kSize * kSize, covered);
+    EXPECT_GT(covered, 3000u);
+    EXPECT_LE(differing, size_t(kSize * kSize / 1000));
 }
 
 TEST(AqpStore, BudgetEvictsLeastRecentlyUsedNeverPinnedOrUsedThisFrame) {
@@ -228,12 +270,12 @@ double frame_ms(StreamingSession& session, const Camera& camera, int frames) {
     return std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count() / frames;
 }
 
-TEST(AqpSession, StreamingConvergesToTheToleranceWithMixedLevelsAndNoFailures) {
+TEST(AqpSession, StreamingMeetsTheToleranceAndTheCloseUpMixesLevelsWithoutFailures) {
     GL_TEST_CONTEXT();
     for (AqpModel m : {AqpModel::Sphere, AqpModel::Bunny}) {
         const std::string& path = test::aqp_dataset_path(m);
         SessionSettings settings;
-        settings.tolerance_px = 1.0;
+        settings.tolerance_px = 2.5;  // the views around the model meet it before the finest level
         StreamingSession session(path, settings);
         ASSERT_NE(dynamic_cast<const AqpFormat*>(&session.format()), nullptr);
         const AqpFormat& format = dynamic_cast<const AqpFormat&>(session.format());
@@ -251,7 +293,12 @@ TEST(AqpSession, StreamingConvergesToTheToleranceWithMixedLevelsAndNoFailures) {
                         "%.2f MB GPU\n",
                         test::aqp_model_name(m), ci, session.items().size(), levels.size(), (unsigned long long)s.triangles,
                         s.certified_error_px, (unsigned long long)s.bytes_fetched, s.gpu_bytes / 1e6);
-            EXPECT_TRUE(s.tolerance_met || (s.limits & kLimitFinestLevel)) << "camera " << ci;
+            // The close-up asks for more than the finest level has.
+            if (ci + 1 < cameras.size()) {
+                EXPECT_TRUE(s.tolerance_met) << "camera " << ci;
+            } else {
+                EXPECT_TRUE(s.tolerance_met || (s.limits & kLimitFinestLevel)) << "camera " << ci;
+            }
             EXPECT_EQ(s.holes, 0u);
             EXPECT_TRUE(session.failures().empty());
             if (ci + 1 == cameras.size()) {

@@ -689,11 +689,12 @@ TEST(Cli, InfoDescribesADatasetLocalOrServed) {
 }
 
 // The same commands for every format: info describes any dataset's container, and a kind this
-// build has no client or verifier for is named, not misread as CATP.
+// build has no client or verifier for is named, not misread as CATP. (The kind: one this branch
+// has neither for; AQP, which this test used first, now has its client, client/aqp.)
 TEST(Cli, ADatasetOfAFormatThisBuildLacksIsNamedByEveryCommand) {
-    fs::path path = scratch() / "patches.cpq";
+    fs::path path = scratch() / "lacking.cpq";
     {
-        ArchiveWriter writer(path.string(), ArchiveKind::Aqp);
+        ArchiveWriter writer(path.string(), ArchiveKind::Points);
         const uint8_t payload[5] = {1, 2, 3, 4, 5};
         for (uint16_t level = 0; level < 2; ++level) {
             ArchiveEntry entry;
@@ -707,16 +708,16 @@ TEST(Cli, ADatasetOfAFormatThisBuildLacksIsNamedByEveryCommand) {
     }
     ToolRun info = run("info " + path.string());
     EXPECT_EQ(info.status, 0) << info.output;
-    EXPECT_NE(info.output.find("format:    aqp (container version 1)"), std::string::npos) << info.output;
+    EXPECT_NE(info.output.find("format:    points (container version 1)"), std::string::npos) << info.output;
     EXPECT_NE(info.output.find("nodes:     2 nodes in 2 levels\n"), std::string::npos) << info.output;
-    EXPECT_NE(info.output.find("client:    none in this build for aqp datasets"), std::string::npos) << info.output;
+    EXPECT_NE(info.output.find("client:    none in this build for points datasets"), std::string::npos) << info.output;
     ToolRun verify = run("verify " + path.string());
     EXPECT_EQ(verify.status, 1) << verify.output;
-    EXPECT_NE(verify.output.find("holds a dataset of kind aqp: this build has no verifier for it"), std::string::npos)
+    EXPECT_NE(verify.output.find("holds a dataset of kind points: this build has no verifier for it"), std::string::npos)
         << verify.output;
     ToolRun render = run("render " + path.string() + " --orbit 1");
     EXPECT_EQ(render.status, 1) << render.output;
-    EXPECT_NE(render.output.find("holds a dataset of kind aqp, which this program cannot stream"), std::string::npos)
+    EXPECT_NE(render.output.find("holds a dataset of kind points, which this program cannot stream"), std::string::npos)
         << render.output;
 }
 
