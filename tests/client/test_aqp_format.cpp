@@ -6,6 +6,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <limits>
+#include <optional>
 #include <cmath>
 #include <map>
 #include <random>
@@ -375,6 +377,76 @@ void expect_random_cuts_are_crack_free(AqpModel m) {
 TEST(AqpStitch, RandomMixedLevelsOfAClosedSphereAreCrackFree) { expect_random_cuts_are_crack_free(AqpModel::Sphere); }
 TEST(AqpStitch, RandomMixedLevelsOfAClosedTorusAreCrackFree) { expect_random_cuts_are_crack_free(AqpModel::Torus); }
 TEST(AqpStitch, RandomMixedLevelsOfTheBunnyCrackNowhereButOnItsBorder) { expect_random_cuts_are_crack_free(AqpModel::Bunny); }
+
+double point_triangle_distance(const std::array<double, 3>& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
+    // Dense sampling of the triangle, independent of the format's exact formula: an upper bound
+    // of the distance, above it by at most a 64th of the triangle's size.
+    double best = std::numeric_limits<double>::infinity();
+    const int n = 64;
+    for (int i = 0; i <= n; ++i)
+        for (int j = 0; i + j <= n; ++j) {
+            const double u = double(i) / n, v = double(j) / n, w = 1 - u - v;
+            double d2 = 0;
+            for (int k = 0; k < 3; ++k) {
+                const double x = w * a[size_t(k)] + u * b[size_t(k)] + v * c[size_t(k)] - p[size_t(k)];
+                d2 += x * x;
+            }
+            best = std::min(best, std::sqrt(d2));
+        }
+    return best;
+}
+
+// data_distance is a lower bound of the distance to what the patch draws, stitched to coarser
+// neighbours or not (the cut engine's projected errors rely on it), and not far below it.
+TEST(AqpFormat, DataDistanceBoundsTheDistanceToTheStitchedTrianglesFromBelow) {
+    test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Torus));
+    const Hierarchy& h = o.format->hierarchy();
+    const aqp::AqpMeta& meta = o.format->meta();
+    const int k = int(meta.patch_level);
+    const Aabb bounds = o.format->world_bounds();
+    std::mt19937_64 rng(5);
+    size_t close = 0;
+    for (int trial = 0; trial < 60; ++trial) {
+        const uint32_t p = uint32_t(rng() % meta.patches.size());
+        const int level = 1 + int(rng() % uint64_t(k));
+        std::vector<std::shared_ptr<const DecodedNode>> keep;
+        std::vector<DecodedPart> parts;
+        auto add = [&](uint32_t patch, int l) {
+            const uint32_t node = h.find(aqp::aqp_node_key(patch, l));
+            keep.push_back(test::decode_chain(o, node));
+            parts.push_back({node, keep.back().get(), 0});
+        };
+        add(p, level);  // first: its vertices come first in the drawn geometry
+        for (const aqp::PatchLink& link : meta.patches[p].link)
+            if (link.patch < meta.patches.size()) add(link.patch, int(rng() % uint64_t(level + 1)));
+        // An eye near the patch (inside its box sometimes) or anywhere around the model.
+        const Aabb& box = h.node(parts[0].node).bounds;
+        std::array<double, 3> eye;
+        for (int a = 0; a < 3; ++a) {
+            const Aabb& around = trial % 2 ? box : bounds;
+            const double lo = around.min[size_t(a)], hi = around.max[size_t(a)];
+            eye[size_t(a)] = lo + (hi - lo) * std::uniform_real_distribution<double>(-0.3, 1.3)(rng);
+        }
+        const DrawnGeometry g = o.format->drawn_geometry(parts, eye);
+        const uint32_t own = uint32_t(aqp_grid(*keep[0]).position.size());
+        double drawn = std::numeric_limits<double>::infinity();
+        auto world = [&](uint32_t v) {
+            const Vec3d& q = g.mesh.positions[v];
+            return Vec3d{g.origin[0] + q[0], g.origin[1] + q[1], g.origin[2] + q[2]};
+        };
+        for (size_t t = 0; t + 2 < g.mesh.indices.size(); t += 3) {
+            const uint32_t a = g.mesh.indices[t], b = g.mesh.indices[t + 1], c = g.mesh.indices[t + 2];
+            if (a >= own || b >= own || c >= own) continue;  // a neighbour's
+            drawn = std::min(drawn, point_triangle_distance(eye, world(a), world(b), world(c)));
+        }
+        const std::optional<double> bound = o.format->data_distance(parts[0].node, *keep[0], eye);
+        ASSERT_TRUE(bound.has_value());
+        const double slack = 1e-9 * (1 + drawn) + meta.step;  // float positions
+        EXPECT_LE(*bound, drawn + slack) << "patch " << p << " level " << level << " trial " << trial;
+        close += *bound >= 0.5 * drawn;
+    }
+    EXPECT_GT(close, 30u) << "the bound is mostly within a factor 2";
+}
 
 TEST(AqpFormat, OpeningRejectsBadMetadataAndIndexWithAClearError) {
     const std::string& path = test::aqp_dataset_path(AqpModel::Sphere);
