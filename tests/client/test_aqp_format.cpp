@@ -202,6 +202,19 @@ TEST(AqpHierarchy, TheCutEngineNeverAsksForALevelWhoseParentIsNotResidentEvenWhe
     EXPECT_GT(requests_without_resident_parent(skippable, eye, target), 0u) << "without decode parents the engine skips levels";
 }
 
+TEST(AqpHierarchy, ADecodeParentThatIsNotAParentIsRejected) {
+    test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Sphere));
+    Hierarchy h = o.format->hierarchy();
+    const uint32_t node = h.find(aqp::aqp_node_key(0, 2)), other = h.find(aqp::aqp_node_key(1, 1));
+    h.mutable_node(node).decode_parent = other;
+    try {
+        h.finalize();
+        ADD_FAILURE() << "a decode parent that is not a parent was accepted";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("decodes against a node that is not a parent"), std::string::npos) << e.what();
+    }
+}
+
 // ---- stitching ------------------------------------------------------------------------------
 
 // Twice the signed area of triangle (a, b, c) of sample indices in the (i, j) plane.
