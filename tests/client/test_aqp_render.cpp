@@ -10,6 +10,7 @@
 #include <unistd.h>
 
 #include <chrono>
+#include <map>
 #include <random>
 #include <set>
 
@@ -20,6 +21,7 @@
 #include "base/error.h"
 #include "client/session.h"
 #include "gl_support.h"
+#include "mesh/io.h"
 
 using namespace catpaq;
 using test::AqpModel;
@@ -363,6 +365,33 @@ TEST(AqpSession, FrameTimeAgainstCatpOnTheSameMesh) {
                 aqp_ms / (a.triangles / 1000.0), catp_ms / (c.triangles / 1000.0));
     EXPECT_GT(aqp_ms, 0.0);
     EXPECT_GT(catp_ms, 0.0);
+}
+
+// The unchanged `catpaq render` streams an AQP dataset and exports its last cut as drawn: a
+// closed surface, welded by position (the PLY's float coordinates).
+TEST(AqpCommand, RenderStreamsAnAqpDatasetAndExportsAClosedCut) {
+    GL_TEST_CONTEXT();  // the command needs EGL as this process does
+    const std::string binary = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq";
+    ASSERT_TRUE(std::filesystem::exists(binary)) << binary;
+    const std::string& dataset = test::aqp_dataset_path(AqpModel::Torus);
+    const std::string cut = test::aqp_scratch_dir() + "/torus_cut.ply", out = test::aqp_scratch_dir() + "/frames";
+    const std::string command = binary + " render " + dataset + " --orbit 2 --size 320x240 --tolerance 1 --quiet --out " + out +
+                                " --export-cut " + cut + " --stats " + test::aqp_scratch_dir() + "/stats.jsonl";
+    ASSERT_EQ(std::system(command.c_str()), 0) << command;
+    EXPECT_TRUE(std::filesystem::exists(out + "/frame_0001.png"));
+    const Mesh mesh = read_mesh(cut);
+    ASSERT_GT(mesh.triangle_count(), 100u);
+    std::map<Vec3d, uint32_t> weld;
+    std::map<std::pair<uint32_t, uint32_t>, int> edges;
+    auto id = [&](uint32_t v) { return weld.emplace(mesh.positions[v], uint32_t(weld.size())).first->second; };
+    for (size_t t = 0; t < mesh.triangle_count(); ++t)
+        for (int k = 0; k < 3; ++k) {
+            const uint32_t a = id(mesh.indices[3 * t + size_t(k)]), b = id(mesh.indices[3 * t + size_t(k + 1) % 3]);
+            if (a != b) edges[{std::min(a, b), std::max(a, b)}]++;
+        }
+    size_t border = 0;
+    for (const auto& [e, count] : edges) border += count == 1;
+    EXPECT_EQ(border, 0u) << "of " << edges.size() << " edges";
 }
 
 }  // namespace
