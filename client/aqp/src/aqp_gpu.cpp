@@ -278,6 +278,9 @@ RenderStats AqpRenderer::render(const Camera& camera_in, const std::vector<AqpDr
     }
     for (const GpuPatch* g : drawn_) drawn_level_[g->patch] = -1;
     glBindVertexArray(0);
+    glActiveTexture(GL_TEXTURE1);
+    glBindTexture(GL_TEXTURE_2D, 0);
+    glActiveTexture(GL_TEXTURE0);
     glBindTexture(GL_TEXTURE_2D, 0);
     glUseProgram(0);
     if (!gles && settings.wireframe) glPolygonMode(GL_FRONT_AND_BACK, GL_FILL);
