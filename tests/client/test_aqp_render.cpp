@@ -20,6 +20,7 @@
 #include "aqp_support.h"
 #include "base/error.h"
 #include "client/session.h"
+#include "common_codec/archive.h"
 #include "gl_support.h"
 #include "mesh/io.h"
 
@@ -211,6 +212,88 @@ TEST(AqpRenderSanity, GlesContextRendersTheSameImage) {
     std::printf("desktop vs ES: %zu of %d pixels differ (%zu covered)\n", differing, kSize * kSize, covered);
     EXPECT_GT(covered, 3000u);
     EXPECT_LE(differing, size_t(kSize * kSize / 1000));
+}
+
+// The same dataset moved 1e7 away from the origin (only the metadata's origin and bounds change:
+// the same samples) renders the same picture from the same relative camera: positions are the
+// patch's integer offset from a grid anchor near the eye times the step, never large floats.
+std::string moved_copy(const std::string& path, const std::array<double, 3>& shift) {
+    aqp::AqpDataset source(path);
+    aqp::AqpMeta meta = source.meta();
+    for (int a = 0; a < 3; ++a) {
+        meta.origin[a] += shift[size_t(a)];
+        meta.bounds_min[a] += shift[size_t(a)];
+        meta.bounds_max[a] += shift[size_t(a)];
+    }
+    const std::string out = test::aqp_scratch_dir() + "/moved.cpq";
+    ArchiveWriter writer(out, ArchiveKind::Aqp);
+    const std::vector<ArchiveEntry>& entries = source.archive().entries();
+    for (size_t e = 0; e < entries.size(); ++e) {
+        std::string error;
+        const uint8_t* bytes = source.archive().node(e, &error);
+        if (!bytes) throw Error(error);
+        writer.add_node(entries[e], bytes, entries[e].size);
+    }
+    writer.finish(aqp::encode_aqp_meta(meta));
+    return out;
+}
+
+TEST(AqpRenderPrecision, ModelFarFromTheOriginRendersLikeAtTheOrigin) {
+    GL_TEST_CONTEXT();
+    const std::string& near_path = test::aqp_dataset_path(AqpModel::Bunny);
+    const std::array<double, 3> shift{1e7, -2e7, 3e7};
+    const std::string far_path = moved_copy(near_path, shift);
+    RenderSettings settings;
+    settings.light_direction = {0.2f, -0.4f, 0.9f};
+    auto render = [&](const std::string& path, const glm::dvec3& offset) {
+        AqpScene scene(path);
+        Camera camera = cameras_around(*scene.opened.format, 192, 192)[1];
+        if (offset != glm::dvec3(0.0)) {  // the near scene's camera, moved along
+            AqpScene near_scene(near_path);
+            camera = cameras_around(*near_scene.opened.format, 192, 192)[1];
+            camera.eye += offset;
+            camera.target += offset;
+        }
+        // Close: the model fills the view.
+        camera.eye = camera.target + (camera.eye - camera.target) * 0.4;
+        Framebuffer fb(192, 192);
+        fb.bind();
+        std::vector<AqpDrawItem> items;
+        for (uint32_t p = 0; p < scene.dataset.patch_count(); ++p) items.push_back({aqp::aqp_node_key(p, 1 + int(p % 4))});
+        scene.renderer->render(camera, items, settings);
+        return fb.read_pixels();
+    };
+    const std::vector<uint8_t> a = render(near_path, glm::dvec3(0.0));
+    const std::vector<uint8_t> b = render(far_path, glm::dvec3(shift[0], shift[1], shift[2]));
+    size_t differing = 0, covered = 0;
+    for (size_t i = 0; i < a.size(); i += 4) {
+        differing += std::abs(int(a[i]) - int(b[i])) > 2 || std::abs(int(a[i + 1]) - int(b[i + 1])) > 2;
+        covered += a[i] != 255 || a[i + 1] != 255 || a[i + 2] != 255;
+    }
+    std::printf("origin vs 1e7: %zu of %zu pixels differ (%zu covered)\n", differing, a.size() / 4, covered);
+    EXPECT_GT(covered, a.size() / 4 / 3);
+    EXPECT_LE(differing, a.size() / 4 / 1000);
+    // And the moved copy stitches as closed.
+    test::OpenedAqp far = test::open_aqp(far_path);
+    std::vector<std::shared_ptr<const DecodedNode>> keep;
+    std::vector<DecodedPart> parts;
+    for (uint32_t p = 0; p < far.format->meta().patches.size(); ++p) {
+        const uint32_t node = far.format->hierarchy().find(aqp::aqp_node_key(p, 1 + int(p % 4)));
+        keep.push_back(test::decode_chain(far, node));
+        parts.push_back({node, keep.back().get(), 0});
+    }
+    const DrawnGeometry g = far.format->drawn_geometry(parts, {shift[0], shift[1], shift[2]});
+    std::map<Vec3d, uint32_t> weld;
+    std::map<std::pair<uint32_t, uint32_t>, int> edges;
+    auto id = [&](uint32_t v) { return weld.emplace(g.mesh.positions[v], uint32_t(weld.size())).first->second; };
+    for (size_t t = 0; t + 2 < g.mesh.indices.size(); t += 3)
+        for (int k = 0; k < 3; ++k) {
+            const uint32_t x = id(g.mesh.indices[t + size_t(k)]), y = id(g.mesh.indices[t + size_t(k + 1) % 3]);
+            if (x != y) edges[{std::min(x, y), std::max(x, y)}]++;
+        }
+    size_t border = 0;
+    for (const auto& [e, count] : edges) border += count == 1;
+    EXPECT_EQ(border, 0u);
 }
 
 TEST(AqpStore, BudgetEvictsLeastRecentlyUsedNeverPinnedOrUsedThisFrame) {
