@@ -1,6 +1,8 @@
 // The list of format modules of this build: the one place a new format is registered.
 #include "client/builtin_formats.h"
 
+#include "aqp_client/aqp_format.h"
+#include "aqp_client/aqp_gpu.h"
 #include "catp_client/catp_format.h"
 #include "catp_client/catp_gpu.h"
 
@@ -12,6 +14,8 @@ const FormatRegistry& builtin_formats() {
         r.add(FormatModule{ArchiveKind::Catp,
                            [](const DatasetPrefix& prefix) { return std::make_unique<CatpFormat>(prefix); },
                            create_catp_renderer});
+        r.add(FormatModule{ArchiveKind::Aqp, [](const DatasetPrefix& prefix) { return std::make_unique<AqpFormat>(prefix); },
+                           create_aqp_renderer});
         return r;
     }();
     return registry;

@@ -700,7 +700,9 @@ void CutEngine::refine_phase() {
         return a.n > b.n;
     };
     double tol = view_.tolerance_px;
-    const double skip_limit = view_.skip_factor > 1 ? tol * view_.skip_factor : tol;
+    // A hierarchy whose nodes decode against their parents is never skipped through: a skipped
+    // node would not be decoded, and its children could not be (HierarchyNode::decode_parent).
+    const double skip_limit = view_.skip_factor > 1 && !h_.decodes_against_parents() ? tol * view_.skip_factor : tol;
     std::vector<Candidate> heap;
     // Virtual nodes draw nothing: refining one for its own sake gains nothing, so they are
     // refined only as ancestors a refinement needs (closure).

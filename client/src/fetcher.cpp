@@ -181,6 +181,7 @@ DatasetPrefix load_prefix(NodeSource& source, int attempts) {
 NodeDecoder format_decoder(const DatasetFormat& format) {
     return [&format](const FetchRequest& request, const uint8_t* data, size_t size, std::shared_ptr<const DecodedNode>& out) {
         if (request.part != kWholeNode) return format.decode_part(request.node, request.part, data, size, out);
+        if (request.decode_parent) return format.decode_with_parent(request.node, *request.decode_parent, data, size, out);
         return format.decode(request.node, data, size, out);
     };
 }

@@ -105,6 +105,7 @@ void Hierarchy::finalize() {
             n.bounds.extend(nodes_[c].bounds);
         }
     }
+    decodes_against_parents_ = std::any_of(nodes_.begin(), nodes_.end(), [](const HierarchyNode& n) { return n.decode_parent != kNoNode; });
     std::string problem = check();
     if (!problem.empty()) fail("hierarchy: %s", problem.c_str());
 }
@@ -139,6 +140,13 @@ std::string Hierarchy::check() const {
             }
         }
         if (!n.has_data && !n.parts.empty()) return strprintf("virtual node %llu has parts", (unsigned long long)n.key);
+        if (n.decode_parent != kNoNode) {
+            if (!std::binary_search(n.parents.begin(), n.parents.end(), n.decode_parent))
+                return strprintf("node %llu: decodes against a node that is not a parent", (unsigned long long)n.key);
+            if (!nodes_[n.decode_parent].has_data || !n.has_data || n.fetch_parts)
+                return strprintf("node %llu: decodes against a parent without data, or is fetched by parts",
+                                 (unsigned long long)n.key);
+        }
         if (n.fetch_parts) {
             if (n.key >> 63) return strprintf("node %llu: a node fetched by parts needs a key below 2^63", (unsigned long long)n.key);
             if (n.parts.size() > kMaxFetchedParts)

@@ -184,6 +184,17 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
     };
     for (const CutRequest& r : frame.requests) {
         const HierarchyNode& n = h.node(r.node);
+        if (n.decode_parent != kNoNode) {
+            // Decodable only with its parent's decoded data: wanted while the parent is resident
+            // (always, in practice: the engine refines from drawn nodes and never skips levels
+            // in such a hierarchy); else it waits, never decoded wrongly.
+            auto parent = decoded_.find(n.decode_parent);
+            if (parent == decoded_.end() || !parent->second.whole) continue;
+            FetchRequest fetch = FetchRequest::of(n);
+            fetch.decode_parent = parent->second.whole;
+            want(fetch);
+            continue;
+        }
         if (!n.fetch_parts || !settings_.fetch_parts) {
             want(FetchRequest::of(n));
             continue;

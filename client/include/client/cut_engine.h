@@ -88,7 +88,8 @@ struct ViewParams {
     // data is never fetched (only what the view finally draws, and children coarser than
     // skip_factor times the tolerance as a preview). 0: never skip (every level is fetched).
     // A node whose fetches fail (Residency::failed) is never skipped through: its subtree takes
-    // every level, so the rest of the view still refines around it.
+    // every level, so the rest of the view still refines around it. Ignored for a hierarchy whose
+    // nodes decode against their parents (Hierarchy::decodes_against_parents: AQP's levels).
     double skip_factor = 0;
 
     double k() const;

@@ -182,6 +182,9 @@ struct FetchRequest {
     uint64_t offset = 0;
     uint32_t size = 0;
     uint64_t checksum = 0;  // whole nodes: XXH3-64 from the index
+    // For a node that decodes against its parent (HierarchyNode::decode_parent): that parent's
+    // decoded data, held until the node is decoded (DatasetFormat::decode_with_parent).
+    std::shared_ptr<const DecodedNode> decode_parent;
 
     static FetchRequest of(const HierarchyNode& node);
     static FetchRequest of_part(const HierarchyNode& node, size_t part);

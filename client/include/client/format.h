@@ -106,6 +106,14 @@ public:
         (void)node, (void)part, (void)data, (void)size, (void)out;
         return "this format fetches whole nodes only";
     }
+    // Decodes the bytes of a node that decodes against its parent (HierarchyNode::decode_parent)
+    // given that parent's decoded data (`parent`, what this format's decoder made of it). Called
+    // like decode(). Formats without such nodes need not override it.
+    virtual std::string decode_with_parent(uint32_t node, const DecodedNode& parent, const uint8_t* data, size_t size,
+                                           std::shared_ptr<const DecodedNode>& out) const {
+        (void)node, (void)parent, (void)data, (void)size, (void)out;
+        return "this format decodes every node alone";
+    }
     // A lower bound of the distance from `eye` to the node's own geometry (world units), or
     // nothing when it has none to measure (Residency::data_distance). Asked for close views only.
     virtual std::optional<double> data_distance(uint32_t node, const DecodedNode& decoded,

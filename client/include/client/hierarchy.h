@@ -90,6 +90,13 @@ struct HierarchyNode {
     // True when every part has its own byte range (inside the node's payload) and is fetched
     // and decoded alone; false: the node is fetched whole.
     bool fetch_parts = false;
+    // The parent whose decoded data this node's decoding needs (a format storing a node as a
+    // difference from its parent: AQP's level deltas), or kNoNode: decoded alone. Such a node is
+    // fetched only while that parent is decoded (the session hands it to the decoder,
+    // DatasetFormat::decode_with_parent), and the cut engine never skips levels in a hierarchy
+    // that has one (ViewParams::skip_factor), so a child is always wanted while its parent is
+    // drawn, hence decoded. Must be one of `parents` and have data; not with fetch_parts.
+    uint32_t decode_parent = kNoNode;
 };
 
 class Hierarchy {
@@ -116,6 +123,9 @@ public:
     // sake); false: the engine projects with `bounds`.
     bool has_view_boxes() const { return has_view_boxes_; }
     void set_has_view_boxes(bool given) { has_view_boxes_ = given; }
+    // True when some node decodes against its parent (HierarchyNode::decode_parent; set by
+    // finalize): the cut engine then fetches every level.
+    bool decodes_against_parents() const { return decodes_against_parents_; }
     size_t virtual_count() const;
     size_t data_count() const { return nodes_.size() - virtual_count(); }
     // Empty string if the invariants hold, else the first problem (used by finalize and tests).
@@ -126,6 +136,7 @@ private:
     std::unordered_map<uint64_t, uint32_t> by_key_;
     std::vector<uint32_t> roots_;
     bool has_view_boxes_ = false;
+    bool decodes_against_parents_ = false;
 };
 
 // A random DAG for tests and benchmarks: a quadtree of cells over [0, size]^2 (thin in z), where

@@ -31,6 +31,7 @@ struct SessionSettings {
     // scan, cold start to 1.5 px: the zoom's last view fetched 2.75 MB instead of 4.61 (2 gave
     // 3.90, 4 2.89, 16 2.52), the fly's first 2.04 instead of 3.63, for the same cut, converging
     // sooner (fewer round trips); 16 makes the first previews coarser for little more.
+    // Datasets whose nodes decode against their parents (AQP) fetch every level whatever it says.
     double skip_factor = 8;
     CutBudgets budgets;               // primitives, GPU and CPU bytes of the cut, requests
     uint64_t gpu_cache_bytes = 512ull << 20;         // GPU store budget (cut + recently used)

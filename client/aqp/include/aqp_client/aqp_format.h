@@ -1,0 +1,88 @@
+#pragma once
+// AQP's client plug-in (client/format.h): an AQP dataset's (patch, level) nodes as the Hierarchy
+// the cut engine refines, nodes decoded into patch grids, and the geometric queries on them.
+// Its GPU side is aqp_client/aqp_gpu.h (create_aqp_renderer). docs/formats/aqp.md has the format.
+//
+// Level deltas: a level l > 0 is stored as its difference from level l - 1 (decoding needs the
+// decoded coarser level). The hierarchy says so (HierarchyNode::decode_parent = the same patch
+// one level down): the session fetches a level only while the level below is decoded and hands
+// it to decode_with_parent, and the cut engine never skips levels here. Why this and not another
+// reconstruction: the streaming client refines one level at a time anyway (a patch's level is
+// wanted only once the coarser one is drawn), a node's decode then costs one PNG inflate plus an
+// add per channel, and the deltas make the nodes 40-48% smaller (docs/formats/aqp.md); fetching
+// every level of a patch costs about what its finest level alone costs without deltas, so
+// skipping levels would save little. Decoding a level without its parent is a clear error.
+#include <array>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "aqp/format.h"
+#include "client/format.h"
+
+namespace catpaq {
+
+// The AQP hierarchy of a dataset: one node per (patch, level), key patch << 8 | level; each patch
+// is a chain: node (p, l) has the one parent (p, l - 1), which creates its one part (id 0), and
+// decodes against it. Errors: the stored bounds (made monotone). Bounds: the patch's box at every
+// level (origin + step * (patch origin + [0, extent])). Primitives: the level's 2 (n - 1)^2 grid
+// triangles.
+Hierarchy build_aqp_hierarchy(const aqp::AqpMeta& meta, const std::vector<ArchiveEntry>& entries);
+
+// A decoded (patch, level) node. DecodedNode's fields: bytes cpu = the grid's samples (position,
+// normal and colour arrays); gpu = what the renderer uploads (aqp_gpu_bytes); part_primitives =
+// the grid's triangles; data_bounds = the box of its decoded samples.
+class AqpNode : public DecodedNode {
+public:
+    aqp::PatchGrid grid;
+};
+// The grid of an AqpNode; throws Error for a node another format decoded.
+const aqp::PatchGrid& aqp_grid(const DecodedNode& node);
+
+// GPU bytes of a level's textures: positions and normal (RGBA16UI, 8 bytes per sample) and, with
+// colours, RGBA8 (4 bytes per sample).
+uint64_t aqp_gpu_bytes(int level, bool colors);
+
+// The point on the dataset's quantization grid nearest `eye`, clamped to the grid's box: the frame
+// AQP draws in (positions are (grid point - anchor) * step, the integer difference exact).
+std::array<int64_t, 3> aqp_frame_anchor(const aqp::AqpMeta& meta, const std::array<double, 3>& eye);
+
+class AqpFormat : public DatasetFormat {
+public:
+    // Parses the AQP metadata, checks the index and builds the hierarchy; throws Error naming the
+    // prefix's source.
+    explicit AqpFormat(const DatasetPrefix& prefix);
+
+    const aqp::AqpMeta& meta() const { return meta_; }
+    const Hierarchy& hierarchy() const override { return hierarchy_; }
+    // Level 0 nodes; a finer level without its parent is an error (decode_with_parent).
+    std::string decode(uint32_t node, const uint8_t* data, size_t size,
+                       std::shared_ptr<const DecodedNode>& out) const override;
+    // A level l > 0 given the same patch's decoded level l - 1.
+    std::string decode_with_parent(uint32_t node, const DecodedNode& parent, const uint8_t* data, size_t size,
+                                   std::shared_ptr<const DecodedNode>& out) const override;
+    // A lower bound of the distance to whatever the node draws, stitched or not: its grid's
+    // triangles away from the border, and near each edge (where stitching replaces the first
+    // row of cells) the box of the samples a stitched triangle there can use.
+    std::optional<double> data_distance(uint32_t node, const DecodedNode& decoded,
+                                        const std::array<double, 3>& eye) const override;
+    // The patches as the renderer draws them: every edge at the coarser of the two drawn levels
+    // sharing it (aqp_client/stitch.h), positions (grid point - anchor) * step in float as the
+    // vertex shader computes them, relative to aqp_frame_anchor(eye).
+    DrawnGeometry drawn_geometry(const std::vector<DecodedPart>& parts, const std::array<double, 3>& eye) const override;
+    Aabb world_bounds() const override;
+    int up_axis() const override { return 0; }  // AQP records none
+    FormatSummary summary() const override;
+
+private:
+    // DecodedNode's fields of a decoded grid.
+    void account(AqpNode& node) const;
+    // (patch, level) of a hierarchy node, checked against the node's key.
+    std::string node_patch_level(uint32_t node, uint32_t& patch, int& level) const;
+
+    aqp::AqpMeta meta_;
+    Hierarchy hierarchy_;
+};
+
+}  // namespace catpaq
