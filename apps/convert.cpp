@@ -27,6 +27,8 @@ static const char* kConvertUsage =
     "  --format F               catp (Compact Adaptive TetraPuzzles), aqp (Adaptive Quad Patches)\n"
     "                           or points (a kd-tree of splats)\n"
     "  --threads N              worker threads (default: all cores)\n"
+    "  --up AXIS                the model's up axis, stored for viewers: x, y, z, -x, -y, -z (default y;\n"
+    "                           points: z for LAS, else y)\n"
     "  --json                   the report as one JSON object on stdout (progress stays on stderr)\n"
     "  --quiet                  no progress bar or report\n"
     "catp and aqp:\n"
@@ -41,7 +43,6 @@ static const char* kConvertUsage =
     "                           its grid reaches the precision, else rgb18), rgb24 (8-bit colour,\n"
     "                           deeper leaves if needed), rgb18 (6-bit colour, 4x finer positions),\n"
     "                           position48 (no colour, 35x finer positions)\n"
-    "  --up AXIS                the model's up axis, stored for viewers: x, y, z, -x, -y, -z (default y)\n"
     "  --leaf-triangles N       target triangles per leaf fragment (default 2000)\n"
     "  --leaf-level L           force the leaf level of the diamond hierarchy\n"
     "aqp:\n"
@@ -88,7 +89,7 @@ struct FormatOption {
 };
 static const FormatOption kFormatOptions[] = {
     {"precision", "catp aqp"},      {"memory", "catp aqp"},       {"vertex-layout", "catp"},
-    {"up", "catp"},                 {"leaf-triangles", "catp"},   {"leaf-level", "catp"},
+    {"leaf-triangles", "catp"},   {"leaf-level", "catp"},
     {"patch-level", "aqp"},         {"domain-triangles", "aqp"},  {"node-points", "points"},
     {"split", "points"},            {"error-fraction", "points"}, {"normals", "points"},
     {"surface-samples", "points"},

@@ -11,6 +11,7 @@
 #include "aqp/format.h"
 #include "aqp_reconstruct/poisson.h"
 #include "base/error.h"
+#include "catp/format.h"
 #include "mesh/io.h"
 #include "points/point_cloud.h"
 
@@ -154,6 +155,10 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     o.patch_level = int(options.integer("patch-level", -1, 1, aqp::kMaxPatchLevel));
     o.domain_triangles = size_t(options.integer("domain-triangles", 0, 4, 10000000));
     o.threads = unsigned(options.integer("threads", 0, 0, 1024));
+    const std::string up = options.get("up", "y");
+    UpAxis axis;
+    if (!parse_up_axis(up, axis)) usage_error("--up: '%s' is not one of x, y, z, -x, -y, -z", up.c_str());
+    o.up_axis = uint32_t(axis);
     o.memory_budget = options.bytes("memory", 0);
     o.progress = !job.quiet;
     options.finish();

@@ -7,6 +7,7 @@
 
 #include "apps/convert_formats.h"
 #include "base/error.h"
+#include "catp/format.h"
 #include "base/output_path.h"
 #include "mesh/io.h"
 #include "points/builder.h"
@@ -99,6 +100,10 @@ int convert_points(Options& options, const ConvertJob& job) {
         usage_error("--normals: '%s' is not one of auto, outward, up", normals.c_str());
     const size_t surface_samples = size_t(options.integer("surface-samples", 0, 1, int64_t(1) << 32));
     s.threads = unsigned(options.integer("threads", 0, 0, 1024));
+    // The up axis: --up, else the input's convention (LAS: z), else y as for catp and aqp.
+    UpAxis up = UpAxis::Unknown;
+    if (options.has("up") && !parse_up_axis(options.get("up", ""), up))
+        usage_error("--up: '%s' is not one of x, y, z, -x, -y, -z", options.get("up", "").c_str());
     s.progress = !job.quiet;
     options.finish();
 
@@ -106,15 +111,19 @@ int convert_points(Options& options, const ConvertJob& job) {
     PointsBuildReport r;
     if (surface_samples) {
         // A mesh sampled uniformly by area, as a scanner samples a surface (points/sampling.h).
-        check_output_file(job.output, "-o");
         std::vector<std::string> dropped;
         const Mesh mesh = read_mesh(job.input, &dropped);
         if (mesh.triangle_count() == 0)
             fail("'%s': --surface-samples needs a mesh with triangles; this file has none", job.input.c_str());
+        s.up_axis = uint8_t(up == UpAxis::Unknown ? UpAxis::PosY : up);
         r = build_points(sample_surface(mesh, surface_samples, 1, true, true), job.output, s);
         r.dropped_input = dropped;
     } else {
-        r = build_points_file(job.input, job.output, s);
+        PointReadInfo info;
+        PointCloud cloud = read_point_cloud(job.input, &info);
+        s.up_axis = uint8_t(up != UpAxis::Unknown ? up : info.z_up ? UpAxis::PosZ : UpAxis::PosY);
+        r = build_points(std::move(cloud), job.output, s, info.z_up);
+        r.dropped_input = info.dropped;
     }
     for (const std::string& d : r.dropped_input)
         std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", job.input.c_str(), d.c_str());

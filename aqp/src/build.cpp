@@ -363,7 +363,9 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
         r.payload_bytes += s.bytes;
     }
     if (progress) progress->phase("writing", 0, "");
-    r.file_bytes = writer.finish(encode_aqp_meta(make_meta(layout, q, samples, k, colors, input, r.mean_edge)));
+    AqpMeta meta = make_meta(layout, q, samples, k, colors, input, r.mean_edge);
+    meta.up_axis = o.up_axis;
+    r.file_bytes = writer.finish(encode_aqp_meta(meta));
     r.seconds_encode = seconds_since(t);
     r.bits_per_sample = 8.0 * double(r.payload_bytes) / double(r.samples);
     if (progress) progress->finish();

@@ -30,6 +30,7 @@ std::vector<uint8_t> encode_aqp_meta(const AqpMeta& m) {
     w.f64(m.precision);
     w.f64(m.mean_edge);
     w.u32(m.atlas_columns);
+    w.u32(m.up_axis);
     for (const AqpPatchInfo& p : m.patches) {
         for (uint32_t c : p.corner) w.u32(c);
         for (const PatchLink& l : p.link) {
@@ -48,8 +49,8 @@ std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
     ByteReader r(data + 8, size - 8);
     const uint32_t version = r.u32();
     if (!r.ok()) return "AQP metadata truncated";
-    if (version != kAqpMetaVersion)
-        return strprintf("unsupported AQP metadata version %u (this build reads %u)", version, kAqpMetaVersion);
+    if (version != 1 && version != kAqpMetaVersion)
+        return strprintf("unsupported AQP metadata version %u (this build reads 1 to %u)", version, kAqpMetaVersion);
     m.patch_level = r.u32();
     const uint32_t patch_count = r.u32();
     m.base_vertices = r.u32();
@@ -65,7 +66,9 @@ std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
     m.precision = r.f64();
     m.mean_edge = r.f64();
     m.atlas_columns = r.u32();
+    m.up_axis = version >= 2 ? r.u32() : 0;
     if (!r.ok()) return "AQP metadata truncated";
+    if (m.up_axis > 6) return strprintf("AQP metadata has an invalid up axis %u", m.up_axis);
     constexpr size_t kPatchBytes = 16 + 4 * 6 + 12 + 6;
     if (r.remaining() != size_t(patch_count) * kPatchBytes)
         return strprintf("AQP metadata holds %zu bytes of patches, %u patches need %zu", r.remaining(), patch_count,

@@ -433,7 +433,7 @@ PointsMeta Builder::make_meta(const PointsBuildReport& report) const {
                  (estimate_radii_ ? 0 : kPointsMetaInputRadii);
     meta.split = settings_.split;
     meta.color_bits = settings_.color_bits;
-    meta.up_axis = z_up_ ? 3 : 0;
+    meta.up_axis = settings_.up_axis ? settings_.up_axis : z_up_ ? 3 : 0;
     for (size_t i : index_order()) {
         const NodeRecord& r = records_[i];
         PointNodeInfo info;

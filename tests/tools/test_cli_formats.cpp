@@ -64,6 +64,10 @@ TEST(CliFormats, AqpConvertsReportsJsonAndVerifiesAgainstTheOriginal) {
     EXPECT_NE(v.output.find("shared edges and corners ok"), std::string::npos) << v.output;
     EXPECT_NE(v.output.find("level->original max"), std::string::npos) << v.output;
     EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
+    // The up axis convert records (default y, as for CATP), which viewers use.
+    EXPECT_NE(run("info " + out.string()).output.find("up axis:   y"), std::string::npos) << run("info " + out.string()).output;
+    ASSERT_EQ(run("convert " + in.string() + " -o " + out.string() + " --format aqp --up -z --quiet").status, 0);
+    EXPECT_NE(run("info " + out.string()).output.find("up axis:   -z"), std::string::npos) << run("info " + out.string()).output;
 }
 
 // Against an original moved by far more than the coarsest bound, verify fails naming the level.

@@ -51,6 +51,7 @@ struct AqpBuildOptions {
     int png_compression = 6;      // zlib level of the node images (9: 4% smaller, encoding 7.6x slower on a 1M scan)
     // Refuse to start when the estimated working memory exceeds this many bytes (0: no limit).
     uint64_t memory_budget = 0;
+    uint32_t up_axis = 0;         // stored for viewers (AqpMeta::up_axis numbering; 0: unknown)
     unsigned threads = 0;         // 0: all cores
     bool progress = true;         // named phases on a terminal
 };

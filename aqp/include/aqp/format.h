@@ -8,6 +8,8 @@
 //   f64 origin[3] | f64 step        world = origin + step * (patch origin + local), per axis
 //   f64 bounds_min[3] | f64 bounds_max[3]   (world, of the samples)
 //   u64 input vertices | u64 input triangles | f64 precision | f64 mean edge | u32 atlas columns
+//   u32 up axis (version 2; version 1 has no field and reads as 0): 0 unknown, 1-6 = +x +y +z
+//       -x -y -z, the numbering of catp/format.h's UpAxis (which the point format uses too)
 //   per patch: u32 corner[4] (quad vertex ids)
 //              4 x (u32 neighbour patch or 0xFFFFFFFF, u8 its edge, u8 reversed)
 //              u32 origin[3] (quantization grid) | u16 extent[3] (largest local coordinate)
@@ -32,7 +34,7 @@
 
 namespace catpaq::aqp {
 
-constexpr uint32_t kAqpMetaVersion = 1;
+constexpr uint32_t kAqpMetaVersion = 2;  // 1 still reads (no up axis)
 constexpr int kMaxPatchLevel = 10;
 constexpr uint32_t kAqpColorFlag = 1;
 
@@ -54,6 +56,7 @@ struct AqpMeta {
     double precision = 0;  // the quantization's largest distance, world units
     double mean_edge = 0;  // the input's mean edge length
     uint32_t atlas_columns = 1;  // patch p's images sit at column p % columns, row p / columns
+    uint32_t up_axis = 0;        // 0 unknown, 1-6 = +x +y +z -x -y -z (catp/format.h's UpAxis)
     std::vector<AqpPatchInfo> patches;
 
     bool has_colors() const { return flags & kAqpColorFlag; }

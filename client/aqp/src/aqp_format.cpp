@@ -291,6 +291,14 @@ Aabb AqpFormat::world_bounds() const {
     return box;
 }
 
+// The recorded up axis (AqpMeta::up_axis, UpAxis numbering) as the seam's 1 (y) or 2 (z).
+int AqpFormat::up_axis() const {
+    const uint32_t up = meta_.up_axis;
+    if (up == 2 || up == 5) return 1;
+    if (up == 3 || up == 6) return 2;
+    return 0;
+}
+
 FormatSummary AqpFormat::summary() const {
     const AqpMeta& m = meta_;
     FormatSummary s;
@@ -310,7 +318,8 @@ FormatSummary AqpFormat::summary() const {
     std::string precision = strprintf("%.6g (step %.6g)", m.precision, m.step);
     if (m.mean_edge > 0) precision += strprintf(", %.3g mean input edges of %.6g", m.precision / m.mean_edge, m.mean_edge);
     s.lines.emplace_back("precision", precision);
-    s.lines.emplace_back("up axis", "not recorded (z assumed)");
+    static const char* const kAxes[] = {"not recorded (z assumed)", "x", "y", "z", "-x", "-y", "-z"};
+    s.lines.emplace_back("up axis", kAxes[m.up_axis <= 6 ? m.up_axis : 0]);
     return s;
 }
 

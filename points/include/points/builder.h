@@ -52,6 +52,9 @@ struct PointsBuildSettings {
     NormalOrientation orientation = NormalOrientation::Auto;
     ColorBits color_bits;       // default: lossless 8-bit RGB
     double error_fraction = 0.25;  // position error / the node's smallest splat radius (0, 1]
+    // The up axis stored for viewers (catp/format.h's UpAxis numbering, 1-6 = +x +y +z -x -y
+    // -z); 0: the input's convention (+z for LAS, else unknown).
+    uint8_t up_axis = 0;
     unsigned threads = 0;       // 0: all cores
     bool progress = true;       // progress display on a terminal
 };

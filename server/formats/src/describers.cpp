@@ -52,6 +52,7 @@ std::string describe_aqp(const ArchiveHeader&, const std::vector<uint8_t>& meta_
                            {"origin", {meta.origin[0], meta.origin[1], meta.origin[2]}},
                            {"step", meta.step},
                            {"precision", meta.precision},
+                           {"up_axis", meta.up_axis},
                            {"input_vertices", meta.input_vertices},
                            {"input_triangles", meta.input_triangles}};
     out.details_json = details.dump();

@@ -72,7 +72,7 @@ public:
     // vertex shader computes them, relative to aqp_frame_anchor(eye).
     DrawnGeometry drawn_geometry(const std::vector<DecodedPart>& parts, const std::array<double, 3>& eye) const override;
     Aabb world_bounds() const override;
-    int up_axis() const override { return 0; }  // AQP records none
+    int up_axis() const override;
     FormatSummary summary() const override;
 
 private:
