@@ -3,6 +3,8 @@
 
 #include "catp_client/catp_format.h"
 #include "catp_client/catp_gpu.h"
+#include "points_client/points_format.h"
+#include "points_client/points_gpu.h"
 
 namespace catpaq {
 
@@ -12,6 +14,9 @@ const FormatRegistry& builtin_formats() {
         r.add(FormatModule{ArchiveKind::Catp,
                            [](const DatasetPrefix& prefix) { return std::make_unique<CatpFormat>(prefix); },
                            create_catp_renderer});
+        r.add(FormatModule{ArchiveKind::Points,
+                           [](const DatasetPrefix& prefix) { return std::make_unique<PointsFormat>(prefix); },
+                           create_points_renderer});
         return r;
     }();
     return registry;

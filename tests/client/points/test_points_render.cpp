@@ -1,0 +1,245 @@
+// The point format's GPU side on a headless context: the splat store's budget policy, dense
+// spheres drawn without holes in both splat shapes, streaming sessions reaching the tolerance
+// under a GPU budget, and a dataset 1e7 units from the origin drawing as one at the origin.
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+
+#include <epoxy/gl.h>
+
+#include "client/builtin_formats.h"
+#include "client/session.h"
+#include "gl_support.h"
+#include "point_datasets.h"
+#include "points_client/points_format.h"
+#include "points/dataset.h"
+#include "points_client/points_gpu.h"
+
+using namespace catpaq;
+using test::PointSet;
+
+namespace {
+
+const uint8_t kWhite[3] = {255, 255, 255};
+
+PointSet dense_sphere(double offset = 0) {
+    PointSet set;
+    set.points = 200000;
+    set.offset = offset;
+    return set;
+}
+
+Camera sphere_camera(glm::dvec3 eye, double offset = 0) {
+    Camera c;
+    c.width = 320;
+    c.height = 240;
+    c.fov_y_degrees = 45;
+    c.eye = eye + glm::dvec3(offset);
+    c.target = glm::dvec3(offset);
+    c.up = {0, 0, 1};
+    return c;
+}
+
+// Pixels whose centre's ray hits the sphere (centre, radius): the exact silhouette.
+std::vector<uint8_t> sphere_silhouette(const Camera& camera, glm::dvec3 centre, double radius) {
+    std::vector<uint8_t> mask(size_t(camera.width) * camera.height, 0);
+    const glm::dvec3 f = camera.forward();
+    const glm::dvec3 r = glm::normalize(glm::cross(f, camera.up));
+    const glm::dvec3 u = glm::cross(r, f);
+    const double t = std::tan(camera.fov_y_degrees * M_PI / 360);
+    for (int y = 0; y < camera.height; ++y)
+        for (int x = 0; x < camera.width; ++x) {
+            const double sx = ((x + 0.5) / camera.width * 2 - 1) * t * camera.aspect();
+            const double sy = (1 - (y + 0.5) / camera.height * 2) * t;
+            const glm::dvec3 d = glm::normalize(f + sx * r + sy * u);
+            const glm::dvec3 oc = camera.eye - centre;
+            const double b = glm::dot(oc, d), c = glm::dot(oc, oc) - radius * radius;
+            mask[size_t(y) * camera.width + x] = b * b - c >= 0 && -b > 0;
+        }
+    return mask;
+}
+
+SessionFrameStats settle(StreamingSession& session, const Camera& camera) {
+    SessionFrameStats s = session.step(camera);
+    for (int i = 0; i < 20000 && !session.settled(); ++i) {
+        usleep(500);
+        s = session.step(camera);
+    }
+    EXPECT_TRUE(session.settled());
+    return s;
+}
+
+std::vector<uint8_t> draw(StreamingSession& session, const Camera& camera, SplatShape shape, bool flat) {
+    Framebuffer fb(camera.width, camera.height);
+    fb.bind();
+    RenderSettings settings;
+    settings.splats = shape;
+    settings.flat = flat;
+    session.draw(camera, settings);
+    return fb.read_pixels();
+}
+
+PackedSplats test_splats(size_t count) {
+    DecodedPoints d;
+    d.count = count;
+    d.flags = 0;
+    for (size_t i = 0; i < count; ++i) {
+        d.positions.insert(d.positions.end(), {float(i), 0.0f, 0.0f});
+        d.radii.push_back(1.0f);
+    }
+    const double origin[3] = {0, 0, 0};
+    return pack_splats(d, origin);
+}
+
+}  // namespace
+
+TEST(SplatStore, KeepsPinnedAndUsedNodesAndEvictsTheLeastRecentlyUsedOverBudget) {
+    GL_TEST_CONTEXT();
+    SplatStore store;
+    const PackedSplats splats = test_splats(100);  // 800 bytes
+    std::vector<uint64_t> evicted;
+    store.set_eviction_callback([&](uint64_t key) { evicted.push_back(key); });
+    for (uint64_t key = 1; key <= 4; ++key) {
+        store.begin_frame();
+        store.upload(key, splats);
+    }
+    EXPECT_EQ(store.gpu_bytes(), 4 * 800u);
+    store.begin_frame();
+    store.pin(1);
+    store.mark_used(2);
+    store.set_budget(2 * 800);  // 3 and 4 are neither pinned nor used: they go, oldest first
+    EXPECT_EQ(evicted, (std::vector<uint64_t>{3, 4}));
+    EXPECT_EQ(store.gpu_bytes(), 2 * 800u);
+    store.set_budget(800);  // 1 pinned, 2 used this frame: over budget, nothing to evict
+    EXPECT_EQ(store.gpu_bytes(), 2 * 800u);
+    store.begin_frame();
+    store.evict_to_budget();  // 2 no longer used this frame
+    EXPECT_EQ(evicted, (std::vector<uint64_t>{3, 4, 2}));
+    EXPECT_TRUE(store.resident(1));
+    PackedSplats bad = splats;
+    bad.words.pop_back();
+    EXPECT_THROW(store.upload(9, bad), Error);
+    EXPECT_FALSE(store.resident(9));
+}
+
+// Drawn at the cut the session picks for 2 px, a dense sphere covers every pixel of its
+// silhouette (bar a 2 px rim) in both shapes; frame times of the two are reported.
+class DenseSphere : public ::testing::TestWithParam<SplatShape> {};
+
+TEST_P(DenseSphere, HasNoBackgroundPixelsInsideItsSilhouette) {
+    GL_TEST_CONTEXT();
+    const std::string& path = test::points_dataset(dense_sphere());
+    SessionSettings settings;
+    settings.tolerance_px = 2.0;
+    StreamingSession session(path, settings);
+    const char* shape = GetParam() == SplatShape::Round ? "round" : "oriented";
+    int view = 0;
+    for (glm::dvec3 eye : {glm::dvec3(0, -3.2, 1.0), glm::dvec3(2.2, 1.5, -1.4), glm::dvec3(-1.3, -1.2, 0.6)}) {
+        const Camera camera = sphere_camera(eye);
+        const SessionFrameStats s = settle(session, camera);
+        EXPECT_TRUE(s.tolerance_met) << shape << " view " << view;
+        const std::vector<uint8_t> image = draw(session, camera, GetParam(), true);
+        test::maybe_save(std::string("sphere_") + shape + "_" + std::to_string(view), image, camera.width, camera.height);
+        const std::vector<uint8_t> covered = test::coverage(image, camera.width, camera.height, kWhite);
+        const std::vector<uint8_t> inside =
+            test::erode(sphere_silhouette(camera, glm::dvec3(0), 1.0), camera.width, camera.height, 2);
+        size_t holes = 0, interior = 0;
+        for (size_t i = 0; i < inside.size(); ++i) {
+            interior += inside[i];
+            holes += inside[i] && !covered[i];
+        }
+        EXPECT_GT(interior, 2000u);
+        EXPECT_EQ(holes, 0u) << shape << " view " << view << ": " << holes << " background pixels of " << interior;
+        // Shaded too (the programs' lighting path), timed: mean of 10 frames after a warm-up.
+        Framebuffer fb(camera.width, camera.height);
+        fb.bind();
+        RenderSettings shaded;
+        shaded.splats = GetParam();
+        session.draw(camera, shaded);
+        glFinish();
+        const auto start = std::chrono::steady_clock::now();
+        RenderStats stats;
+        for (int i = 0; i < 10; ++i) stats = session.draw(camera, shaded);
+        glFinish();
+        const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count() / 10;
+        std::printf("%s splats, view %d: %zu splats in %zu nodes, %.2f ms per frame (llvmpipe), GPU %llu bytes\n", shape,
+                    view, stats.vertices, stats.draws, ms, (unsigned long long)s.gpu_bytes);
+        EXPECT_GT(stats.vertices, 0u);
+        ++view;
+    }
+}
+
+INSTANTIATE_TEST_SUITE_P(BothShapes, DenseSphere, ::testing::Values(SplatShape::Round, SplatShape::Oriented),
+                         [](const auto& info) { return info.param == SplatShape::Round ? "Round" : "Oriented"; });
+
+// A session under a GPU budget stays within it on every step while it flies around and into the
+// sphere, and still settles at the tolerance from afar.
+TEST(PointsSession, StaysWithinTheGpuBudgetAndConvergesToTheTolerance) {
+    GL_TEST_CONTEXT();
+    const std::string& path = test::points_dataset(dense_sphere());
+    SessionSettings settings;
+    settings.tolerance_px = 1.0;
+    settings.gpu_cache_bytes = 600 << 10;
+    settings.budgets.max_gpu_bytes = 300 << 10;
+    StreamingSession session(path, settings);
+    EXPECT_EQ(session.hierarchy().size(), PointDataset(path).node_count());
+    std::vector<Camera> cameras;
+    for (int i = 0; i < 8; ++i) {
+        const double a = i * 0.8, d = 4.5 - 0.4 * i;
+        cameras.push_back(sphere_camera({d * std::cos(a), d * std::sin(a), 0.3 * d}));
+    }
+    uint64_t peak = 0;
+    for (const Camera& camera : cameras)
+        for (int step = 0; step < 400; ++step) {
+            const SessionFrameStats s = session.step(camera);
+            peak = std::max(peak, s.gpu_bytes);
+            ASSERT_LE(s.gpu_bytes, settings.gpu_cache_bytes) << "step " << step;
+            if (session.settled()) break;
+            usleep(500);
+        }
+    std::printf("GPU store peak %llu bytes under a %llu-byte cache\n", (unsigned long long)peak,
+                (unsigned long long)settings.gpu_cache_bytes);
+    // From afar the budget does not bind: the tolerance is met.
+    const SessionFrameStats s = settle(session, sphere_camera({0, -7, 2}));
+    EXPECT_TRUE(s.tolerance_met);
+    EXPECT_EQ(s.holes, 0u);
+}
+
+// A sphere 1e7 units from the origin, seen from the same relative place, draws the same image
+// within a few pixels (positions reach the GPU relative to the eye).
+TEST(PointsPrecision, FarFromTheOriginDrawsTheSameImage) {
+    GL_TEST_CONTEXT();
+    const double offset = 1e7;
+    std::vector<uint8_t> images[2];
+    for (int far = 0; far < 2; ++far) {
+        const std::string& path = test::points_dataset(dense_sphere(far ? offset : 0));
+        SessionSettings settings;
+        settings.tolerance_px = 1.0;
+        StreamingSession session(path, settings);
+        const Camera camera = sphere_camera({0.4, -1.9, 0.5}, far ? offset : 0);
+        EXPECT_TRUE(settle(session, camera).tolerance_met);
+        images[far] = draw(session, camera, SplatShape::Oriented, true);
+        test::maybe_save(far ? "offset_far" : "offset_zero", images[far], camera.width, camera.height);
+    }
+    const std::vector<uint8_t> a = test::coverage(images[0], 320, 240, kWhite);
+    const std::vector<uint8_t> b = test::coverage(images[1], 320, 240, kWhite);
+    size_t differ = 0, covered = 0;
+    for (size_t i = 0; i < a.size(); ++i) {
+        differ += a[i] != b[i];
+        covered += a[i];
+    }
+    std::printf("offset 1e7: %zu of %zu covered pixels differ\n", differ, covered);
+    EXPECT_GT(covered, 10000u);
+    EXPECT_LE(differ, 12u);
+}
+
+TEST(PointsFormatModule, IsRegisteredForPointArchives) {
+    const FormatModule* module = builtin_formats().find(ArchiveKind::Points);
+    ASSERT_TRUE(module);
+    const std::string& path = test::points_dataset(dense_sphere());
+    std::unique_ptr<DatasetFormat> format = module->open(test::read_prefix(path));
+    EXPECT_TRUE(dynamic_cast<PointsFormat*>(format.get()));
+}
