@@ -355,6 +355,7 @@ void DesktopViewer::Impl::open() {
     controller.frame_box({bounds.min[0], bounds.min[1], bounds.min[2]}, {bounds.max[0], bounds.max[1], bounds.max[2]}, 45,
                          double(std::max(fbw, 1)) / double(std::max(fbh, 1)));
     render.background = {0.12f, 0.13f, 0.15f, 1.0f};
+    render.splats = settings.splats;
 
     IMGUI_CHECKVERSION();
     ImGui::CreateContext();
@@ -427,6 +428,8 @@ void DesktopViewer::Impl::overlay() {
         }
         ImGui::ColorEdit3("background", render.background.data());
         ImGui::Checkbox("wireframe", &render.wireframe);
+        bool oriented = render.splats == SplatShape::Oriented;
+        if (ImGui::Checkbox("oriented splats (points)", &oriented)) render.splats = oriented ? SplatShape::Oriented : SplatShape::Round;
         ImGui::Separator();
         ImGui::TextDisabled("drag: orbit  right/shift drag: pan  wheel: zoom");
         ImGui::TextDisabled("double click: fly to  P/F12: screenshot  H: hide  Esc: quit");

@@ -115,6 +115,7 @@ struct ViewerSettings {
     std::string screenshot;         // save the last frame here (PNG)
     bool vsync = true;
     int msaa = 0;                   // anti-aliasing samples per pixel (0: none)
+    SplatShape splats = SplatShape::Round;  // how point datasets draw (RenderSettings::splats)
 };
 
 // Thrown when no window can be opened (no display): the caller tells the user to render headless.
