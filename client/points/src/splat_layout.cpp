@@ -25,6 +25,25 @@ uint32_t quantize6(float v) {  // [-1, 1] -> 0..63
 
 }  // namespace
 
+namespace {
+
+// The 6+6-bit code of every 8+8-bit normal code: a table (128 KiB, built once) instead of a
+// decode and an encode per splat, which took most of the packing time.
+const std::vector<uint16_t>& oct8_to_oct6() {
+    static const std::vector<uint16_t> table = [] {
+        std::vector<uint16_t> t(65536);
+        for (uint32_t code = 0; code < 65536; ++code) {
+            float n[3];
+            oct_decode(uint16_t(code), n);
+            t[code] = uint16_t(oct6_encode(n));
+        }
+        return t;
+    }();
+    return table;
+}
+
+}  // namespace
+
 uint32_t oct6_encode(const float n[3]) {
     float l1 = std::abs(n[0]) + std::abs(n[1]) + std::abs(n[2]);
     if (!(l1 > 0)) return quantize6(0) | quantize6(0) << 6;  // no direction: +z
@@ -68,6 +87,8 @@ PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origi
         out.origin[a] = dataset_origin[a] + lo[a];
         out.step[a] = float((hi[a] - lo[a]) / kPositionLevels[a]);
     }
+    double inverse_step[3];
+    for (int a = 0; a < 3; ++a) inverse_step[a] = out.step[a] > 0 ? 1.0 / double(out.step[a]) : 0.0;
     double error2 = 0;
     for (size_t i = 0; i < n; ++i) {
         uint32_t word = 0;
@@ -75,8 +96,8 @@ PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origi
         for (int a = 0; a < 3; ++a) {
             const double p = points.positions[3 * i + a];
             uint32_t q = 0;
-            if (out.step[a] > 0)
-                q = uint32_t(std::clamp(std::lround((p - lo[a]) / double(out.step[a])), 0L, long(kPositionLevels[a])));
+            if (out.step[a] > 0)  // (p - lo) / step >= 0: truncating x + 0.5 rounds
+                q = std::min(uint32_t((p - lo[a]) * inverse_step[a] + 0.5), kPositionLevels[a]);
             // What the shader computes (float product), relative to the node origin.
             const double packed = lo[a] + double(float(q) * out.step[a]);
             d2 += (packed - p) * (packed - p);
@@ -98,24 +119,23 @@ PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origi
     out.radius_base = float(rmin * (1 + kRadiusMargin));
     double log2_step = std::log2(rmax * (1 + 2 * kRadiusMargin) / out.radius_base) / (kSplatRadiusCodes - 1);
     out.radius_log2_step = float(std::max(log2_step * (1 + 1e-6), 1.0 / 256));
+    // The radius of every code, as the shader computes it (exact exp2 here; the margin covers the
+    // GPU's): a splat takes the first code at least its radius (a table search, no log per point).
+    double code_radius[kSplatRadiusCodes];
+    for (int c = 0; c < kSplatRadiusCodes; ++c) code_radius[c] = double(out.radius_base) * std::exp2(double(c) * out.radius_log2_step);
+    const uint16_t* normal_codes = oct8_to_oct6().data();
     for (size_t i = 0; i < n; ++i) {
         const double r = (double(points.radii[i]) + out.position_error) * (1 + kRadiusMargin);
-        long code = std::lround(std::ceil(std::log2(r / out.radius_base) / out.radius_log2_step));
-        code = std::clamp(code, 0L, long(kSplatRadiusCodes - 1));
-        while (code < kSplatRadiusCodes - 1 && double(out.radius_base) * std::exp2(double(code) * out.radius_log2_step) < r)
-            ++code;
+        const long code = std::min(long(std::lower_bound(code_radius, code_radius + kSplatRadiusCodes, r) - code_radius),
+                                   long(kSplatRadiusCodes - 1));
         uint32_t word = uint32_t(code) << 12;
-        if (out.has_normals) {
-            float normal[3];
-            oct_decode(points.normals[i], normal);
-            word |= oct6_encode(normal);
-        }
+        if (out.has_normals) word |= normal_codes[points.normals[i]];
         if (out.has_colors) {
             const uint8_t* c = &points.colors[3 * i];
             for (int k = 0; k < 3; ++k) word |= ((uint32_t(c[k]) * 31 + 127) / 255) << (17 + 5 * k);
         }
         out.words[2 * i + 1] = word;
-        out.max_radius = std::max(out.max_radius, float(double(out.radius_base) * std::exp2(double(code) * out.radius_log2_step)));
+        out.max_radius = std::max(out.max_radius, float(code_radius[code]));
     }
     return out;
 }
