@@ -119,6 +119,11 @@ std::string PointsFormat::decode(uint32_t node, const uint8_t* data, size_t size
     points.scratch = {};  // decoder work space: not kept with the node
     if (points.count != n.primitives)
         return strprintf("node %llu holds %zu points, the index says %u", (unsigned long long)n.key, points.count, n.primitives);
+    // The codec refuses non-positive steps and radius bases, so this holds for any bytes it
+    // accepts; checked again because the packer's logarithmic radius scale relies on it.
+    for (size_t i = 0; i < points.count; ++i)
+        if (!(points.radii[i] > 0) || !std::isfinite(points.radii[i]))
+            return strprintf("node %llu: splat %zu has radius %g", (unsigned long long)n.key, i, double(points.radii[i]));
     decoded->splats = pack_splats(points, meta_.origin);
     decoded->part_primitives = {uint32_t(points.count)};
     decoded->bytes.gpu = uint64_t(points.count) * kPackedSplatBytes;
