@@ -126,9 +126,9 @@ std::string PointsFormat::decode(uint32_t node, const uint8_t* data, size_t size
             return strprintf("node %llu: splat %zu has radius %g", (unsigned long long)n.key, i, double(points.radii[i]));
     decoded->splats = pack_splats(points, meta_.origin);
     decoded->part_primitives = {uint32_t(points.count)};
-    decoded->bytes.gpu = uint64_t(points.count) * kPackedSplatBytes;
+    decoded->bytes.gpu = uint64_t(points.count) * decoded->splats.stride;
     decoded->bytes.cpu = points.positions.size() * 4 + points.normals.size() * 2 + points.colors.size() +
-                         points.radii.size() * 4 + decoded->splats.words.size() * 4;
+                         points.radii.size() * 4 + decoded->splats.halves.size() * 2;
     Aabb box;
     for (size_t i = 0; i < points.count; ++i)
         for (int a = 0; a < 3; ++a) {

@@ -45,13 +45,17 @@ std::string points_shader_source(PointsShader kind, bool gles) {
 SplatStore::~SplatStore() { clear(); }
 
 void SplatStore::upload(uint64_t key, const PackedSplats& splats) {
-    if (splats.words.size() != 2 * splats.count || splats.count == 0 || splats.count >= (1u << 24))
-        fail("node %llu: %zu packed words for %zu splats", (unsigned long long)key, splats.words.size(), splats.count);
+    if ((splats.stride != kSplatBytesWithColor && splats.stride != kSplatBytesWithoutColor) ||
+        splats.halves.size() != splats.count * (splats.stride / 2) || splats.count == 0 || splats.count >= (1u << 24) ||
+        (splats.radius_bits != 4 && splats.radius_bits != 5))
+        fail("node %llu: %zu packed halves for %zu splats of %u bytes", (unsigned long long)key, splats.halves.size(),
+             splats.count, splats.stride);
     for (int guard = 0; guard < 16 && glGetError() != GL_NO_ERROR; ++guard) {
     }
     GpuSplats g;
     g.count = uint32_t(splats.count);
-    g.bytes = uint64_t(splats.count) * kPackedSplatBytes;
+    g.bytes = uint64_t(splats.count) * splats.stride;
+    g.radius_bits = splats.radius_bits;
     g.origin = splats.origin;
     g.step = splats.step;
     g.radius_base = splats.radius_base;
@@ -62,9 +66,11 @@ void SplatStore::upload(uint64_t key, const PackedSplats& splats) {
     glBindVertexArray(g.vao);
     glGenBuffers(1, &g.vbo);
     glBindBuffer(GL_ARRAY_BUFFER, g.vbo);
-    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(g.bytes), splats.words.data(), GL_STATIC_DRAW);
+    glBufferData(GL_ARRAY_BUFFER, GLsizeiptr(g.bytes), splats.halves.data(), GL_STATIC_DRAW);
     glEnableVertexAttribArray(0);
-    glVertexAttribIPointer(0, 2, GL_UNSIGNED_INT, kPackedSplatBytes, nullptr);
+    // Halves as unsigned shorts (integer attribute, no conversion): 4 or 3 of them; a missing
+    // fourth reads as 1, which the 6-byte layout never looks at.
+    glVertexAttribIPointer(0, GLint(splats.stride / 2), GL_UNSIGNED_SHORT, GLsizei(splats.stride), nullptr);
     glBindVertexArray(0);
     glBindBuffer(GL_ARRAY_BUFFER, 0);
     const GLenum error = glGetError();
@@ -161,6 +167,7 @@ void find_uniforms(const GlProgram& p, U& u) {
     u.node_step = p.uniform("node_step");
     u.radius_base = p.uniform("radius_base");
     u.radius_log2_step = p.uniform("radius_log2_step");
+    u.radius_bits = p.uniform("radius_bits");
     u.has_normals = p.uniform("has_normals");
     u.has_colors = p.uniform("has_colors");
     u.default_color = p.uniform("default_color");
@@ -271,6 +278,7 @@ RenderStats PointsRenderer::draw(const Camera& camera_in, const std::vector<Draw
         glUniform3f(u.node_step, g->step[0], g->step[1], g->step[2]);
         glUniform1f(u.radius_base, g->radius_base);
         glUniform1f(u.radius_log2_step, g->radius_log2_step);
+        glUniform1i(u.radius_bits, g->radius_bits);
         glUniform1i(u.has_normals, g->has_normals ? 1 : 0);
         glUniform1i(u.has_colors, g->has_colors ? 1 : 0);
         glBindVertexArray(g->vao);

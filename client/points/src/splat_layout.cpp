@@ -73,7 +73,10 @@ PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origi
     out.count = n;
     out.has_normals = (points.flags & kPointHasNormals) != 0;
     out.has_colors = (points.flags & kPointHasColors) != 0;
-    out.words.assign(2 * n, 0);
+    out.stride = out.has_colors ? kSplatBytesWithColor : kSplatBytesWithoutColor;
+    out.radius_bits = out.has_colors ? 5 : 4;
+    const size_t halves = out.stride / 2;
+    out.halves.assign(halves * n, 0);
     if (n == 0) return out;
 
     // Position grid over the tight box of the centres.
@@ -104,7 +107,8 @@ PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origi
             word |= q << kPositionShift[a];
         }
         error2 = std::max(error2, d2);
-        out.words[2 * i] = word;
+        out.halves[halves * i] = uint16_t(word);
+        out.halves[halves * i + 1] = uint16_t(word >> 16);
     }
     // Rounding of origin + lo in double is far below the float grid; a relative hair covers it.
     out.position_error = float(std::sqrt(error2) * (1 + 1e-6));
@@ -117,24 +121,25 @@ PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origi
         rmax = std::max(rmax, r);
     }
     out.radius_base = float(rmin * (1 + kRadiusMargin));
-    double log2_step = std::log2(rmax * (1 + 2 * kRadiusMargin) / out.radius_base) / (kSplatRadiusCodes - 1);
+    const int codes = 1 << out.radius_bits;
+    double log2_step = std::log2(rmax * (1 + 2 * kRadiusMargin) / out.radius_base) / (codes - 1);
     out.radius_log2_step = float(std::max(log2_step * (1 + 1e-6), 1.0 / 256));
     // The radius of every code, as the shader computes it (exact exp2 here; the margin covers the
     // GPU's): a splat takes the first code at least its radius (a table search, no log per point).
-    double code_radius[kSplatRadiusCodes];
-    for (int c = 0; c < kSplatRadiusCodes; ++c) code_radius[c] = double(out.radius_base) * std::exp2(double(c) * out.radius_log2_step);
+    double code_radius[32];
+    for (int c = 0; c < codes; ++c) code_radius[c] = double(out.radius_base) * std::exp2(double(c) * out.radius_log2_step);
     const uint16_t* normal_codes = oct8_to_oct6().data();
     for (size_t i = 0; i < n; ++i) {
         const double r = (double(points.radii[i]) + out.position_error) * (1 + kRadiusMargin);
-        const long code = std::min(long(std::lower_bound(code_radius, code_radius + kSplatRadiusCodes, r) - code_radius),
-                                   long(kSplatRadiusCodes - 1));
+        const long code = std::min(long(std::lower_bound(code_radius, code_radius + codes, r) - code_radius), long(codes - 1));
         uint32_t word = uint32_t(code) << 12;
         if (out.has_normals) word |= normal_codes[points.normals[i]];
         if (out.has_colors) {
             const uint8_t* c = &points.colors[3 * i];
             for (int k = 0; k < 3; ++k) word |= ((uint32_t(c[k]) * 31 + 127) / 255) << (17 + 5 * k);
         }
-        out.words[2 * i + 1] = word;
+        out.halves[halves * i + 2] = uint16_t(word);
+        if (halves == 4) out.halves[halves * i + 3] = uint16_t(word >> 16);
         out.max_radius = std::max(out.max_radius, float(code_radius[code]));
     }
     return out;
@@ -142,9 +147,13 @@ PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origi
 
 UnpackedSplat unpack_splat(const PackedSplats& splats, size_t i) {
     UnpackedSplat s;
-    const uint32_t w0 = splats.words[2 * i], w1 = splats.words[2 * i + 1];
+    const size_t halves = splats.stride / 2;
+    const uint16_t* h = &splats.halves[halves * i];
+    const uint32_t w0 = uint32_t(h[0]) | uint32_t(h[1]) << 16;
+    const uint32_t w1 = uint32_t(h[2]) | (halves == 4 ? uint32_t(h[3]) << 16 : 0u);
     for (int a = 0; a < 3; ++a) s.position[a] = float((w0 >> kPositionShift[a]) & kPositionLevels[a]) * splats.step[a];
-    s.radius = splats.radius_base * std::exp2(float((w1 >> 12) & 31u) * splats.radius_log2_step);
+    const uint32_t code = (w1 >> 12) & ((1u << splats.radius_bits) - 1);
+    s.radius = splats.radius_base * std::exp2(float(code) * splats.radius_log2_step);
     if (splats.has_normals) oct6_decode(w1 & 0xfffu, s.normal.data());
     for (int k = 0; k < 3; ++k)
         s.color[k] = splats.has_colors ? uint8_t(std::lround(float((w1 >> (17 + 5 * k)) & 31u) * 255.0f / 31.0f)) : 0;

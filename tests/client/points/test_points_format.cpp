@@ -143,13 +143,13 @@ TEST(PointsDecode, EqualsThePointDatasetsDecodedPoints) {
         EXPECT_EQ(got.colors, want.colors);
         EXPECT_EQ(got.radii, want.radii);
         EXPECT_EQ(decoded->part_primitives, std::vector<uint32_t>{uint32_t(got.count)});
-        EXPECT_EQ(decoded->bytes.gpu, uint64_t(got.count) * kPackedSplatBytes);
+        EXPECT_EQ(decoded->bytes.gpu, uint64_t(got.count) * points_node(*decoded).splats.stride);
         EXPECT_FALSE(decoded->data_bounds.empty());
         EXPECT_TRUE(h.node(n).bounds.contains(decoded->data_bounds));
     }
 }
 
-TEST(PointsPacking, PackedSplatsCoverTheDecodedOnesWithin8Bytes) {
+TEST(PointsPacking, PackedSplatsCoverTheDecodedOnesIn8BytesOr6WithoutColour) {
     for (const PointSet& set : hierarchy_sets()) {
         const std::string& path = test::points_dataset(set);
         PointDataset file(path);
@@ -161,7 +161,8 @@ TEST(PointsPacking, PackedSplatsCoverTheDecodedOnesWithin8Bytes) {
             const PointsNode& node = points_node(*decoded);
             const DecodedPoints& d = node.points;
             const PackedSplats& s = node.splats;
-            ASSERT_EQ(s.words.size(), 2 * d.count);
+            ASSERT_EQ(s.stride, (d.flags & kPointHasColors) ? 8u : 6u) << "6 bytes without colours";
+            ASSERT_EQ(s.halves.size(), s.stride / 2 * d.count);
             float min_radius = INFINITY;
             for (size_t i = 0; i < d.count; ++i) {
                 const UnpackedSplat u = unpack_splat(s, i);
@@ -189,7 +190,7 @@ TEST(PointsPacking, PackedSplatsCoverTheDecodedOnesWithin8Bytes) {
         }
         std::printf("GPU packing: %u bytes per point; worst position error / smallest radius %.3f; worst normal %.2f deg; "
                     "worst colour step %d\n",
-                    kPackedSplatBytes, worst_error_to_radius, worst_normal_degrees, worst_color);
+                    set.colors ? kSplatBytesWithColor : kSplatBytesWithoutColor, worst_error_to_radius, worst_normal_degrees, worst_color);
         EXPECT_LT(worst_error_to_radius, 0.5) << "the node grid is fine next to the splats";
         EXPECT_LT(worst_normal_degrees, 4.0);
         EXPECT_LE(worst_color, 5);

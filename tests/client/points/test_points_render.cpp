@@ -7,6 +7,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <tuple>
 
 #include <epoxy/gl.h>
 
@@ -26,10 +27,11 @@ namespace {
 
 const uint8_t kWhite[3] = {255, 255, 255};
 
-PointSet dense_sphere(double offset = 0) {
+PointSet dense_sphere(double offset = 0, bool colors = true) {
     PointSet set;
     set.points = 200000;
     set.offset = offset;
+    set.colors = colors;
     return set;
 }
 
@@ -100,51 +102,55 @@ PackedSplats test_splats(size_t count) {
 TEST(SplatStore, KeepsPinnedAndUsedNodesAndEvictsTheLeastRecentlyUsedOverBudget) {
     GL_TEST_CONTEXT();
     SplatStore store;
-    const PackedSplats splats = test_splats(100);  // 800 bytes
+    const PackedSplats splats = test_splats(100);  // 600 bytes (6 per splat: no colours)
     std::vector<uint64_t> evicted;
     store.set_eviction_callback([&](uint64_t key) { evicted.push_back(key); });
     for (uint64_t key = 1; key <= 4; ++key) {
         store.begin_frame();
         store.upload(key, splats);
     }
-    EXPECT_EQ(store.gpu_bytes(), 4 * 800u);
+    EXPECT_EQ(store.gpu_bytes(), 4 * 600u);
     store.begin_frame();
     store.pin(1);
     store.mark_used(2);
-    store.set_budget(2 * 800);  // 3 and 4 are neither pinned nor used: they go, oldest first
+    store.set_budget(2 * 600);  // 3 and 4 are neither pinned nor used: they go, oldest first
     EXPECT_EQ(evicted, (std::vector<uint64_t>{3, 4}));
-    EXPECT_EQ(store.gpu_bytes(), 2 * 800u);
-    store.set_budget(800);  // 1 pinned, 2 used this frame: over budget, nothing to evict
-    EXPECT_EQ(store.gpu_bytes(), 2 * 800u);
+    EXPECT_EQ(store.gpu_bytes(), 2 * 600u);
+    store.set_budget(600);  // 1 pinned, 2 used this frame: over budget, nothing to evict
+    EXPECT_EQ(store.gpu_bytes(), 2 * 600u);
     store.begin_frame();
     store.evict_to_budget();  // 2 no longer used this frame
     EXPECT_EQ(evicted, (std::vector<uint64_t>{3, 4, 2}));
     EXPECT_TRUE(store.resident(1));
     PackedSplats bad = splats;
-    bad.words.pop_back();
+    bad.halves.pop_back();
     EXPECT_THROW(store.upload(9, bad), Error);
     EXPECT_FALSE(store.resident(9));
 }
 
 // Drawn at the cut the session picks for 2 px, a dense sphere covers every pixel of its
-// silhouette (bar a 2 px rim) in both shapes; frame times of the two are reported.
-class DenseSphere : public ::testing::TestWithParam<SplatShape> {};
+// silhouette (bar a 2 px rim) in both shapes and both GPU layouts (8 bytes with colours, 6
+// without); frame times of the two shapes are reported.
+class DenseSphere : public ::testing::TestWithParam<std::tuple<SplatShape, bool>> {};
 
 TEST_P(DenseSphere, HasNoBackgroundPixelsInsideItsSilhouette) {
     GL_TEST_CONTEXT();
-    const std::string& path = test::points_dataset(dense_sphere());
+    const SplatShape param_shape = std::get<0>(GetParam());
+    const bool colors = std::get<1>(GetParam());
+    const std::string& path = test::points_dataset(dense_sphere(0, colors));
     SessionSettings settings;
     settings.tolerance_px = 2.0;
     StreamingSession session(path, settings);
-    const char* shape = GetParam() == SplatShape::Round ? "round" : "oriented";
+    const std::string shape = std::string(param_shape == SplatShape::Round ? "round" : "oriented") +
+                              (colors ? "" : " colourless");
     int view = 0;
     for (glm::dvec3 eye : {glm::dvec3(0, -3.2, 1.0), glm::dvec3(2.2, 1.5, -1.4), glm::dvec3(-2.0, -1.8, 0.8)}) {
         const Camera camera = sphere_camera(eye);
         const SessionFrameStats s = settle(session, camera);
         EXPECT_TRUE(s.tolerance_met) << shape << " view " << view << ": " << s.certified_error_px << " px, limits "
                                      << int(s.limits);
-        const std::vector<uint8_t> image = draw(session, camera, GetParam(), true);
-        test::maybe_save(std::string("sphere_") + shape + "_" + std::to_string(view), image, camera.width, camera.height);
+        const std::vector<uint8_t> image = draw(session, camera, param_shape, true);
+        test::maybe_save("sphere_" + shape + "_" + std::to_string(view), image, camera.width, camera.height);
         const std::vector<uint8_t> covered = test::coverage(image, camera.width, camera.height, kWhite);
         const std::vector<uint8_t> inside =
             test::erode(sphere_silhouette(camera, glm::dvec3(0), 1.0), camera.width, camera.height, 2);
@@ -172,18 +178,22 @@ TEST_P(DenseSphere, HasNoBackgroundPixelsInsideItsSilhouette) {
                 const double ms = std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - start).count();
                 if (round > 0) best_ms[oriented] = std::min(best_ms[oriented], ms);
             }
-        if (GetParam() == SplatShape::Oriented)
-            std::printf("view %d: %zu splats in %zu nodes, GPU store %llu bytes; frame (llvmpipe, 320x240): round %.1f ms, "
+        if (param_shape == SplatShape::Oriented)
+            std::printf("%s, view %d: %zu splats in %zu nodes, GPU store %llu bytes; frame (llvmpipe, 320x240): round %.1f ms, "
                         "oriented %.1f ms (x%.2f)\n",
-                        view, stats.vertices, stats.draws, (unsigned long long)s.gpu_bytes, best_ms[0], best_ms[1],
+                        colors ? "colours" : "no colours", view, stats.vertices, stats.draws, (unsigned long long)s.gpu_bytes, best_ms[0], best_ms[1],
                         best_ms[1] / best_ms[0]);
         EXPECT_GT(stats.vertices, 0u);
         ++view;
     }
 }
 
-INSTANTIATE_TEST_SUITE_P(BothShapes, DenseSphere, ::testing::Values(SplatShape::Round, SplatShape::Oriented),
-                         [](const auto& info) { return info.param == SplatShape::Round ? "Round" : "Oriented"; });
+INSTANTIATE_TEST_SUITE_P(BothShapesAndLayouts, DenseSphere,
+                         ::testing::Combine(::testing::Values(SplatShape::Round, SplatShape::Oriented), ::testing::Bool()),
+                         [](const auto& info) {
+                             return std::string(std::get<0>(info.param) == SplatShape::Round ? "Round" : "Oriented") +
+                                    (std::get<1>(info.param) ? "8Bytes" : "6Bytes");
+                         });
 
 // A session under a GPU budget stays within it on every step while it flies around and into the
 // sphere, and still settles at the tolerance from afar.

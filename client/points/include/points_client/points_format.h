@@ -31,7 +31,7 @@ Hierarchy build_points_hierarchy(const PointsMeta& meta, const std::vector<Archi
                                  const std::string& source);
 
 // A decoded node. DecodedNode's fields: bytes cpu = the decoded arrays and the packed splats;
-// gpu = kPackedSplatBytes per point (what the renderer uploads); part_primitives = {points};
+// gpu = PackedSplats::stride per point (what the renderer uploads); part_primitives = {points};
 // data_bounds = the box of the decoded splat balls (centre +- radius), within the node's box.
 class PointsNode : public DecodedNode {
 public:

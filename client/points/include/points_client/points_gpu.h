@@ -3,7 +3,7 @@
 // (client/node_renderer.h).
 //
 // SplatStore keeps one vertex buffer per node: its packed splats as they are
-// (points_client/splat_layout.h, kPackedSplatBytes per point, one uvec2 attribute), with the
+// (points_client/splat_layout.h, 8 or 6 bytes per point, one attribute of 16-bit halves), with the
 // node's decode constants. Its policy is CATP's FragmentStore's (catp_client/catp_gpu.h): pinned
 // nodes and nodes used in the current frame are never evicted, the others go least recently
 // used first once the store is over its byte budget, and every eviction is reported.
@@ -45,6 +45,7 @@ struct GpuSplats {
     std::array<double, 3> origin{};
     std::array<float, 3> step{};
     float radius_base = 0, radius_log2_step = 0;
+    int radius_bits = 5;
     bool has_normals = false, has_colors = false;
     int pins = 0;
     uint64_t last_used = 0;  // frame of the last upload or mark_used
@@ -126,7 +127,8 @@ public:
 
 private:
     struct Uniforms {
-        int node_offset = -1, node_step = -1, radius_base = -1, radius_log2_step = -1, has_normals = -1, has_colors = -1;
+        int node_offset = -1, node_step = -1, radius_base = -1, radius_log2_step = -1, radius_bits = -1, has_normals = -1;
+        int has_colors = -1;
         int default_color = -1, modelview = -1, projection = -1, pixels_per_unit = -1, max_point_size = -1, oriented = -1;
         int flat_mode = -1, flat_color = -1, light_eye = -1, ambient = -1;
         int viewport = -1, projection_scale = -1, depth_coefficients = -1;

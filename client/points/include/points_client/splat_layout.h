@@ -1,12 +1,14 @@
 #pragma once
-// The GPU layout of a point node's splats: 8 bytes per splat, decoded by the vertex shader
-// (shaders/points.vert). Packing runs on the fetcher's workers (PointsFormat::decode), so the
-// render thread only copies the words into a buffer.
+// The GPU layout of a point node's splats, decoded by the vertex shader (shaders/points.vert):
+// 8 bytes per splat in nodes with colours, 6 in nodes without. Packing runs on the fetcher's
+// workers (PointsFormat::decode), so the render thread only copies the halves into a buffer.
+// Stored as 16-bit halves, little end first (one uvec4 / uvec3 attribute of unsigned shorts):
 //
-//   word 0: position, quantized on a grid over the tight box of the node's splat centres:
+//   halves 0-1, position: quantized on a grid over the tight box of the node's splat centres,
 //           x bits 0-10, y bits 11-21, z bits 22-31 (11 + 11 + 10 bits);
-//   word 1: normal, octahedral 6 + 6 bits (bits 0-5 u, 6-11 v); radius code, 5 bits (12-16);
-//           colour RGB 5-5-5 (bits 17-21 red, 22-26 green, 27-31 blue).
+//   8 bytes, halves 2-3: normal, octahedral 6 + 6 bits (bits 0-5 u, 6-11 v); radius code,
+//           5 bits (12-16); colour RGB 5-5-5 (bits 17-21 red, 22-26 green, 27-31 blue);
+//   6 bytes, half 2: normal as above (bits 0-11); radius code, 4 bits (12-15).
 //
 // A node's box is a few thousand splat spacings wide at most, so its 2048-step grid lands well
 // within a splat radius (the measured error is reported as PackedSplats::position_error and added
@@ -24,22 +26,24 @@
 
 namespace catpaq {
 
-constexpr uint32_t kPackedSplatBytes = 8;
-constexpr int kSplatRadiusCodes = 32;  // 5 bits
+constexpr uint32_t kSplatBytesWithColor = 8;
+constexpr uint32_t kSplatBytesWithoutColor = 6;
 
 struct PackedSplats {
     size_t count = 0;
-    std::vector<uint32_t> words;          // 2 per splat (layout above)
+    uint32_t stride = kSplatBytesWithColor;  // bytes per splat: 8 with colours, 6 without
+    std::vector<uint16_t> halves;         // stride / 2 per splat (layout above)
     std::array<double, 3> origin{};       // world position of grid point (0, 0, 0)
     std::array<float, 3> step{};          // grid step per axis, world units (0 for a flat axis)
     float radius_base = 0;                // radius of code 0
     float radius_log2_step = 0;           // log2 of the ratio of consecutive radius codes
+    int radius_bits = 5;                  // 5 (8-byte layout) or 4 (6-byte layout)
     bool has_normals = false, has_colors = false;
     float position_error = 0;             // largest |packed - decoded position| (world units)
     float max_radius = 0;                 // largest packed radius (world units)
 };
 
-// Packs a decoded node; `dataset_origin` is the dataset's origin (world = origin + decoded
+// Packs a decoded node (the 6-byte layout when it has no colours); `dataset_origin` is the dataset's origin (world = origin + decoded
 // position). Decoded nodes hold at least one point (decode_point_node guarantees it).
 PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origin[3]);
 
