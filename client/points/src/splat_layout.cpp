@@ -1,4 +1,5 @@
-// Packing decoded point nodes into the 8-byte GPU splat (points_client/splat_layout.h).
+// Packing decoded point nodes into GPU splats of 8 bytes, or 6 without colours
+// (points_client/splat_layout.h).
 #include "points_client/splat_layout.h"
 
 #include <algorithm>
