@@ -79,6 +79,7 @@ void SplatStore::upload(uint64_t key, const PackedSplats& splats) {
         fail("uploading node %llu failed (GL error 0x%x%s)", (unsigned long long)key, unsigned(error),
              error == GL_OUT_OF_MEMORY ? ": out of GPU memory" : "");
     }
+    if (const GpuSplats* earlier = find(key)) g.pins = earlier->pins;  // replacing keeps the pins
     release(key);
     lru_.push_back(key);
     g.last_used = frame_;

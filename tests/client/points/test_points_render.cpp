@@ -122,6 +122,10 @@ TEST(SplatStore, KeepsPinnedAndUsedNodesAndEvictsTheLeastRecentlyUsedOverBudget)
     store.evict_to_budget();  // 2 no longer used this frame
     EXPECT_EQ(evicted, (std::vector<uint64_t>{3, 4, 2}));
     EXPECT_TRUE(store.resident(1));
+    store.upload(1, splats);  // replacing a pinned node keeps it pinned
+    store.begin_frame();
+    EXPECT_EQ(store.evict_to_budget(), 0u);
+    EXPECT_TRUE(store.resident(1));
     PackedSplats bad = splats;
     bad.halves.pop_back();
     EXPECT_THROW(store.upload(9, bad), Error);
