@@ -123,6 +123,7 @@ TEST(SplatStore, KeepsPinnedAndUsedNodesAndEvictsTheLeastRecentlyUsedOverBudget)
     EXPECT_EQ(evicted, (std::vector<uint64_t>{3, 4, 2}));
     EXPECT_TRUE(store.resident(1));
     store.upload(1, splats);  // replacing a pinned node keeps it pinned
+    store.set_budget(100);
     store.begin_frame();
     EXPECT_EQ(store.evict_to_budget(), 0u);
     EXPECT_TRUE(store.resident(1));
