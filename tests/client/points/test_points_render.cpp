@@ -200,6 +200,67 @@ INSTANTIATE_TEST_SUITE_P(BothShapesAndLayouts, DenseSphere,
                                     (std::get<1>(info.param) ? "8Bytes" : "6Bytes");
                          });
 
+// Oriented splats write the depth of their ray's hit in the splat's plane: on a dense sphere it is
+// the sphere's own depth within a small fraction of the splat radius, far closer than round
+// splats, whose every pixel takes the depth of the splat's centre. Neither shape lets the back of
+// the sphere show through a gap in the front (the background test alone cannot see those).
+TEST(OrientedSplats, WriteTheSurfacesDepth) {
+    GL_TEST_CONTEXT();
+    if (current_context_is_gles()) GTEST_SKIP() << "reading depth needs desktop GL";
+    const std::string& path = test::points_dataset(dense_sphere());
+    SessionSettings settings;
+    settings.tolerance_px = 2.0;
+    StreamingSession session(path, settings);
+    Camera camera = sphere_camera({0.8, -2.6, 1.0});
+    settle(session, camera);
+    camera.fit_clip_planes(glm::dvec3(-1.05), glm::dvec3(1.05));
+    const glm::dmat4 projection = camera.projection();
+    const std::vector<uint8_t> inside = test::erode(sphere_silhouette(camera, glm::dvec3(0), 1.0), camera.width, camera.height, 3);
+    const glm::dvec3 f = camera.forward();
+    const glm::dvec3 r = glm::normalize(glm::cross(f, camera.up));
+    const glm::dvec3 u = glm::cross(r, f);
+    const double t = std::tan(camera.fov_y_degrees * M_PI / 360);
+    double mean_error[2] = {0, 0}, worst_error[2] = {0, 0};
+    for (int oriented = 0; oriented < 2; ++oriented) {
+        Framebuffer fb(camera.width, camera.height);
+        fb.bind();
+        RenderSettings render;
+        render.splats = oriented ? SplatShape::Oriented : SplatShape::Round;
+        session.draw(camera, render);
+        std::vector<float> depth(size_t(camera.width) * camera.height);
+        glReadPixels(0, 0, camera.width, camera.height, GL_DEPTH_COMPONENT, GL_FLOAT, depth.data());
+        ASSERT_EQ(glGetError(), GLenum(GL_NO_ERROR));
+        size_t n = 0;
+        for (int y = 0; y < camera.height; ++y)
+            for (int x = 0; x < camera.width; ++x) {
+                if (!inside[size_t(y) * camera.width + x]) continue;
+                // The sphere's depth along the pixel's ray (rows of the depth buffer are bottom-up).
+                const double sx = ((x + 0.5) / camera.width * 2 - 1) * t * camera.aspect();
+                const double sy = (1 - (y + 0.5) / camera.height * 2) * t;
+                const glm::dvec3 d = glm::normalize(f + sx * r + sy * u);
+                const double b = glm::dot(camera.eye, d), c = glm::dot(camera.eye, camera.eye) - 1.0;
+                const double hit = -b - std::sqrt(b * b - c);
+                const double want = hit * glm::dot(d, f);  // eye-space depth
+                const double ndc = 2.0 * depth[size_t(camera.height - 1 - y) * camera.width + x] - 1.0;
+                const double got = projection[3][2] / (ndc + projection[2][2]);  // -z_eye
+                const double error = std::abs(got - want);
+                mean_error[oriented] += error;
+                worst_error[oriented] = std::max(worst_error[oriented], error);
+                ++n;
+            }
+        ASSERT_GT(n, 5000u);
+        mean_error[oriented] /= double(n);
+    }
+    std::printf("depth against the sphere: round mean %.2e worst %.2e; oriented mean %.2e worst %.2e (unit sphere)\n",
+                mean_error[0], worst_error[0], mean_error[1], worst_error[1]);
+    // The sphere is 2 units deep: a pixel showing its back is a hole in the front.
+    EXPECT_LT(worst_error[0], 0.25) << "round splats leave a hole in the front surface";
+    EXPECT_LT(worst_error[1], 0.25) << "oriented splats leave a hole in the front surface";
+    EXPECT_LT(mean_error[1], 0.5 * mean_error[0]);
+    EXPECT_LT(worst_error[1], 0.5 * worst_error[0]);
+    EXPECT_LT(mean_error[1], 2e-3);
+}
+
 // A session under a GPU budget stays within it on every step while it flies around and into the
 // sphere, and still settles at the tolerance from afar.
 TEST(PointsSession, StaysWithinTheGpuBudgetAndConvergesToTheTolerance) {
