@@ -261,6 +261,36 @@ TEST(OrientedSplats, WriteTheSurfacesDepth) {
     EXPECT_LT(mean_error[1], 2e-3);
 }
 
+// Up close the sphere fills the view: every pixel is covered, the border's included (splats whose
+// centre is just outside the image still reach into it).
+TEST(PointSprites, CoverTheImageBorderUpClose) {
+    GL_TEST_CONTEXT();
+    const std::string& path = test::points_dataset(dense_sphere());
+    SessionSettings settings;
+    settings.tolerance_px = 2.0;
+    StreamingSession session(path, settings);
+    const Camera camera = sphere_camera({0.3, -1.6, 0.4});
+    settle(session, camera);
+    for (SplatShape shape : {SplatShape::Round, SplatShape::Oriented}) {
+        const std::vector<uint8_t> image = draw(session, camera, shape, true);
+        const std::vector<uint8_t> covered = test::coverage(image, camera.width, camera.height, kWhite);
+        const std::vector<uint8_t> inside = sphere_silhouette(camera, glm::dvec3(0), 0.99);
+        size_t holes = 0, border_holes = 0, interior = 0;
+        for (int y = 0; y < camera.height; ++y)
+            for (int x = 0; x < camera.width; ++x) {
+                const size_t i = size_t(y) * camera.width + x;
+                if (!inside[i]) continue;
+                ++interior;
+                if (covered[i]) continue;
+                ++holes;
+                border_holes += x < 4 || y < 4 || x >= camera.width - 4 || y >= camera.height - 4;
+            }
+        EXPECT_GT(interior, size_t(camera.width) * camera.height / 2);
+        EXPECT_EQ(holes, 0u) << (shape == SplatShape::Round ? "round" : "oriented") << ": " << border_holes
+                             << " of them within 4 px of the border";
+    }
+}
+
 // A session under a GPU budget stays within it on every step while it flies around and into the
 // sphere, and still settles at the tolerance from afar.
 TEST(PointsSession, StaysWithinTheGpuBudgetAndConvergesToTheTolerance) {

@@ -13,9 +13,10 @@
 // points_round.frag, points_oriented.frag). Positions reach the GPU relative to the eye (the node
 // origin minus the eye in double on the CPU).
 //
-// Limits of point sprites: a splat is clipped by its centre (one whose centre is just outside the
-// image may leave a gap along the border), and sprites are at most the GL's largest point size
-// (llvmpipe: 255 px), so extreme close-ups of coarse splats show gaps.
+// Limits of point sprites: GL may discard a point whose centre is outside the view, which would
+// leave gaps along the image border (llvmpipe keeps them: PointSprites.CoverTheImageBorderUpClose
+// passes), and sprites are at most the GL's largest point size, so extreme close-ups of coarse
+// splats may show gaps.
 //
 // Everything here needs a current GL context (client/gl_context.h).
 #include <cstdint>
