@@ -13,11 +13,10 @@ namespace catpaq {
 
 namespace {
 
-// origin + v in double, moved outwards by a hair so float boxes rounded to world units still
-// hold what they held (|v| around 1e7 loses bits in the sum).
+// origin + v in double, one ulp outwards: the sum rounds (by half an ulp at most), and a box
+// must still hold what it held relative to the origin.
 double outward(double origin, float v, int direction) {
-    double w = origin + double(v);
-    return w + direction * (std::abs(w) * 1e-12 + 1e-30);
+    return std::nextafter(origin + double(v), direction * INFINITY);
 }
 
 void check_index(const PointsMeta& meta, const std::vector<ArchiveEntry>& e, const std::string& source,
@@ -27,7 +26,8 @@ void check_index(const PointsMeta& meta, const std::vector<ArchiveEntry>& e, con
     if (!by_key.count(1)) fail("'%s': the dataset has no root node", source.c_str());
     for (size_t i = 0; i < e.size(); ++i) {
         const uint64_t key = e[i].key;
-        if (key == 0 || point_node_depth(key) > kPointMaxDepth) fail("'%s': %llu is not a node id", source.c_str(), (unsigned long long)key);
+        if (key == 0 || point_node_depth(key) > kPointMaxDepth)
+            fail("'%s': %llu is not a node id", source.c_str(), (unsigned long long)key);
         if (key != meta.nodes[i].key)
             fail("'%s': node record %zu is for node %llu, the index says %llu", source.c_str(), i,
                  (unsigned long long)meta.nodes[i].key, (unsigned long long)key);
