@@ -98,7 +98,8 @@ std::optional<double> intersect_triangle(const Ray& ray, const glm::dvec3& a, co
 
 // The nearest hit of the ray with the triangles the session draws (StreamingSession::
 // drawn_geometry: for CATP every drawn fragment decoded on the CPU as the shader does), in world
-// coordinates.
+// coordinates. Geometry without triangles (point sets) is picked by its points: the one nearest
+// the eye within 3 pixels of the ray.
 std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera& camera, const Ray& ray);
 
 // The path of the next screenshot: DIRECTORY/catpaq_view_NNNN.png with the smallest number not

@@ -14,6 +14,7 @@
 #include "base/error.h"
 #include "client/builtin_formats.h"
 #include "client/session.h"
+#include "client/viewer.h"
 #include "gl_support.h"
 #include "point_datasets.h"
 #include "points_client/points_format.h"
@@ -355,6 +356,24 @@ TEST(PointsPrecision, FarFromTheOriginDrawsTheSameImage) {
     std::printf("offset 1e7: %zu of %zu covered pixels differ\n", differ, covered);
     EXPECT_GT(covered, 10000u);
     EXPECT_LE(differ, 12u);
+}
+
+// The viewer picks point sets by their points: a ray through the sphere's image hits its front
+// surface, one beside it hits nothing.
+TEST(PointsPicking, FindsTheFrontSurfaceUnderTheCursor) {
+    GL_TEST_CONTEXT();
+    const std::string& path = test::points_dataset(dense_sphere());
+    SessionSettings settings;
+    settings.tolerance_px = 1.5;
+    StreamingSession session(path, settings);
+    const Camera camera = sphere_camera({0, -3.0, 0});
+    settle(session, camera);
+    std::optional<glm::dvec3> hit = pick_cut(session, camera, pixel_ray(camera, 160, 120));
+    ASSERT_TRUE(hit);
+    EXPECT_NEAR(hit->y, -1.0, 0.03) << "the front of the sphere, not its back";
+    EXPECT_NEAR(glm::length(*hit), 1.0, 0.03);
+    hit = pick_cut(session, camera, pixel_ray(camera, 310, 10));
+    EXPECT_FALSE(hit) << "nothing drawn in the corner";
 }
 
 TEST(PointsFormatModule, IsRegisteredForPointArchives) {
