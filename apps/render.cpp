@@ -52,6 +52,8 @@ static const char* kRenderUsage =
     "  --stats FILE           one JSON line of statistics per frame, written as each frame ends\n"
     "                         (docs/formats/stats.md; default: standard output)\n"
     "  --background R,G,B     background colour, 0..255 (default 255,255,255)\n"
+    "  --splats round|oriented  point datasets: screen-aligned discs (default) or oriented\n"
+    "                         ellipses ray-cast with their depth (slower, sharper where they overlap)\n"
     "  --export-cut FILE.ply  write the last frame's cut as rendered (not welded)\n"
     "  --quiet                no line per frame on the terminal\n"
     "Output paths are checked before the first frame. A node that cannot be fetched or decoded\n"
@@ -61,6 +63,12 @@ static const char* kRenderUsage =
 static void parse_size(const std::string& text, int& w, int& h) {
     if (std::sscanf(text.c_str(), "%dx%d", &w, &h) != 2 || w < 16 || h < 16 || w > 16384 || h > 16384)
         usage_error("--size: '%s' is not WIDTHxHEIGHT between 16 and 16384", text.c_str());
+}
+
+static SplatShape parse_splat_shape(const std::string& text) {
+    if (text == "round") return SplatShape::Round;
+    if (text == "oriented") return SplatShape::Oriented;
+    usage_error("--splats: '%s' is not round or oriented", text.c_str());
 }
 
 static std::array<float, 4> parse_color(const std::string& text) {
@@ -162,6 +170,7 @@ int cmd_render(int argc, char** argv) {
     std::string export_path = options.get("export-cut", "");
     RenderSettings render;
     render.background = parse_color(options.get("background", "255,255,255"));
+    render.splats = parse_splat_shape(options.get("splats", "round"));
     bool quiet = options.flag("quiet");
     options.finish();
 

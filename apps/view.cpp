@@ -24,6 +24,7 @@ static const char* kViewUsage =
     "  --msaa N               anti-aliasing samples per pixel (0, 2, 4, 8; default 4)\n"
     "  --frames N             draw N frames (every one, as fast as possible), then exit (for tests)\n"
     "  --exit-after SECONDS   run as usual (drawing on demand), then exit (for tests)\n"
+    "  --splats round|oriented  point datasets: screen-aligned discs (default) or oriented ellipses\n"
     "  --screenshot FILE.png  save the last frame (without the overlay); exits after --frames\n"
     "                         frames or --exit-after seconds, else after 120 frames\n"
     "controls:\n"
@@ -58,6 +59,9 @@ int cmd_view(int argc, char** argv) {
     settings.exit_after = options.number("exit-after", 0, 0.01, 1e9);
     settings.msaa = int(options.integer("msaa", 4, 0, 64));
     settings.screenshot = options.get("screenshot", "");
+    const std::string splats = options.get("splats", "round");
+    if (splats == "oriented") settings.splats = SplatShape::Oriented;
+    else if (splats != "round") usage_error("--splats: '%s' is not round or oriented", splats.c_str());
     options.finish();
     if (settings.screenshot.size()) check_output_file(settings.screenshot, "--screenshot");
     if (settings.screenshot.size() && settings.frames == 0 && settings.exit_after == 0) settings.frames = 120;

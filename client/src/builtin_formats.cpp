@@ -5,6 +5,8 @@
 #include "aqp_client/aqp_gpu.h"
 #include "catp_client/catp_format.h"
 #include "catp_client/catp_gpu.h"
+#include "points_client/points_format.h"
+#include "points_client/points_gpu.h"
 
 namespace catpaq {
 
@@ -16,6 +18,9 @@ const FormatRegistry& builtin_formats() {
                            create_catp_renderer});
         r.add(FormatModule{ArchiveKind::Aqp, [](const DatasetPrefix& prefix) { return std::make_unique<AqpFormat>(prefix); },
                            create_aqp_renderer});
+        r.add(FormatModule{ArchiveKind::Points,
+                           [](const DatasetPrefix& prefix) { return std::make_unique<PointsFormat>(prefix); },
+                           create_points_renderer});
         return r;
     }();
     return registry;

@@ -153,6 +153,20 @@ std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera
     const Mesh& mesh = geometry.mesh;
     double best = std::numeric_limits<double>::infinity();
     auto position = [&](uint32_t v) { return glm::dvec3(mesh.positions[v][0], mesh.positions[v][1], mesh.positions[v][2]); };
+    if (mesh.indices.empty()) {
+        // Geometry without triangles (point sets): the drawn point nearest the eye among those
+        // within kPickPointPixels of the ray (as an angle: pixels at the centre of the view).
+        constexpr double kPickPointPixels = 3;
+        const double limit = kPickPointPixels * 2 * std::tan(camera.fov_y_degrees * kPi / 360) / camera.height;
+        const glm::dvec3 d = glm::normalize(ray.direction);
+        for (uint32_t v = 0; v < mesh.positions.size(); ++v) {
+            const glm::dvec3 to = position(v) - local.origin;
+            const double t = glm::dot(to, d);
+            if (t > 0 && t < best && glm::length(to - t * d) <= limit * t) best = t;
+        }
+        if (!std::isfinite(best)) return std::nullopt;
+        return ray.origin + best * d;
+    }
     for (size_t i = 0; i + 2 < mesh.indices.size(); i += 3) {
         std::optional<double> t =
             intersect_triangle(local, position(mesh.indices[i]), position(mesh.indices[i + 1]), position(mesh.indices[i + 2]));
@@ -355,6 +369,7 @@ void DesktopViewer::Impl::open() {
     controller.frame_box({bounds.min[0], bounds.min[1], bounds.min[2]}, {bounds.max[0], bounds.max[1], bounds.max[2]}, 45,
                          double(std::max(fbw, 1)) / double(std::max(fbh, 1)));
     render.background = {0.12f, 0.13f, 0.15f, 1.0f};
+    render.splats = settings.splats;
 
     IMGUI_CHECKVERSION();
     ImGui::CreateContext();
@@ -427,6 +442,8 @@ void DesktopViewer::Impl::overlay() {
         }
         ImGui::ColorEdit3("background", render.background.data());
         ImGui::Checkbox("wireframe", &render.wireframe);
+        bool oriented = render.splats == SplatShape::Oriented;
+        if (ImGui::Checkbox("oriented splats (points)", &oriented)) render.splats = oriented ? SplatShape::Oriented : SplatShape::Round;
         ImGui::Separator();
         ImGui::TextDisabled("drag: orbit  right/shift drag: pan  wheel: zoom");
         ImGui::TextDisabled("double click: fly to  P/F12: screenshot  H: hide  Esc: quit");

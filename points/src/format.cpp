@@ -59,6 +59,7 @@ std::string decode_points_meta(const uint8_t* data, size_t size, PointsMeta& out
     uint32_t count = r.u32();
     if (!r.ok()) return "point metadata truncated";
     if (split > 1) return "unknown split rule";
+    if (out.up_axis > 6) return "invalid up axis";
     out.split = PointSplitRule(split);
     if (uint64_t(count) * 36 != r.remaining()) return "point metadata: node table size does not match its count";
     for (int a = 0; a < 3; ++a)

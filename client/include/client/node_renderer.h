@@ -29,6 +29,12 @@ struct DrawnPart {
     bool operator==(const DrawnPart& o) const { return key == o.key && part == o.part; }
 };
 
+// How point formats draw a splat (formats of triangles ignore it).
+enum class SplatShape : uint8_t {
+    Round,     // screen-aligned discs sized by the projected radius, at the centre's depth (fast)
+    Oriented,  // ellipses: the splat's disc in its tangent plane, ray-cast per pixel with its depth
+};
+
 struct RenderSettings {
     std::array<float, 4> background{1.0f, 1.0f, 1.0f, 1.0f};
     // World-space direction towards the light; all zero: a headlight (from the eye).
@@ -39,6 +45,7 @@ struct RenderSettings {
     bool wireframe = false;                           // polygon mode lines (desktop GL only)
     bool cull_back_faces = false;
     bool clear = true;                                // clear colour and depth first
+    SplatShape splats = SplatShape::Round;            // point formats only
 };
 
 struct RenderStats {

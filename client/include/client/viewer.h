@@ -98,7 +98,8 @@ std::optional<double> intersect_triangle(const Ray& ray, const glm::dvec3& a, co
 
 // The nearest hit of the ray with the triangles the session draws (StreamingSession::
 // drawn_geometry: for CATP every drawn fragment decoded on the CPU as the shader does), in world
-// coordinates.
+// coordinates. Geometry without triangles (point sets) is picked by its points: the one nearest
+// the eye within 3 pixels of the ray.
 std::optional<glm::dvec3> pick_cut(const StreamingSession& session, const Camera& camera, const Ray& ray);
 
 // The path of the next screenshot: DIRECTORY/catpaq_view_NNNN.png with the smallest number not
@@ -115,6 +116,7 @@ struct ViewerSettings {
     std::string screenshot;         // save the last frame here (PNG)
     bool vsync = true;
     int msaa = 0;                   // anti-aliasing samples per pixel (0: none)
+    SplatShape splats = SplatShape::Round;  // how point datasets draw (RenderSettings::splats)
 };
 
 // Thrown when no window can be opened (no display): the caller tells the user to render headless.

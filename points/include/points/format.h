@@ -15,7 +15,8 @@
 //                              relative to this: the bounds' centre, so 1e7 offsets keep precision)
 //   f64 bounds_min[3], f64 bounds_max[3]   of the input, world units
 //   u64 input_points | u32 node_points (the target per node) | u32 flags (kPointsMeta*)
-//   u8 split rule | u8 colour luma bits | u8 colour chroma bits | u8 up axis (0 unknown, 3 +z)
+//   u8 split rule | u8 colour luma bits | u8 colour chroma bits | u8 up axis (0 unknown, 1-6 =
+//                              +x +y +z -x -y -z: catp/format.h's UpAxis; LAS input +z, else convert --up)
 //   u32 node_count, then per index entry in index order:
 //     u64 key | f32 box_min[3] | f32 box_max[3] | f32 mean_radius
 //   The box (relative to origin) holds the splat balls (centre +- radius) of the node and of all
