@@ -100,12 +100,12 @@ static std::string stats_line(size_t frame, const SessionFrameStats& s, const Re
     limits += "]";
     char line[1536];
     std::snprintf(line, sizeof line,
-                  "{\"frame\":%zu,\"triangles\":%llu,\"fragments\":%zu,\"nodes_drawn\":%zu,\"nodes_refined\":%zu,"
+                  "{\"frame\":%zu,\"triangles\":%llu,\"points\":%llu,\"fragments\":%zu,\"nodes_drawn\":%zu,\"nodes_refined\":%zu,"
                   "\"bytes_fetched\":%llu,\"requests\":%llu,\"pending\":%zu,\"gpu_bytes\":%llu,\"cpu_bytes\":%llu,"
                   "\"cut_ms\":%.3f,\"draw_ms\":%.3f,\"frame_ms\":%.3f,\"steps\":%d,\"certified_error_px\":%s,"
                   "\"tolerance_px\":%.3f,\"settled\":%s,\"tolerance_met\":%s,\"limited_by\":%s,\"failed_nodes\":%zu,"
                   "\"elapsed_ms\":%.3f}\n",
-                  frame, (unsigned long long)r.triangles, r.draws, s.drawn_nodes, s.refined_nodes,
+                  frame, (unsigned long long)r.triangles, (unsigned long long)r.points, r.draws, s.drawn_nodes, s.refined_nodes,
                   (unsigned long long)s.bytes_fetched, (unsigned long long)s.requests, s.pending,
                   (unsigned long long)s.gpu_bytes, (unsigned long long)s.cpu_bytes, s.cut_ms, draw_ms, frame_ms, steps,
                   certified, tolerance, s.settled ? "true" : "false", s.tolerance_met ? "true" : "false",
@@ -113,7 +113,7 @@ static std::string stats_line(size_t frame, const SessionFrameStats& s, const Re
     return line;
 }
 
-// The line a person reads on a terminal: frame, triangles, error against the tolerance, time.
+// The line a person reads on a terminal: frame, what was drawn, error against the tolerance, time.
 static void print_frame_line(size_t frame, size_t frames, const SessionFrameStats& s, const RenderStats& r,
                              double tolerance, double frame_ms) {
     std::string error = s.holes ? "not bounded yet" : strprintf("%.2f px", s.certified_error_px);
@@ -124,8 +124,10 @@ static void print_frame_line(size_t frame, size_t frames, const SessionFrameStat
         for (size_t i = 0; i < limits.size(); ++i) verdict += (i ? ", " : "") + std::string(limits[i]);
         verdict += ")";
     }
-    std::fprintf(stderr, "render: frame %zu/%zu: %llu triangles, certified error %s, %s of %.2f px, %.0f ms\n",
-                 frame + 1, frames, (unsigned long long)r.triangles, error.c_str(), verdict.c_str(), tolerance, frame_ms);
+    const std::string drawn = r.points ? strprintf("%llu points", (unsigned long long)r.points)
+                                       : strprintf("%llu triangles", (unsigned long long)r.triangles);
+    std::fprintf(stderr, "render: frame %zu/%zu: %s, certified error %s, %s of %.2f px, %.0f ms\n", frame + 1, frames,
+                 drawn.c_str(), error.c_str(), verdict.c_str(), tolerance, frame_ms);
 }
 
 // Names the first node that failed and why; the caller stops with exit status 1.

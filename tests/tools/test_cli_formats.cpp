@@ -179,3 +179,26 @@ TEST(CliFormats, AqpFromAPointCloudReconstructsAClosedSurfaceFirst) {
     ToolRun v = run("verify " + out.string() + " --quiet");
     EXPECT_EQ(v.status, 0) << v.output;
 }
+
+// A point dataset converted by the tool renders headless to the tolerance; its statistics count
+// the points drawn (and no triangles).
+TEST(CliFormats, PointDatasetsRenderAndCountThePointsDrawn) {
+    fs::path in = scratch() / "render_cloud.xyz", out = scratch() / "render_cloud.cpq", stats = scratch() / "points.jsonl";
+    write_xyz(in, sample_surface(make_sphere(4000, 3), 40000, 12, false, false));
+    ASSERT_EQ(run("convert " + in.string() + " -o " + out.string() + " --format points --node-points 2000 --quiet").status, 0);
+    ToolRun r = run("render " + out.string() + " --orbit 2 --size 160x120 --tolerance 2 --stats " + stats.string() +
+                    " --out " + (scratch() / "points_frames").string());
+    ASSERT_EQ(r.status, 0) << r.output;
+    std::ifstream lines(stats);
+    std::string line;
+    int frames = 0;
+    while (std::getline(lines, line)) {
+        const nlohmann::json j = nlohmann::json::parse(line);
+        EXPECT_EQ(j.at("triangles").get<uint64_t>(), 0u) << line;
+        EXPECT_GT(j.at("points").get<uint64_t>(), 1000u) << line;
+        EXPECT_TRUE(j.at("tolerance_met").get<bool>()) << line;
+        ++frames;
+    }
+    EXPECT_EQ(frames, 2);
+    EXPECT_TRUE(fs::exists(scratch() / "points_frames" / "frame_0001.png"));
+}

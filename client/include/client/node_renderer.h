@@ -52,6 +52,7 @@ struct RenderStats {
     size_t draws = 0;
     size_t triangles = 0;
     size_t vertices = 0;
+    size_t points = 0;   // point primitives (splats) drawn; 0 for the mesh formats
     size_t missing = 0;  // items that were not resident (skipped)
 };
 

@@ -288,6 +288,7 @@ RenderStats PointsRenderer::draw(const Camera& camera_in, const std::vector<Draw
         glDrawArrays(GL_POINTS, 0, GLsizei(g->count));
         ++stats.draws;
         stats.vertices += g->count;
+        stats.points += g->count;
     }
     glBindVertexArray(0);
     glUseProgram(0);
