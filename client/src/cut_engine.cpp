@@ -791,10 +791,13 @@ void CutEngine::refine_phase() {
 
 void CutEngine::emit_requests() {
     CutFrameStats& st = frame_.stats;
+    // A hole is a drawn node without its data in the view: one outside the view draws nothing
+    // on screen either way, so it neither waits for data nor leaves the error unbounded (AQP
+    // has a root per patch: those behind the eye of a close view would otherwise never settle).
     for (uint32_t n : active_.items) {
-        if (drawable(n)) continue;
+        if (drawable(n) || !in_view(n)) continue;
         st.holes++;
-        if (in_view(n)) want_drawable(n, RequestReason::Drawn, proj(n));
+        want_drawable(n, RequestReason::Drawn, proj(n));
     }
     // The request of a unit: the node, and the parent whose parts it names (kNoNode: the whole
     // node, or a root's parts).

@@ -1284,6 +1284,7 @@ def write_report(raw, work, docs):
     try:
         report_formats.aqp_section(raw, ver["levels"], size, conv_s, int(info.get("vertices", "0") or 0), w)
         report_formats.points_section(raw, w)
+        report_formats.stream_section(raw, SCAN_PATHS, stream_tris, w)
     except report_formats.ReportError as e:
         require(False, str(e))
 
@@ -1304,9 +1305,9 @@ def write_report(raw, work, docs):
       "diamonds that are not in the view." %
       (100 * zl["bytes_fetched"] / zl["size"], 100 * zw["bytes_fetched"] / zw["size"], 100 * in_frustum["zoom"][1],
        zl["bytes_fetched"] / fz["total"]["cut"]["drawn"], zw["bytes_fetched"] / fz["total"]["cut"]["drawn"]))
-    w("- AQP and points: the converters, `verify` and the server are measured above (sections 6 and 7); "
-      "streaming, decode and render speed of AQP and points through the client, and the comparison "
-      "with LAZ (laspy with lazrs is not installable here: no PyPI), are not in this report yet.")
+    w("- AQP and points are streamed along the same views as CATP (section 8) but not compared with peers "
+      "yet: LAZ (laspy with lazrs) is not installable here (no PyPI), and the point datasets are not "
+      "compared with Potree-style octrees.")
     w("- Leaves sit at one level of the hierarchy for the whole model, chosen so that no leaf holds more "
       "than 8 times the target: where density varies a hundredfold the sparse parts are cut into small "
       "fragments many levels below their own density (a 10M-triangle `make_uneven_density` mesh at 1 GiB: "

@@ -192,3 +192,48 @@ def points_section(raw, w):
        "met" if min(c["b_stored"] for c in pb["conversion"]) <= 3.6 else "not met with lossless colour",
        min(c["b_stored"] for c in pb["conversion"]), d["ours"]))
     w("")
+
+
+def read_jsonl_one(path):
+    rows = [json.loads(l) for l in read(path).splitlines() if l.strip()]
+    need(len(rows) == 1, "%s: expected one frame" % path)
+    return rows[0]
+
+
+def stream_section(raw, paths, stream_triangles, w):
+    """Section 8: the streaming mesh as CATP, AQP and points, cold starts on the same views."""
+    catp_size = int(read(os.path.join(raw, "scan_dataset_size.txt")).strip())
+    aqp = json.loads(read(os.path.join(raw, "convert_scan_aqp.json")).strip().splitlines()[-1])
+    pts = json.loads(read(os.path.join(raw, "convert_scan_points.json")).strip().splitlines()[-1])
+    sizes = {"scan": catp_size, "scanaqp": aqp["output"]["bytes"], "scanpts": pts["output"]["bytes"]}
+    names = {"scan": "CATP", "scanaqp": "AQP", "scanpts": "points"}
+    aqp_s = float(read(os.path.join(raw, "convert_scan_aqp_ms.txt")).strip()) / 1000
+    pts_s = float(read(os.path.join(raw, "convert_scan_points_ms.txt")).strip()) / 1000
+    w("## 8. The three formats on the same views (cold starts over HTTP)")
+    w("")
+    w("The streaming mesh of section 3 (%s triangles) converted three ways with default settings: CATP "
+      "(%s bytes), AQP (%s bytes, %d patches of %dx%d samples, converted in %.1f s) and its %s vertices as "
+      "a point cloud (%s bytes, normals and radii estimated, converted in %.1f s). A fresh client renders "
+      "each view alone from our server until it converges at 1.5 px (`render --tolerance 1.5`), as in "
+      "section 3.2: the bytes and requests it took, what it drew and the command's wall time. The three "
+      "errors are not the same quantity: CATP's and AQP's bound the distance to the original surface, "
+      "the points' the distance from an input point to its splat, so equal tolerances are not equal "
+      "image quality." %
+      (f"{stream_triangles:,}", f"{catp_size:,}", f"{sizes['scanaqp']:,}", aqp["patches"],
+       (1 << aqp["patch_level"]) + 1, (1 << aqp["patch_level"]) + 1, aqp_s, f"{pts['input']['points']:,}",
+       f"{sizes['scanpts']:,}", pts_s))
+    w("")
+    rows = []
+    for p in paths:
+        for view in ("first", "last"):
+            for ds in ("scan", "scanaqp", "scanpts"):
+                c = read_jsonl_one(os.path.join(raw, "cold_%s_%s_%s.jsonl" % (ds, p, view)))
+                wall = float(read(os.path.join(raw, "cold_%s_%s_%s_wall_ms.txt" % (ds, p, view))).strip())
+                drawn = "%s points" % f"{c.get('points', 0):,}" if ds == "scanpts" else "%s triangles" % f"{c['triangles']:,}"
+                rows.append(["%s, %s" % (p, view), names[ds], f"{c['bytes_fetched']:,}",
+                             "%.1f%%" % (100 * c["bytes_fetched"] / sizes[ds]), c["requests"], drawn,
+                             f"{c['gpu_bytes']:,}", "%.0f" % wall, "yes" if c["tolerance_met"] else
+                             "no (%s)" % ", ".join(c["limited_by"])])
+    w(md_table(["view", "format", "bytes fetched", "of its dataset", "requests", "drawn", "GPU bytes",
+                "wall ms", "tolerance met"], rows))
+    w("")

@@ -204,6 +204,21 @@ for p in $SCAN_PATHS; do
         --stats "$RAW/ref_scan_$p.jsonl" --out "$WORK/ref_scan_$p"
 done
 
+# The same mesh as AQP, and its vertices as a point cloud: the three formats on the same views
+# (section 8).
+log "convert scan --format aqp"
+s=$(date +%s%N)
+required "convert scan aqp" "$RAW/convert_scan_aqp.json" "$CATPAQ" convert "$SCAN_STREAM" -o "$WORK/root/scanaqp.cpq" \
+    --format aqp --json --quiet
+e=$(date +%s%N)
+echo "$(( (e - s) / 1000000 ))" > "$RAW/convert_scan_aqp_ms.txt"
+log "convert scan --format points"
+s=$(date +%s%N)
+required "convert scan points" "$RAW/convert_scan_points.json" "$CATPAQ" convert "$SCAN_STREAM" -o "$WORK/root/scanpts.cpq" \
+    --format points --json --quiet
+e=$(date +%s%N)
+echo "$(( (e - s) / 1000000 ))" > "$RAW/convert_scan_points_ms.txt"
+
 log "serve"
 "$CATPAQ" serve --root "$WORK/root" --port 0 --log-level warn > "$WORK/serve.log" 2>&1 &
 SERVER_PID=$!
@@ -255,6 +270,11 @@ for p in $SCAN_PATHS; do
     # And fetching whole diamonds instead of the slots a refinement draws: what parts save.
     cold_start scan "$p" first _whole --fetch-whole-nodes
     cold_start scan "$p" last _whole --fetch-whole-nodes
+    # AQP and points on the same views.
+    for view in first last; do
+        cold_start scanaqp "$p" "$view"
+        cold_start scanpts "$p" "$view"
+    done
     required "image error scan $p" "$RAW/imgerr_scan_$p.txt" "$PYTHON" "$REPORT_PY" compare \
         --ref "$WORK/ref_scan_$p" --frames "$WORK/frames_scan_$p" --out "$RAW/imgerr_scan_$p.jsonl"
 done

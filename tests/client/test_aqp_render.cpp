@@ -396,6 +396,33 @@ TEST(AqpSession, StreamingMeetsTheToleranceAndTheCloseUpMixesLevelsWithoutFailur
     }
 }
 
+// A cold start on a close view, with much of the model outside the frustum: every patch is a root,
+// and the roots out of view are never fetched, yet the frame settles with a bounded error (out
+// of view, a drawn node without data is no hole: it used to keep such sessions from settling).
+TEST(AqpSession, ACloseViewFromAColdStartSettlesWithoutFetchingPatchesOutOfView) {
+    GL_TEST_CONTEXT();
+    const std::string& path = test::aqp_dataset_path(AqpModel::Bunny);
+    SessionSettings settings;
+    settings.tolerance_px = 2.5;
+    StreamingSession whole(path, settings);
+    const AqpFormat& format = dynamic_cast<const AqpFormat&>(whole.format());
+    const Camera far = cameras_around(format, 320, 240)[0];
+    const SessionFrameStats all = settle(whole, far);
+    Camera close = far;
+    close.target = glm::dvec3(format.world_bounds().max[0], far.target.y, far.target.z);
+    close.eye = close.target + (far.eye - far.target) * 0.2;
+    StreamingSession cold(path, settings);
+    const SessionFrameStats s = settle(cold, close);
+    EXPECT_TRUE(cold.settled());
+    EXPECT_EQ(s.holes, 0u);
+    EXPECT_GE(s.certified_error_px, 0.0);
+    EXPECT_TRUE(s.tolerance_met || (s.limits & kLimitFinestLevel)) << s.certified_error_px;
+    EXPECT_LT(cold.items().size(), format.meta().patches.size()) << "some patches are out of view";
+    std::printf("close view from a cold start: %zu of %zu patches drawn, %llu requests (whole view %llu), %.2f px\n",
+                cold.items().size(), format.meta().patches.size(), (unsigned long long)s.requests,
+                (unsigned long long)all.requests, s.certified_error_px);
+}
+
 TEST(AqpSession, GpuBudgetsHoldOnEveryFrame) {
     GL_TEST_CONTEXT();
     const std::string& path = test::aqp_dataset_path(AqpModel::Sphere);

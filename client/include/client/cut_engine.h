@@ -313,7 +313,7 @@ struct CutFrameStats {
     uint64_t primitives = 0, gpu_bytes = 0, cpu_bytes = 0;
     double certified_error_px = 0;  // max projected error over drawn nodes with data
     size_t drawn_nodes = 0, refined_nodes = 0, frontier_nodes = 0;
-    size_t holes = 0;  // drawn nodes with data that are not resident (draw nothing yet)
+    size_t holes = 0;  // drawn nodes in the view with data that are not resident (draw nothing yet)
     uint32_t refinements = 0, coarsenings = 0;
     uint32_t budget_blocked = 0;  // refinements refused by a budget
     uint8_t budgets_binding = 0;  // which budgets refused them (BudgetBit)

@@ -77,7 +77,7 @@ struct SessionFrameStats {
     uint64_t gpu_bytes = 0, cpu_bytes = 0;
     double cut_ms = 0;
     double certified_error_px = 0;  // largest projected error of any drawn node
-    size_t holes = 0;             // drawn nodes whose data is not resident yet
+    size_t holes = 0;             // drawn nodes in the view whose data is not resident yet
     size_t arrived = 0;           // nodes integrated by this step
     uint32_t cut_changes = 0;     // refinements and coarsenings of this step
     size_t failed_nodes = 0;      // failures so far (StreamingSession::failures)
