@@ -139,6 +139,7 @@ def aqp_section(raw, catp_verify_levels, catp_bunny_bytes, catp_convert_s, bunny
                  "%.1f" % m["bits_per_sample"], "%.1f" % m["levels"][-1]["bits"],
                  "%.2f / %.2f" % (m["angle_mean"], m["angle_p99"])] for m in models]))
     w("")
+    render_rows(parse_aqp_render_bench(read(os.path.join(raw, "aqp_render_bench.txt"))), w)
     big = models[-1]
     w("Per level on %s: bits per sample %s (coarse to fine): a coarse node's PNG costs its fixed "
       "overhead (signature, header chunk, zlib stream: about 60 bytes) for a few samples, so levels 0-1 "
@@ -146,6 +147,35 @@ def aqp_section(raw, catp_verify_levels, catp_bunny_bytes, catp_convert_s, bunny
       "(%.1f at the finest level alone)." %
       (big["name"], ", ".join("%.0f" % l["bits"] for l in big["levels"]),
        "met" if big["bits_per_sample"] <= 24 else "not met", big["levels"][-1]["bits"]))
+    w("")
+
+
+def parse_aqp_render_bench(text):
+    m = re.search(r"^mesh: (\d+) triangles; AQP: (\d+) patches, finest level (\d+)", text, re.M)
+    d = re.search(r"^AQP decode \(one thread.*?\): (%s) MB in (%s) s = (%s) MB/s compressed, (%s) M samples/s, (%s) "
+                  r"compressed bytes per sample" % ((NUM,) * 5), text, re.M)
+    t = re.search(r"^(\d+)x(\d+), tolerance (%s) px, median of (\d+) frames" % NUM, text, re.M)
+    need(m and d and t, "aqp_render_bench: header, decode or settings line missing")
+    rows = re.findall(r"^\s+(\d+) (AQP|CATP)\s+(\d+)\s+(\d+)\s+(%s)\s+(%s)\s+(%s)\s+(%s)\s+(%s)\s+(%s)$"
+                      % ((NUM,) * 6), text, re.M)
+    need(rows, "aqp_render_bench: no view rows")
+    return {"triangles": int(m.group(1)), "patches": int(m.group(2)), "level": int(m.group(3)),
+            "decode_mbs": float(d.group(3)), "decode_msps": float(d.group(4)), "bytes_per_sample": float(d.group(5)),
+            "size": "%sx%s" % (t.group(1), t.group(2)), "tolerance": float(t.group(3)), "frames": int(t.group(4)),
+            "rows": rows}
+
+
+def render_rows(ab, w):
+    w("AQP's client against CATP's on a %s-triangle scan-like mesh (AQP: %d patches, finest level %d), in one "
+      "GL context (`bench/client/aqp_render_bench`; llvmpipe, so frame times include rasterization on the "
+      "CPU): decoding the level chains of every patch on one thread ran at **%.1f MB/s of PNG, %.1f M samples/s** "
+      "(%.2f compressed bytes per sample; section 1 has CATP's decode). Sessions converged to %.2f px on "
+      "the same views at %s, median of %d frames:" %
+      (f"{ab['triangles']:,}", ab["patches"], ab["level"], ab["decode_mbs"], ab["decode_msps"], ab["bytes_per_sample"],
+       ab["tolerance"], ab["size"], ab["frames"]))
+    w("")
+    w(md_table(["view", "format", "nodes drawn", "triangles", "GPU MB", "fetched MB", "certified px", "frame ms",
+                "submit ms"], [[r[0], r[1], r[2], f"{int(r[3]):,}", r[4], r[5], r[6], r[7], r[8]] for r in ab["rows"]]))
     w("")
 
 

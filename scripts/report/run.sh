@@ -75,6 +75,7 @@ need memory_budget_bench bench/catp/memory_budget_bench
 need fetch_bench bench/client/fetch_bench
 need aqp_bench bench/aqp/aqp_bench
 need points_bench bench/points/points_bench
+need aqp_render_bench bench/client/aqp_render_bench
 
 # required NAME OUTFILE CMD...: runs a step the report needs, output to OUTFILE; on failure names
 # the step, shows the end of its output and stops the run (exit 1), so nothing half-measured is
@@ -315,6 +316,11 @@ for level in default 5; do
     required "verify bunny aqp $level" "$RAW/aqp_verify_bunny_$level.txt" "$CATPAQ" verify \
         "$WORK/root/bunny_aqp_$level.cpq" --mesh "$BUNNY" --quiet
 done
+
+# AQP's client against CATP's on the same mesh, in one GL context: decode throughput of the level
+# chains, and sessions converged on the same views (triangles, GPU bytes, fetched, frame time).
+log "aqp_render_bench"
+required "aqp_render_bench" "$RAW/aqp_render_bench.txt" "$BUILD/bench/client/aqp_render_bench"
 
 # ---- (7) points ----------------------------------------------------------------------------
 # The point converter and codec on random samples of the scan-like surface (points_bench: each
