@@ -617,7 +617,9 @@ bool DesktopViewer::Impl::loop_frame(bool last, bool force) {
         screenshot_requested = false;
         save_screenshot(next_screenshot_path(), fbw, fbh);
     }
-    if (last && settings.screenshot.size()) save_screenshot(settings.screenshot, fbw, fbh);
+    // A scripted measurement ends the run after this frame: it is the last one.
+    const bool closing = last || (scripted_picks_made && settings.exit_after_measure);
+    if (closing && settings.screenshot.size()) save_screenshot(settings.screenshot, fbw, fbh);
     framebuffer->blit_to_window();
     glViewport(0, 0, fbw, fbh);
 
@@ -630,7 +632,7 @@ bool DesktopViewer::Impl::loop_frame(bool last, bool force) {
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
     glfwSwapBuffers(window);
     frame_ms = (glfwGetTime() - frame_start) * 1000.0;
-    if (scripted_picks_made && settings.exit_after_measure) glfwSetWindowShouldClose(window, GLFW_TRUE);
+    if (closing) glfwSetWindowShouldClose(window, GLFW_TRUE);
     return true;
 }
 
