@@ -1,5 +1,5 @@
 // catpaq view: open a dataset (local path or URL) in a desktop window with streaming, orbit, pan,
-// zoom, fly-to on a picked point and a statistics overlay (client/viewer.h).
+// zoom, fly-to on a picked point, measuring and a statistics overlay (client/viewer.h).
 #include <cstdio>
 #include <string>
 
@@ -27,9 +27,14 @@ static const char* kViewUsage =
     "  --splats round|oriented  point datasets: screen-aligned discs (default) or oriented ellipses\n"
     "  --screenshot FILE.png  save the last frame (without the overlay); exits after --frames\n"
     "                         frames or --exit-after seconds, else after 120 frames\n"
+    "  --measure \"X,Y X,Y [X,Y]\"  scripted measure clicks at window pixels once the view has\n"
+    "                         settled: prints the distance (2) or angle (3) on stdout, then exits\n"
+    "                         (unless --exit-after); exit status 1 if a click hits nothing\n"
     "controls:\n"
     "  left drag: orbit   right or shift+left drag: pan   wheel: zoom\n"
-    "  double click: fly to the point under the cursor   H: overlay   Escape: quit\n"
+    "  double click: fly to the point under the cursor   H: overlay\n"
+    "  M: measure mode: click 2 points for their distance (and dx dy dz), a 3rd for the angle at\n"
+    "  the 2nd; each result is also printed on stdout   Escape: clear the measurement, else quit\n"
     "  P or F12: screenshot, saved as catpaq_view_NNNN.png in the working directory (the first\n"
     "  free number: earlier screenshots are never overwritten)\n"
     "The window is redrawn only when something changes. Nodes that cannot be loaded are shown in\n"
@@ -62,8 +67,16 @@ int cmd_view(int argc, char** argv) {
     const std::string splats = options.get("splats", "round");
     if (splats == "oriented") settings.splats = SplatShape::Oriented;
     else if (splats != "round") usage_error("--splats: '%s' is not round or oriented", splats.c_str());
+    const bool measure_given = options.has("measure");
+    const std::string measure = options.get("measure", "");
     options.finish();
     if (settings.screenshot.size()) check_output_file(settings.screenshot, "--screenshot");
+    if (measure_given) {
+        settings.measure_picks = parse_pixel_picks(measure);
+        settings.exit_after_measure = settings.exit_after == 0;
+        // An upper bound for a view that never settles: the picks are then made on the last frame.
+        if (settings.frames == 0 && settings.exit_after == 0) settings.frames = 600;
+    }
     if (settings.screenshot.size() && settings.frames == 0 && settings.exit_after == 0) settings.frames = 120;
     if (settings.frames > 0) settings.vsync = false;  // scripted runs go as fast as they can
 

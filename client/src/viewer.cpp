@@ -224,6 +224,14 @@ struct DesktopViewer::Impl {
     double last_click_time = -1, last_click_x = 0, last_click_y = 0;
     bool pick_pending = false;
     double pick_x = 0, pick_y = 0;  // window coordinates
+    // Measuring: a left press in measure mode that is released within kClickPixels is a pick.
+    bool measure_mode = false;
+    Measurement measurement;
+    bool press_may_pick = false;
+    double press_x = 0, press_y = 0;  // window coordinates of that press
+    std::vector<glm::dvec2> measure_picks_pending;  // window coordinates
+    bool scripted_picks_made = false;
+    int exit_status = 0;
     bool screenshot_requested = false;
     std::string message;  // last status line (screenshot saved, nothing picked, ...)
     double message_time = -1;
@@ -250,6 +258,13 @@ struct DesktopViewer::Impl {
     // Seconds to sleep in the event queue before the next iteration when nothing changed.
     double idle_wait() const;
     void overlay();
+    // Picks the point under window position (x, y) for the measurement and prints the result;
+    // returns false (and says so) when nothing is there.
+    bool measure_pick(const Camera& camera, double x, double y, double sx, double sy);
+    void clear_measurement();
+    // The measurement's markers, segments and label on ImGui's foreground draw list (window
+    // coordinates: framebuffer pixels / (sx, sy)).
+    void draw_measurement(const Camera& camera, double sx, double sy);
     void save_screenshot(const std::string& path, int width, int height);
     void set_message(const std::string& m) {
         message = m;
@@ -284,14 +299,29 @@ void DesktopViewer::Impl::on_mouse_button(GLFWwindow* w, int button, int action,
     v.events++;
     double x, y;
     glfwGetCursorPos(w, &x, &y);
+    // Measure picks are clicks, not drags: a release near its press (the few pixels a hand moves
+    // while clicking; they orbit a little, which the pick then sees).
+    constexpr double kClickPixels = 4;
     if (action == GLFW_RELEASE) {
         v.drag = Drag::None;
+        if (button == GLFW_MOUSE_BUTTON_LEFT && v.press_may_pick && std::abs(x - v.press_x) < kClickPixels &&
+            std::abs(y - v.press_y) < kClickPixels)
+            v.measure_picks_pending.push_back({x, y});
+        v.press_may_pick = false;
         return;
     }
     if (action != GLFW_PRESS) return;
     if (ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureMouse) return;
     v.last_x = x;
     v.last_y = y;
+    if (button == GLFW_MOUSE_BUTTON_LEFT && v.measure_mode) {
+        // In measure mode single clicks pick, so a double click is two picks, not a fly-to.
+        v.press_may_pick = !(mods & GLFW_MOD_SHIFT);
+        v.press_x = x;
+        v.press_y = y;
+        v.drag = (mods & GLFW_MOD_SHIFT) ? Drag::Pan : Drag::Orbit;
+        return;
+    }
     if (button == GLFW_MOUSE_BUTTON_LEFT) {
         double now = glfwGetTime();
         if (now - v.last_click_time < 0.35 && std::abs(x - v.last_click_x) < 5 && std::abs(y - v.last_click_y) < 5) {
@@ -322,12 +352,15 @@ void DesktopViewer::Impl::on_key(GLFWwindow* w, int key, int, int action, int) {
     if (action != GLFW_PRESS) return;
     Impl& v = of(w);
     if (key == GLFW_KEY_ESCAPE) {
-        glfwSetWindowShouldClose(w, GLFW_TRUE);
+        // A measurement on screen is cleared first: Escape quits only an uncluttered view.
+        if (!v.measurement.empty()) v.clear_measurement();
+        else glfwSetWindowShouldClose(w, GLFW_TRUE);
         return;
     }
     if (ImGui::GetCurrentContext() && ImGui::GetIO().WantCaptureKeyboard) return;
     if (key == GLFW_KEY_F12 || key == GLFW_KEY_P) v.screenshot_requested = true;
     if (key == GLFW_KEY_H) v.show_overlay = !v.show_overlay;
+    if (key == GLFW_KEY_M) v.measure_mode = !v.measure_mode;
 }
 
 void DesktopViewer::Impl::open() {
@@ -401,6 +434,54 @@ std::string next_screenshot_path(const std::string& directory) {
     }
 }
 
+bool DesktopViewer::Impl::measure_pick(const Camera& camera, double x, double y, double sx, double sy) {
+    const std::optional<glm::dvec3> hit = pick_cut(*session, camera, pixel_ray(camera, x * sx, y * sy));
+    if (!hit) {
+        char buf[96];
+        std::snprintf(buf, sizeof buf, "measure: nothing under the cursor at %.0f,%.0f", x, y);
+        set_message(buf);
+        return false;
+    }
+    measurement.add(*hit);
+    // One line per pick on stdout, flushed: scripts read the measurement as it happens.
+    std::printf("measure: %s\n", measurement.describe().c_str());
+    std::fflush(stdout);
+    message.clear();  // the overlay shows the measurement itself
+    return true;
+}
+
+void DesktopViewer::Impl::clear_measurement() {
+    measurement.clear();
+    std::printf("measure: cleared\n");
+    std::fflush(stdout);
+}
+
+void DesktopViewer::Impl::draw_measurement(const Camera& camera, double sx, double sy) {
+    if (measurement.empty()) return;
+    const MeasurementOverlay drawn = measurement_overlay(measurement, camera);
+    ImDrawList* list = ImGui::GetForegroundDrawList();
+    auto window_point = [&](const glm::dvec2& p) { return ImVec2(float(p.x / sx), float(p.y / sy)); };
+    const ImU32 line_colour = IM_COL32(255, 220, 60, 255), outline = IM_COL32(0, 0, 0, 200);
+    // Dark under light: the overlay stays readable over bright and dark models alike.
+    for (const auto& [a, b] : drawn.segments) {
+        list->AddLine(window_point(a), window_point(b), outline, 4.0f);
+        list->AddLine(window_point(a), window_point(b), line_colour, 2.0f);
+    }
+    for (const glm::dvec2& m : drawn.markers) {
+        list->AddCircleFilled(window_point(m), 5.0f, line_colour);
+        list->AddCircle(window_point(m), 5.0f, outline, 0, 1.5f);
+    }
+    if (drawn.label_position) {
+        // Up and right of its anchor, clear of the marker.
+        const ImVec2 anchor = window_point(*drawn.label_position);
+        const ImVec2 at(anchor.x + 10, anchor.y - 22);
+        const ImVec2 size = ImGui::CalcTextSize(drawn.label.c_str());
+        list->AddRectFilled(ImVec2(at.x - 4, at.y - 2), ImVec2(at.x + size.x + 4, at.y + size.y + 2), IM_COL32(0, 0, 0, 190),
+                            3.0f);
+        list->AddText(at, IM_COL32(255, 255, 255, 255), drawn.label.c_str());
+    }
+}
+
 void DesktopViewer::Impl::overlay() {
     ImGui::SetNextWindowPos(ImVec2(10, 10), ImGuiCond_FirstUseEver);
     ImGui::SetNextWindowBgAlpha(0.75f);
@@ -445,8 +526,15 @@ void DesktopViewer::Impl::overlay() {
         bool oriented = render.splats == SplatShape::Oriented;
         if (ImGui::Checkbox("oriented splats (points)", &oriented)) render.splats = oriented ? SplatShape::Oriented : SplatShape::Round;
         ImGui::Separator();
+        ImGui::Checkbox("measure (M): click 2 points for a distance, 3 for an angle", &measure_mode);
+        if (!measurement.empty()) {
+            ImGui::TextWrapped("%s", measurement.describe().c_str());
+            if (ImGui::Button("clear measurement (Esc)")) clear_measurement();
+        }
+        ImGui::Separator();
         ImGui::TextDisabled("drag: orbit  right/shift drag: pan  wheel: zoom");
-        ImGui::TextDisabled("double click: fly to  P/F12: screenshot  H: hide  Esc: quit");
+        ImGui::TextDisabled("double click: fly to  M: measure  P/F12: screenshot  H: hide");
+        ImGui::TextDisabled("Esc: clear the measurement, else quit");
         if (message.size() && glfwGetTime() - message_time < 4) ImGui::Text("%s", message.c_str());
     }
     ImGui::End();
@@ -481,12 +569,22 @@ bool DesktopViewer::Impl::loop_frame(bool last, bool force) {
             set_message("nothing under the cursor");
         }
     }
+    for (const glm::dvec2& p : measure_picks_pending) measure_pick(last_camera, p.x, p.y, sx, sy);
+    measure_picks_pending.clear();
     controller.update(frame_start);
 
     Camera camera = controller.camera(fbw, fbh);
     stats = session->step(camera);
     last_camera = camera;
     changed |= stats.arrived > 0 || stats.cut_changes > 0;
+    if (!settings.measure_picks.empty() && !scripted_picks_made && (stats.settled || last)) {
+        // Scripted picks see the settled cut, as a user who waits for the view would.
+        scripted_picks_made = true;
+        measure_mode = true;
+        for (const glm::dvec2& p : settings.measure_picks)
+            if (!measure_pick(camera, p.x, p.y, sx, sy)) exit_status = 1;
+        changed = true;
+    }
     for (; failures_reported < session->failures().size(); ++failures_reported) {
         const NodeFailure& f = session->failures()[failures_reported];
         std::fprintf(stderr, "view: node %llu (level %u) cannot be loaded: %s (showing the coarser data)\n",
@@ -519,7 +617,9 @@ bool DesktopViewer::Impl::loop_frame(bool last, bool force) {
         screenshot_requested = false;
         save_screenshot(next_screenshot_path(), fbw, fbh);
     }
-    if (last && settings.screenshot.size()) save_screenshot(settings.screenshot, fbw, fbh);
+    // A scripted measurement ends the run after this frame: it is the last one.
+    const bool closing = last || (scripted_picks_made && settings.exit_after_measure);
+    if (closing && settings.screenshot.size()) save_screenshot(settings.screenshot, fbw, fbh);
     framebuffer->blit_to_window();
     glViewport(0, 0, fbw, fbh);
 
@@ -527,10 +627,12 @@ bool DesktopViewer::Impl::loop_frame(bool last, bool force) {
     ImGui_ImplGlfw_NewFrame();
     ImGui::NewFrame();
     if (show_overlay) overlay();
+    draw_measurement(camera, sx, sy);
     ImGui::Render();
     ImGui_ImplOpenGL3_RenderDrawData(ImGui::GetDrawData());
     glfwSwapBuffers(window);
     frame_ms = (glfwGetTime() - frame_start) * 1000.0;
+    if (closing) glfwSetWindowShouldClose(window, GLFW_TRUE);
     return true;
 }
 
@@ -574,7 +676,7 @@ int DesktopViewer::run() {
             glfwPollEvents();
         }
     }
-    return 0;
+    return v.exit_status;
 }
 
 }  // namespace catpaq

@@ -5,9 +5,17 @@
 // dollies towards the target, a double click flies to the point under the cursor (a ray cast on
 // the CPU against the triangles of the drawn cut, as the dataset's format draws them),
 // F12 or P saves a screenshot (catpaq_view_NNNN.png in the working directory, the first free
-// number: earlier ones are never overwritten), Escape quits. A Dear ImGui overlay shows the
+// number: earlier ones are never overwritten), M toggles the measure mode, Escape clears a
+// measurement or else quits. A Dear ImGui overlay shows the
 // session's statistics (and nodes that failed to load: the coarser data stays on screen) and has
 // a tolerance slider, light direction and background colour controls.
+//
+// Measure mode (M, or the overlay's checkbox): a click (press and release without dragging) picks
+// a point with pick_cut; two picks give their distance, three the angle at the middle one, a
+// fourth starts over (client/measure.h). The picks, segments and the value are drawn on top of
+// the model, and each pick prints the measurement as one line on stdout ("measure: distance ...",
+// "measure: angle ..."). `--measure "X,Y X,Y"` (ViewerSettings::measure_picks) makes the same
+// picks from a script once the view has settled.
 //
 // The window is drawn on demand: after input, while the camera moves, when data arrives or the
 // cut changes. In between the viewer sleeps in the event queue (a settled, idle view used 0.9 of
@@ -24,6 +32,7 @@
 
 #include "base/error.h"
 #include "client/camera.h"
+#include "client/measure.h"
 #include "client/session.h"
 
 namespace catpaq {
@@ -117,6 +126,10 @@ struct ViewerSettings {
     bool vsync = true;
     int msaa = 0;                   // anti-aliasing samples per pixel (0: none)
     SplatShape splats = SplatShape::Round;  // how point datasets draw (RenderSettings::splats)
+    // Scripted measure picks (window pixels, as clicks), made in measure mode once the view has
+    // settled (or on the last frame); a pick that hits nothing makes run() return 1.
+    std::vector<glm::dvec2> measure_picks;
+    bool exit_after_measure = false;  // close once the scripted picks are made and drawn
 };
 
 // Thrown when no window can be opened (no display): the caller tells the user to render headless.
@@ -134,7 +147,8 @@ public:
     DesktopViewer(const DesktopViewer&) = delete;
     DesktopViewer& operator=(const DesktopViewer&) = delete;
 
-    // Runs until the window closes, Escape, or the frame limit; returns the exit status.
+    // Runs until the window closes, Escape, or the frame limit; returns the exit status (1 when a
+    // scripted measure pick hit nothing).
     int run();
 
     struct Impl;
