@@ -432,6 +432,10 @@ TEST(AqpSession, AColdStartNeedsFarFewerRequestsWhenAdjacentNodesShareTransfers)
     const std::string& path = test::aqp_dataset_path(AqpModel::Bunny);
     SessionSettings settings;
     settings.tolerance_px = 2.5;
+    // Enough new requests per frame for a level's patches in view to be listed, and queued, at
+    // once (the default 16 lists the nearest few, rarely neighbours in the file).
+    settings.budgets.max_new_requests = 1024;
+    settings.budgets.max_outstanding_requests = 1024;
     SessionSettings alone = settings;
     alone.fetcher.coalesce_gap_bytes = -1;
     StreamingSession coalesced(path, settings), separate(path, alone);
@@ -448,7 +452,7 @@ TEST(AqpSession, AColdStartNeedsFarFewerRequestsWhenAdjacentNodesShareTransfers)
         EXPECT_TRUE(coalesced.failures().empty());
         EXPECT_EQ(coalesced.items().size(), separate.items().size());
         EXPECT_EQ(c.triangles, s.triangles);
-        EXPECT_LT(c.requests * 4, s.requests);
+        EXPECT_LT(c.requests * 2, s.requests);
         // Unrequested bytes between coalesced nodes cost little.
         EXPECT_LT(double(c.bytes_fetched), 1.1 * double(s.bytes_fetched));
     }
