@@ -682,3 +682,46 @@ TEST(Fetcher, NodesFartherApartThanTheGapGetTransfersOfTheirOwn) {
         EXPECT_EQ(s.bytes_fetched, shared ? run.end - run.first : ends[0].size + ends[1].size);
     }
 }
+
+// Cancellation with coalescing on: nodes that would share a transfer, cancelled while queued
+// (the camera turned before a connection was free), are never sent; the ones still wanted go
+// together, and the bytes counted are theirs alone.
+TEST(Fetcher, QueuedNeighboursCancelledBeforeTheirTransferStartsAreNeverFetched) {
+    const Dataset& d = dataset();
+    const NodeRun run = adjacent_nodes(d, 6);
+    ASSERT_EQ(run.requests.size(), 6u);
+    FetchRequest far;
+    for (const FetchRequest& r : d.all_requests())
+        if (r.size > 0 && (r.offset + r.size + 64 < run.first || r.offset > run.end + 64)) far = r;
+    ASSERT_GT(far.size, 0u);
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    server.hold(true);
+    HttpSettings http;
+    http.parallel = 1;
+    Fetcher fetcher(std::make_unique<HttpSource>(server.base_url(), http), fast_retries());
+    fetcher.request({far});
+    ASSERT_TRUE(eventually([&] { return server.waiting() == 1; }));  // the only connection is busy
+    std::vector<FetchRequest> all = {far};
+    all.insert(all.end(), run.requests.begin(), run.requests.end());
+    fetcher.request(all);
+    ASSERT_TRUE(eventually([&] { return fetcher.stats().queued == run.requests.size(); }));
+    fetcher.request({far, run.requests[0], run.requests[1]});
+    ASSERT_TRUE(eventually([&] { return fetcher.stats().cancelled == run.requests.size() - 2; }));
+    server.hold(false);
+    std::vector<FetchedNode> got;
+    ASSERT_TRUE(eventually([&] {
+        fetcher.poll(got);
+        return got.size() >= 3 && fetcher.idle();
+    }));
+    std::set<uint64_t> keys;
+    for (const FetchedNode& n : got) {
+        EXPECT_TRUE(n.ok) << n.error;
+        keys.insert(n.key);
+    }
+    EXPECT_EQ(keys, (std::set<uint64_t>{far.key, run.requests[0].key, run.requests[1].key}));
+    const FetcherStats s = fetcher.stats();
+    EXPECT_EQ(s.transfers, 2u);
+    EXPECT_EQ(s.bytes_fetched, uint64_t(far.size) + run.requests[0].size + run.requests[1].size);
+    EXPECT_EQ(server.requests(), 2u);
+}
