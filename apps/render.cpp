@@ -40,6 +40,11 @@ static const char* kRenderUsage =
     "                         when their descendants are drawn instead (default 8; 0: fetch\n"
     "                         every level)\n"
     "  --fetch-whole-nodes    fetch nodes whole, not only the parts a refinement draws (to compare)\n"
+    "  --coalesce-gap BYTES   nodes (or parts) queued together whose byte ranges lie within BYTES\n"
+    "                         of each other share one request (default 64; -1: one request\n"
+    "                         per node, to compare)\n"
+    "  --new-requests N       nodes the cut engine may newly request per frame (default 16; more\n"
+    "                         lets the fetcher see a level's small nodes together and coalesce them)\n"
     "  --max-triangles N      triangle budget per frame\n"
     "  --gpu-budget SIZE      GPU bytes of the cut (e.g. 256M)\n"
     "  --cpu-budget SIZE      CPU bytes of the cut\n"
@@ -159,6 +164,13 @@ int cmd_render(int argc, char** argv) {
     settings.tolerance_px = options.number("tolerance", 1.5, 0.05, 1000);
     settings.skip_factor = options.number("skip", 8, 0, 1e6);
     settings.fetch_parts = !options.flag("fetch-whole-nodes");
+    if (options.has("new-requests")) {
+        settings.budgets.max_new_requests = uint32_t(options.integer("new-requests", 16, 1, 1 << 20));
+        settings.budgets.max_outstanding_requests =
+            std::max(settings.budgets.max_outstanding_requests, settings.budgets.max_new_requests);
+    }
+    settings.fetcher.coalesce_gap_bytes =
+        options.integer("coalesce-gap", settings.fetcher.coalesce_gap_bytes, -1, int64_t(1) << 30);
     if (options.has("max-triangles"))
         settings.budgets.max_primitives = uint64_t(options.integer("max-triangles", 0, 1, int64_t(1) << 40));
     if (options.has("gpu-budget")) settings.budgets.max_gpu_bytes = options.bytes("gpu-budget", 0);

@@ -466,54 +466,68 @@ uint64_t Fetcher::apply_commands() {
     return seq;
 }
 
+// Queued fetches that may share a transfer, by (file offset, id): the entries of one kind
+// (parts, or whole nodes; the two are never mixed: a part lies inside its node's range).
+Fetcher::CoalesceMap Fetcher::coalescable(bool parts) {
+    CoalesceMap out;
+    if (settings_.coalesce_gap_bytes < 0) return out;
+    for (auto& [id, e] : entries_)
+        if (e.state == State::Queued && !e.alone && e.request.size > 0 && (e.request.part != kWholeNode) == parts)
+            out.emplace(std::make_pair(e.request.offset, id), &e);
+    return out;
+}
+
+// The fetches `head` carries in its transfer: itself and its neighbours in the file that are
+// still queued (in `queued`), each starting within coalesce_gap_bytes of the previous one's end,
+// up to max_coalesced_bytes from the first byte to the last. Neighbours after it are taken
+// first, so the cap keeps the head near the start of the body. Ids in file order; `end` is
+// where the transfer's bytes end.
+Fetcher::Transfer Fetcher::gather(uint64_t head_id, const Entry& head, const CoalesceMap& queued, uint64_t& end) const {
+    Transfer t;
+    t.ids.push_back(head_id);
+    t.offset = head.request.offset;
+    end = head.request.offset + head.request.size;
+    auto at = queued.find(std::make_pair(head.request.offset, head_id));
+    if (at == queued.end()) return t;  // not coalescable (retried alone, empty, coalescing off)
+    const uint64_t gap = uint64_t(settings_.coalesce_gap_bytes);
+    const uint64_t cap = std::max<uint64_t>(settings_.max_coalesced_bytes, end - t.offset);
+    for (auto next = std::next(at); next != queued.end(); ++next) {
+        const Entry* n = next->second;
+        const uint64_t offset = n->request.offset;
+        if (n->state != State::Queued || offset < end || offset - end > gap || offset + n->request.size - t.offset > cap)
+            break;
+        t.ids.push_back(next->first.second);
+        end = offset + n->request.size;
+    }
+    while (at != queued.begin()) {
+        auto prev = std::prev(at);
+        const Entry* p = prev->second;
+        const uint64_t p_end = p->request.offset + p->request.size;
+        if (p->state != State::Queued || p_end > t.offset || t.offset - p_end > gap || end - p->request.offset > cap) break;
+        t.ids.insert(t.ids.begin(), prev->first.second);
+        t.offset = p->request.offset;
+        at = prev;
+    }
+    return t;
+}
+
 void Fetcher::dispatch() {
     size_t cap = source_->max_parallel();
     if (source_->in_flight() >= cap) return;
-    // Queued parts by file offset, for coalescing (built only when some are queued).
-    std::map<uint64_t, uint64_t> queued_parts;
-    if (settings_.coalesce_gap_bytes >= 0)
-        for (const auto& [id, e] : entries_)
-            if (e.state == State::Queued && e.request.part != kWholeNode) queued_parts.emplace(e.request.offset, id);
-    auto queued_at = [&](std::map<uint64_t, uint64_t>::iterator it) {
-        auto e = entries_.find(it->second);
-        return e != entries_.end() && e->second.state == State::Queued ? &e->second : nullptr;
-    };
+    // Built once per dispatch: the fetches queued now are the ones that may share transfers.
+    const CoalesceMap parts = coalescable(true), wholes = coalescable(false);
     for (uint64_t key : order_) {
         if (source_->in_flight() >= cap) break;
         auto it = entries_.find(key);
         if (it == entries_.end() || it->second.state != State::Queued) continue;
         Entry& e = it->second;
-        Transfer t;
-        t.ids.push_back(key);
-        t.offset = e.request.offset;
-        uint64_t end = e.request.offset + e.request.size;
-        if (e.request.part != kWholeNode && !queued_parts.empty()) {
-            // Adjacent queued parts after and before it, while the gaps and the total stay small.
-            const uint64_t gap = uint64_t(settings_.coalesce_gap_bytes);
-            auto at = queued_parts.find(e.request.offset);
-            for (auto next = std::next(at); next != queued_parts.end(); ++next) {
-                Entry* n = queued_at(next);
-                if (!n || next->first < end || next->first - end > gap ||
-                    next->first + n->request.size - t.offset > settings_.max_coalesced_bytes)
-                    break;
-                t.ids.push_back(next->second);
-                end = next->first + n->request.size;
-            }
-            while (at != queued_parts.begin()) {
-                auto prev = std::prev(at);
-                Entry* p = queued_at(prev);
-                if (!p || prev->first + p->request.size > t.offset || t.offset - (prev->first + p->request.size) > gap ||
-                    end - prev->first > settings_.max_coalesced_bytes)
-                    break;
-                t.ids.insert(t.ids.begin(), prev->second);
-                t.offset = prev->first;
-                at = prev;
-            }
-        }
+        uint64_t end = 0;
+        Transfer t = gather(key, e, e.request.part == kWholeNode ? wholes : parts, end);
         SourceRequest sr;
         sr.id = next_transfer_++;
-        // A part is a plain byte range (the server's node route serves whole nodes).
-        sr.kind = e.request.part == kWholeNode ? SourceRequest::Kind::Node : SourceRequest::Kind::Range;
+        // One whole node goes by key (the server's node route checks its checksum too); a part or
+        // several fetches are a plain byte range (in server mode the raw file route).
+        sr.kind = e.request.part == kWholeNode && t.ids.size() == 1 ? SourceRequest::Kind::Node : SourceRequest::Kind::Range;
         sr.key = e.request.key;
         sr.offset = t.offset;
         sr.size = end - t.offset;
@@ -535,6 +549,9 @@ void Fetcher::fail_attempt(uint64_t key, const std::string& error, bool permanen
     Entry& e = it->second;
     e.attempts = permanent ? std::max(e.attempts + 1, settings_.max_attempts) : e.attempts + 1;
     e.last_error = error;
+    // Retried in a transfer of its own: a neighbour that shared its failed transfer (or whose
+    // bytes are bad) must not fail again with it, nor keep failing the others.
+    e.alone = true;
     if (e.stale || !e.wanted) {
         entries_.erase(it);  // nobody is waiting for it
         return;
@@ -566,14 +583,17 @@ void Fetcher::handle_result(SourceResult& r) {
     const Transfer t = std::move(tk->second);
     transfer_key_.erase(tk);
     if (r.ok) stats_bytes_ += r.bytes.size();
+    else stats_transport_errors_++;  // one failed transfer, however many fetches it carried
+    // A failed transfer of several fetches says nothing final about any one of them (a 416 or an
+    // ignored range may be due to one node's range): each is retried alone, never given up here.
+    const bool permanent = !r.ok && !r.retryable && t.ids.size() == 1;
     auto bytes = std::make_shared<const std::vector<uint8_t>>(std::move(r.bytes));
     for (uint64_t key : t.ids) {
         auto it = entries_.find(key);
         if (it == entries_.end() || it->second.state != State::Running || it->second.transfer != r.id) continue;
         Entry& e = it->second;
         if (!r.ok) {
-            stats_transport_errors_++;
-            fail_attempt(key, r.error, !r.retryable);
+            fail_attempt(key, r.error, permanent);
             continue;
         }
         e.state = State::Decoding;

@@ -3,6 +3,8 @@
 // errors retried with backoff, a server restart survived, stale requests cancelled.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <fstream>
 #include <set>
 
 #include "base/checksum.h"
@@ -313,7 +315,11 @@ TEST(Fetcher, StaleRequestsAreCancelledBeforeTheyAreSent) {
     server.hold(true);
     HttpSettings http;
     http.parallel = 2;
-    Fetcher fetcher(std::make_unique<HttpSource>(server.base_url(), http), fast_retries());
+    // One node per transfer, so that the two held transfers carry two nodes (coalesced transfers
+    // are cancelled the same way: a node joins one only while it is queued).
+    FetcherSettings settings = fast_retries();
+    settings.coalesce_gap_bytes = -1;
+    Fetcher fetcher(std::make_unique<HttpSource>(server.base_url(), http), settings);
     std::vector<FetchRequest> all = d.all_requests();
     ASSERT_GT(all.size(), 40u);
     fetcher.request(all);
@@ -464,4 +470,258 @@ TEST(Fetcher, PartsArriveAloneAndAdjacentOnesShareTransfers) {
         if (mode == 2) EXPECT_EQ(s.transfers, wanted.size());
         else EXPECT_LE(s.transfers, nodes + 2) << "mode " << mode;  // about one per diamond
     }
+}
+
+namespace {
+
+// A run of whole nodes that lie one after the other in the file (within `gap` bytes), in file
+// order, with the byte range they span.
+struct NodeRun {
+    std::vector<FetchRequest> requests;
+    uint64_t first = 0, end = 0;
+};
+NodeRun adjacent_nodes(const Dataset& d, size_t count, uint64_t gap = 0) {
+    std::vector<FetchRequest> all = d.all_requests();
+    std::sort(all.begin(), all.end(), [](const FetchRequest& a, const FetchRequest& b) { return a.offset < b.offset; });
+    // Start in the middle of the file: neighbours on both sides that are not requested.
+    for (size_t start = all.size() / 3; start + count <= all.size(); ++start) {
+        NodeRun run;
+        run.requests.push_back(all[start]);
+        for (size_t i = start + 1; i < start + count; ++i) {
+            const FetchRequest& prev = run.requests.back();
+            if (all[i].size == 0 || all[i].offset < prev.offset + prev.size || all[i].offset - (prev.offset + prev.size) > gap)
+                break;
+            run.requests.push_back(all[i]);
+        }
+        if (run.requests.size() < count || run.requests.front().size == 0) continue;
+        run.first = run.requests.front().offset;
+        run.end = run.requests.back().offset + run.requests.back().size;
+        return run;
+    }
+    ADD_FAILURE() << "no run of " << count << " adjacent nodes";
+    return {};
+}
+
+// Requests `wanted` once and waits until every one was reported (ok or failed).
+std::vector<FetchedNode> fetch_all(Fetcher& fetcher, const std::vector<FetchRequest>& wanted) {
+    fetcher.request(wanted);
+    std::vector<FetchedNode> got;
+    EXPECT_TRUE(eventually([&] {
+        fetcher.poll(got);
+        return got.size() >= wanted.size() && fetcher.idle();
+    }));
+    return got;
+}
+
+}  // namespace
+
+// Whole nodes queued together whose byte ranges touch go in one range transfer, from a local
+// file, our server (its raw file route, not one /nodes/ request each) and a static server; each
+// node gets exactly its bytes, checked against its own index checksum and decoded; the bytes and
+// transfers counted are those of the one transfer. The priority order (here the reverse of the
+// file order) does not split the run.
+TEST(Fetcher, AdjacentWholeNodesQueuedTogetherArriveInOneTransferEachVerified) {
+    const Dataset& d = dataset();
+    const NodeRun run = adjacent_nodes(d, 8);
+    ASSERT_EQ(run.requests.size(), 8u);
+    std::vector<FetchRequest> wanted(run.requests.rbegin(), run.requests.rend());
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    for (int mode = 0; mode < 3; ++mode) {
+        SCOPED_TRACE(mode == 0 ? "local file" : mode == 1 ? "server" : "raw");
+        std::unique_ptr<NodeSource> source;
+        if (mode == 0) source = std::make_unique<LocalFileSource>(d.path);
+        if (mode == 1) source = std::make_unique<HttpSource>(server.base_url());
+        if (mode == 2) source = std::make_unique<HttpSource>(server.file_url());
+        const size_t before = server.requests();
+        Fetcher fetcher(std::move(source), decoding());
+        std::vector<FetchedNode> got = fetch_all(fetcher, wanted);
+        ASSERT_EQ(got.size(), wanted.size());
+        std::set<uint64_t> keys;
+        for (const FetchedNode& n : got) {
+            ASSERT_TRUE(n.ok) << n.error;
+            ASSERT_EQ(n.part, kWholeNode);
+            keys.insert(n.key);
+            const ArchiveEntry& e = *d.file.index().find(DiamondId{n.key});
+            EXPECT_EQ(*n.compressed, d.node_bytes(e));
+            ASSERT_TRUE(n.decoded);
+            EXPECT_EQ(catp_fragments(*n.decoded).slot_mask, d.file.decode(e).slot_mask);
+        }
+        EXPECT_EQ(keys.size(), wanted.size());
+        const FetcherStats s = fetcher.stats();
+        EXPECT_EQ(s.transfers, 1u);
+        EXPECT_EQ(s.bytes_fetched, run.end - run.first);
+        EXPECT_EQ(s.delivered, wanted.size());
+        EXPECT_EQ(s.checksum_failures, 0u);
+        if (mode > 0) {
+            EXPECT_EQ(server.requests() - before, 1u);
+            EXPECT_EQ(server.targets().back(), "/files/sphere.cpq");
+        }
+    }
+    // Without coalescing: one transfer (one /nodes/ request) per node.
+    FetcherSettings off = decoding();
+    off.coalesce_gap_bytes = -1;
+    Fetcher fetcher(std::make_unique<HttpSource>(server.base_url()), off);
+    const size_t before = server.requests();
+    EXPECT_EQ(fetch_all(fetcher, wanted).size(), wanted.size());
+    EXPECT_EQ(fetcher.stats().transfers, wanted.size());
+    EXPECT_EQ(server.requests() - before, wanted.size());
+}
+
+// A node whose bytes in the file are bad, in a coalesced transfer: it alone fails its checksum,
+// is retried in transfers of its own and reported failed; its neighbours in the same transfer
+// arrive on the first attempt.
+TEST(Fetcher, ACorruptNodeInACoalescedTransferFailsAloneAndItsNeighboursArrive) {
+    const Dataset& d = dataset();
+    const NodeRun run = adjacent_nodes(d, 5);
+    ASSERT_EQ(run.requests.size(), 5u);
+    const FetchRequest bad = run.requests[2];
+    std::vector<uint8_t> bytes = d.bytes;
+    bytes[bad.offset + bad.size / 2] ^= 0x5a;
+    const std::string path = test::scratch_dir() + "/one_bad_node.cpq";
+    {
+        std::ofstream out(path, std::ios::binary);
+        out.write(reinterpret_cast<const char*>(bytes.data()), std::streamsize(bytes.size()));
+    }
+    FetcherSettings settings = fast_retries();
+    settings.failed_retry_delay = std::chrono::hours(1);  // reported failed once, not fetched again
+    Fetcher fetcher(std::make_unique<LocalFileSource>(path), settings);
+    std::vector<FetchedNode> got = fetch_all(fetcher, run.requests);
+    ASSERT_EQ(got.size(), run.requests.size());
+    for (const FetchedNode& n : got) {
+        if (n.key == bad.key) {
+            EXPECT_FALSE(n.ok);
+            EXPECT_NE(n.error.find("checksum"), std::string::npos) << n.error;
+            EXPECT_EQ(n.attempts, settings.max_attempts);
+        } else {
+            ASSERT_TRUE(n.ok) << n.error;
+            EXPECT_EQ(n.attempts, 1u);
+            EXPECT_EQ(*n.compressed, d.node_bytes(*d.file.index().find(DiamondId{n.key})));
+        }
+    }
+    const FetcherStats s = fetcher.stats();
+    EXPECT_EQ(s.checksum_failures, settings.max_attempts);
+    EXPECT_EQ(s.failed, 1u);
+    // The coalesced transfer, then the bad node's retries alone: its own bytes each time.
+    EXPECT_EQ(s.transfers, settings.max_attempts);
+    EXPECT_EQ(s.retries, settings.max_attempts - 1);
+    EXPECT_EQ(s.bytes_fetched, (run.end - run.first) + uint64_t(settings.max_attempts - 1) * bad.size);
+}
+
+// Over HTTP (our server's raw file route and a static server): a coalesced answer corrupted on
+// the wire fails only the node whose bytes were hit, fetched again alone (by key from our
+// server); a coalesced answer cut short fails the transfer once, and every node it carried is
+// retried alone and arrives.
+TEST(Fetcher, OverHttpABadCoalescedAnswerIsRetriedNodeByNodeAndEveryNodeArrives) {
+    const Dataset& d = dataset();
+    const NodeRun run = adjacent_nodes(d, 5);
+    ASSERT_EQ(run.requests.size(), 5u);
+    // The test server corrupts the middle byte of the body: the node that holds it.
+    const uint64_t middle = run.first + (run.end - run.first) / 2;
+    uint64_t hit = 0;
+    for (const FetchRequest& r : run.requests)
+        if (r.offset <= middle && middle < r.offset + r.size) hit = r.key;
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    for (bool raw : {false, true}) {
+        for (Fault fault : {Fault::Corrupt, Fault::Truncate}) {
+            SCOPED_TRACE(std::string(raw ? "raw" : "server") + (fault == Fault::Corrupt ? ", corrupt" : ", truncated"));
+            Fetcher fetcher(std::make_unique<HttpSource>(raw ? server.file_url() : server.base_url()), fast_retries());
+            const size_t before = server.targets().size();
+            server.inject(1, {fault});
+            std::vector<FetchedNode> got = fetch_all(fetcher, run.requests);
+            ASSERT_EQ(got.size(), run.requests.size());
+            for (const FetchedNode& n : got) {
+                ASSERT_TRUE(n.ok) << n.error;
+                EXPECT_EQ(*n.compressed, d.node_bytes(*d.file.index().find(DiamondId{n.key})));
+                const bool retried = fault == Fault::Truncate || n.key == hit;
+                EXPECT_EQ(n.attempts, retried ? 2u : 1u) << n.key;
+            }
+            const FetcherStats s = fetcher.stats();
+            std::vector<std::string> targets = server.targets();
+            targets.erase(targets.begin(), targets.begin() + long(before));
+            if (fault == Fault::Corrupt) {
+                EXPECT_EQ(s.checksum_failures, 1u);
+                EXPECT_EQ(s.transport_errors, 0u);
+                EXPECT_EQ(s.transfers, 2u);
+                ASSERT_EQ(targets.size(), 2u);
+                EXPECT_EQ(targets[1], raw ? "/files/sphere.cpq" : "/api/datasets/sphere/nodes/" + std::to_string(hit));
+            } else {
+                EXPECT_EQ(s.checksum_failures, 0u);
+                EXPECT_EQ(s.transport_errors, 1u);
+                EXPECT_EQ(s.transfers, 1 + run.requests.size());
+                ASSERT_EQ(targets.size(), 1 + run.requests.size());
+                for (size_t i = 1; i < targets.size() && !raw; ++i) {
+                    EXPECT_NE(targets[i].find("/nodes/"), std::string::npos) << targets[i];
+                }
+            }
+            EXPECT_EQ(targets[0], "/files/sphere.cpq");
+            EXPECT_EQ(s.delivered, run.requests.size());
+        }
+    }
+}
+
+// Nodes queued together with a stretch of unrequested bytes between them share a transfer only
+// when the stretch is within the gap; the gap's bytes are counted as fetched.
+TEST(Fetcher, NodesFartherApartThanTheGapGetTransfersOfTheirOwn) {
+    const Dataset& d = dataset();
+    const NodeRun run = adjacent_nodes(d, 3);
+    ASSERT_EQ(run.requests.size(), 3u);
+    const std::vector<FetchRequest> ends = {run.requests[0], run.requests[2]};
+    const uint64_t hole = run.requests[1].size;
+    for (int64_t gap : {int64_t(hole) - 1, int64_t(hole)}) {
+        FetcherSettings settings = decoding();
+        settings.coalesce_gap_bytes = gap;
+        Fetcher fetcher(std::make_unique<LocalFileSource>(d.path), settings);
+        std::vector<FetchedNode> got = fetch_all(fetcher, ends);
+        ASSERT_EQ(got.size(), 2u);
+        for (const FetchedNode& n : got) EXPECT_TRUE(n.ok) << n.error;
+        const FetcherStats s = fetcher.stats();
+        const bool shared = uint64_t(gap) >= hole;
+        EXPECT_EQ(s.transfers, shared ? 1u : 2u) << "gap " << gap;
+        EXPECT_EQ(s.bytes_fetched, shared ? run.end - run.first : ends[0].size + ends[1].size);
+    }
+}
+
+// Cancellation with coalescing on: nodes that would share a transfer, cancelled while queued
+// (the camera turned before a connection was free), are never sent; the ones still wanted go
+// together, and the bytes counted are theirs alone.
+TEST(Fetcher, QueuedNeighboursCancelledBeforeTheirTransferStartsAreNeverFetched) {
+    const Dataset& d = dataset();
+    const NodeRun run = adjacent_nodes(d, 6);
+    ASSERT_EQ(run.requests.size(), 6u);
+    FetchRequest far;
+    for (const FetchRequest& r : d.all_requests())
+        if (r.size > 0 && (r.offset + r.size + 64 < run.first || r.offset > run.end + 64)) far = r;
+    ASSERT_GT(far.size, 0u);
+    test::TestHttpServer server(d.path, "sphere");
+    server.start();
+    server.hold(true);
+    HttpSettings http;
+    http.parallel = 1;
+    Fetcher fetcher(std::make_unique<HttpSource>(server.base_url(), http), fast_retries());
+    fetcher.request({far});
+    ASSERT_TRUE(eventually([&] { return server.waiting() == 1; }));  // the only connection is busy
+    std::vector<FetchRequest> all = {far};
+    all.insert(all.end(), run.requests.begin(), run.requests.end());
+    fetcher.request(all);
+    ASSERT_TRUE(eventually([&] { return fetcher.stats().queued == run.requests.size(); }));
+    fetcher.request({far, run.requests[0], run.requests[1]});
+    ASSERT_TRUE(eventually([&] { return fetcher.stats().cancelled == run.requests.size() - 2; }));
+    server.hold(false);
+    std::vector<FetchedNode> got;
+    ASSERT_TRUE(eventually([&] {
+        fetcher.poll(got);
+        return got.size() >= 3 && fetcher.idle();
+    }));
+    std::set<uint64_t> keys;
+    for (const FetchedNode& n : got) {
+        EXPECT_TRUE(n.ok) << n.error;
+        keys.insert(n.key);
+    }
+    EXPECT_EQ(keys, (std::set<uint64_t>{far.key, run.requests[0].key, run.requests[1].key}));
+    const FetcherStats s = fetcher.stats();
+    EXPECT_EQ(s.transfers, 2u);
+    EXPECT_EQ(s.bytes_fetched, uint64_t(far.size) + run.requests[0].size + run.requests[1].size);
+    EXPECT_EQ(server.requests(), 2u);
 }

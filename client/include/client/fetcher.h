@@ -18,10 +18,16 @@
 // index checksum (XXH3), decoded on worker threads by the dataset format's decoder (the fetcher
 // knows byte ranges and checksums, not formats), and delivered through a completion queue the
 // render thread polls without blocking. A request may name one part of a node (a byte range its
-// format decodes and verifies alone, FetchRequest::part): parts queued at once whose ranges are
-// adjacent share one range transfer (FetcherSettings::coalesce_gap_bytes); in server mode they
-// come from the raw file route. A failed or corrupt transfer is retried with exponential
-// backoff; after max_attempts the node is reported failed and retried later if still wanted.
+// format decodes and verifies alone, FetchRequest::part). Fetches queued at once whose byte
+// ranges lie next to each other in the file (parts with parts, whole nodes with whole nodes)
+// share one range transfer (FetcherSettings::coalesce_gap_bytes): small nodes listed together
+// (AQP's patch levels, CATP's slots) cost one request per run, not one each. A shared transfer
+// is a plain byte range (server mode: the raw file route; one whole node alone still goes by
+// key), cut into each fetch's slice, and each slice is verified alone (a whole node against its
+// index checksum, a part by its format). A failed or corrupt fetch is retried with exponential
+// backoff, in transfers of its own from then on (a bad node never fails its neighbours again;
+// the fetches of a transfer that failed as a whole are all retried alone); after max_attempts
+// the node is reported failed and retried later if still wanted.
 // Connection errors (the server went away) are just failures: backoff, then success when it is
 // back.
 #include <atomic>
@@ -30,6 +36,7 @@
 #include <cstdint>
 #include <deque>
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <mutex>
@@ -219,10 +226,18 @@ struct FetcherSettings {
     uint32_t max_attempts = 6;                          // then reported failed
     std::chrono::milliseconds failed_retry_delay{5000};  // a failed node requested again waits this
     bool abort_stale_in_flight = false;  // stale transfers already running: finish (default) or abort
-    // Parts (FetchRequest::part) queued at once whose byte ranges lie within this many bytes
-    // of each other go in one transfer, up to max_coalesced_bytes (fewer requests: a diamond's
-    // slots that one parent creates are usually adjacent, 4 bytes apart). 0 gap: only
-    // touching ranges; negative: never.
+    // Fetches queued at once (whole nodes with whole nodes, parts with parts) whose byte ranges
+    // lie within this many bytes of each other go in one transfer, up to max_coalesced_bytes:
+    // fewer requests where nodes are small and listed together (AQP's patch levels, 100 bytes
+    // to 2.4 KB, stored by level then patch; one level's kd-tree nodes of a point cloud; a
+    // diamond's slots that one parent creates, 4 bytes apart). 0: only touching ranges;
+    // negative: never. Why 64, measured on cold starts of the 2M-triangle scan as AQP (the 6
+    // views of RESULTS section 8, our server): 0 and 64 fetch exactly the bytes wanted (what
+    // is queued together touches; the slots need 4); 256 fetched 1-11% more bytes for 0-36%
+    // fewer requests, 1024 5-79% more (the gaps are unwanted patches) for 39-72% fewer, 4096
+    // 2-2.8 times the bytes. Each request a larger gap saves costs some 500-600 bytes of
+    // unwanted data, more than the request's own headers (about 350 bytes both ways), and the
+    // requests run 6 at a time on persistent connections: exact bytes win.
     int64_t coalesce_gap_bytes = 64;
     uint64_t max_coalesced_bytes = uint64_t(1) << 20;
     // Decodes verified bytes (format_decoder(format)); empty: nodes are delivered as verified
@@ -232,9 +247,11 @@ struct FetcherSettings {
 
 struct FetcherStats {
     uint64_t transfers = 0;          // transfers started
-    uint64_t bytes_fetched = 0;      // bytes received in successful transfers
+    uint64_t bytes_fetched = 0;      // bytes received in successful transfers (coalesced ones
+                                     // with the unrequested gaps between their fetches)
     uint64_t delivered = 0;          // nodes delivered decoded
-    uint64_t transport_errors = 0;   // failed transfers (connection, HTTP status, short body)
+    uint64_t transport_errors = 0;   // failed transfers (connection, HTTP status, short body),
+                                     // one per transfer however many fetches it carried
     uint64_t checksum_failures = 0;  // bytes that did not match the index checksum
     uint64_t decode_failures = 0;
     uint64_t retries = 0;            // transfers started again after a failure
@@ -275,6 +292,7 @@ private:
         State state = State::Queued;
         uint32_t attempts = 0;
         uint64_t transfer = 0;  // source id while Running
+        bool alone = false;     // an attempt failed: fetched in transfers of its own from now on
         bool stale = false;
         bool wanted = true;
         std::chrono::steady_clock::time_point retry_at{};
@@ -293,8 +311,18 @@ private:
         bool supplied = false;
     };
 
+    // A transfer's fetches: their ids in file order, and where the transfer's bytes start (a
+    // transfer may carry several adjacent fetches, see gather()).
+    struct Transfer {
+        std::vector<uint64_t> ids;
+        uint64_t offset = 0;
+    };
+    using CoalesceMap = std::map<std::pair<uint64_t, uint64_t>, Entry*>;  // (offset, id) -> queued entry
+
     void fetch_loop();
     void fetch_iterations();
+    CoalesceMap coalescable(bool parts);
+    Transfer gather(uint64_t head_id, const Entry& head, const CoalesceMap& queued, uint64_t& end) const;
     void decode_loop();
     uint64_t apply_commands();  // returns the command sequence number it saw
     void dispatch();
@@ -318,12 +346,6 @@ private:
     // Fetch-thread state.
     std::unordered_map<uint64_t, Entry> entries_;  // by key
     std::vector<uint64_t> order_;                  // keys, best first
-    // A transfer's fetches: their ids in file order, and where the transfer's bytes start (a
-    // transfer may carry several adjacent parts, see dispatch()).
-    struct Transfer {
-        std::vector<uint64_t> ids;
-        uint64_t offset = 0;
-    };
     std::unordered_map<uint64_t, Transfer> transfer_key_;
     uint64_t next_transfer_ = 1;
     uint64_t stats_transfers_ = 0, stats_bytes_ = 0, stats_delivered_ = 0, stats_transport_errors_ = 0,
