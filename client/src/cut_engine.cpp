@@ -767,7 +767,13 @@ void CutEngine::refine_phase() {
                 frame_.stats.budget_blocked++;
             } else if (!missing.empty()) {
                 frame_.stats.waiting++;
-                for (const auto& [c, s] : missing) want(c, s, RequestReason::Refine, cand.e);
+                for (const auto& [c, s] : missing) {
+                    // A child decodable only with its parent's data waits for that parent (wanted
+                    // itself while drawn without data); asking for it now would be refused.
+                    const uint32_t decode_parent = h_.node(c).decode_parent;
+                    if (decode_parent != kNoNode && !residency_->resident(decode_parent)) continue;
+                    want(c, s, RequestReason::Refine, cand.e);
+                }
             } else {
                 frame_.stats.capped++;
             }
