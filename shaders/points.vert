@@ -9,7 +9,6 @@
 //                         has_normals, has_colors
 // Per frame: modelview    eye-relative world -> eye space (a rotation: the eye is at 0)
 //            projection, pixels_per_unit (pixels of one unit at distance 1), max_point_size,
-//            radius_scale (the coverage factor, PointsRenderer::kRadiusScale),
 //            oriented (1: the sprite must hold the whole ellipse, which the fragment shader
 //            ray-casts; 0: a screen-aligned disc of the projected radius), default_color
 // Outputs (flat): centre and normal in eye space, colour, radius (world), the disc's radius and
@@ -29,7 +28,6 @@ uniform mat4 modelview;
 uniform mat4 projection;
 uniform float pixels_per_unit;
 uniform float max_point_size;
-uniform float radius_scale;
 uniform int oriented;
 
 flat out vec3 v_center;
@@ -60,7 +58,7 @@ void main() {
     vec4 eye = modelview * vec4(relative, 1.0);
     v_center = eye.xyz;
     uint radius_code = (w1 >> 12u) & ((1u << uint(radius_bits)) - 1u);
-    v_radius = radius_base * exp2(float(radius_code) * radius_log2_step) * radius_scale;
+    v_radius = radius_base * exp2(float(radius_code) * radius_log2_step);
     v_normal = has_normals != 0 ? mat3(modelview) * oct6_decode(w1 & 4095u) : vec3(0.0);
     v_color = has_colors != 0 ? vec3(float((w1 >> 17u) & 31u), float((w1 >> 22u) & 31u), float(w1 >> 27u)) / 31.0
                               : default_color;

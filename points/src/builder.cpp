@@ -254,6 +254,7 @@ std::vector<Splat> Builder::leaf_splats(const HNode& node) {
         in.tree = &tree_;
         in.positions = cloud_.positions.data();
         in.neighbours = settings_.neighbours;
+        in.radius_neighbour = settings_.radius_neighbour;
         in.orient_up = settings_.orientation == NormalOrientation::Up ||
                        (settings_.orientation == NormalOrientation::Auto && z_up_);
         estimate_leaf(in, node.begin, node.end, estimate_normals_ ? cloud_.normals.data() : nullptr,
@@ -533,6 +534,8 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
              settings.color_bits.chroma);
     if (!(settings.error_fraction > 0 && settings.error_fraction <= 1))
         fail("position error fraction %g is out of range (0, 1]", settings.error_fraction);
+    if (settings.radius_neighbour < 1 || settings.radius_neighbour > 63)
+        fail("radius neighbour %zu is out of range (1 .. 63)", settings.radius_neighbour);
     std::unique_ptr<tbb::global_control> threads;
     if (settings.threads)
         threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings.threads);

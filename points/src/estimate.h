@@ -12,7 +12,8 @@ namespace catpaq::points_detail {
 struct EstimateInput {
     const KdTree* tree = nullptr;      // over all points (float, relative to the origin)
     const Vec3d* positions = nullptr;  // the same points in double precision, in the tree's ids
-    size_t neighbours = 16;
+    size_t neighbours = 16;         // k of the normals' PCA
+    size_t radius_neighbour = 6;    // a radius reaches this neighbour (PointsBuildSettings)
     bool orient_up = false;         // else outward from the origin (the bounds' centre)
 };
 

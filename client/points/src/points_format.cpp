@@ -113,10 +113,10 @@ std::string PointsFormat::decode(uint32_t node, const uint8_t* data, size_t size
                                  std::shared_ptr<const DecodedNode>& out) const {
     const HierarchyNode& n = hierarchy_.node(node);
     auto decoded = std::make_shared<PointsNode>();
-    DecodedPoints& points = decoded->points;
+    // Decoded arrays live only while packing: each decoding thread reuses its own.
+    thread_local DecodedPoints points;
     std::string problem = decode_point_node(data, size, points);
     if (!problem.empty()) return problem;
-    points.scratch = {};  // decoder work space: not kept with the node
     if (points.count != n.primitives)
         return strprintf("node %llu holds %zu points, the index says %u", (unsigned long long)n.key, points.count, n.primitives);
     // The codec refuses non-positive steps and radius bases, so this holds for any bytes it
@@ -127,8 +127,8 @@ std::string PointsFormat::decode(uint32_t node, const uint8_t* data, size_t size
     decoded->splats = pack_splats(points, meta_.origin);
     decoded->part_primitives = {uint32_t(points.count)};
     decoded->bytes.gpu = uint64_t(points.count) * decoded->splats.stride;
-    decoded->bytes.cpu = points.positions.size() * 4 + points.normals.size() * 2 + points.colors.size() +
-                         points.radii.size() * 4 + decoded->splats.halves.size() * 2;
+    // Only the packed splats stay with the node (the decoded arrays go with `points`).
+    decoded->bytes.cpu = decoded->splats.halves.size() * 2;
     Aabb box;
     for (size_t i = 0; i < points.count; ++i)
         for (int a = 0; a < 3; ++a) {
@@ -149,16 +149,22 @@ std::string PointsFormat::decode(uint32_t node, const uint8_t* data, size_t size
 std::optional<double> PointsFormat::data_distance(uint32_t node, const DecodedNode& decoded,
                                                   const std::array<double, 3>& eye) const {
     (void)node;
-    const DecodedPoints& points = points_node(decoded).points;
-    if (points.count == 0) return std::nullopt;
+    const PackedSplats& splats = points_node(decoded).splats;
+    if (splats.count == 0) return std::nullopt;
+    // The eye relative to the node's grid origin, and the radius of every code, once.
+    const double eye_local[3] = {eye[0] - splats.origin[0], eye[1] - splats.origin[1], eye[2] - splats.origin[2]};
+    std::array<float, 32> radius_of_code;
+    for (uint32_t code = 0; code < radius_of_code.size(); ++code)
+        radius_of_code[code] = splats.radius_base * std::exp2(float(code) * splats.radius_log2_step);
     double best = INFINITY;
-    for (size_t i = 0; i < points.count; ++i) {
+    for (size_t i = 0; i < splats.count; ++i) {
+        const SplatFields f = splat_fields(splats, i);
         double d2 = 0;
         for (int a = 0; a < 3; ++a) {
-            const double d = meta_.origin[a] + double(points.positions[3 * i + a]) - eye[a];
+            const double d = double(f.position[a]) - eye_local[a];
             d2 += d * d;
         }
-        best = std::min(best, std::sqrt(d2) - double(points.radii[i]));
+        best = std::min(best, std::sqrt(d2) - double(radius_of_code[f.radius_code]));
     }
     // Rounding: a hair less than measured, never more.
     return std::max(0.0, best - std::abs(best) * 1e-9);
@@ -170,22 +176,19 @@ DrawnGeometry PointsFormat::drawn_geometry(const std::vector<DecodedPart>& parts
     Mesh& mesh = out.mesh;
     bool all_colors = true, all_normals = true;
     for (const DecodedPart& p : parts) {
-        const DecodedPoints& d = points_node(*p.decoded).points;
-        all_colors &= (d.flags & kPointHasColors) != 0;
-        all_normals &= (d.flags & kPointHasNormals) != 0;
+        const PackedSplats& s = points_node(*p.decoded).splats;
+        all_colors &= s.has_colors;
+        all_normals &= s.has_normals;
     }
     for (const DecodedPart& p : parts) {
-        const DecodedPoints& d = points_node(*p.decoded).points;
-        for (size_t i = 0; i < d.count; ++i) {
+        const PackedSplats& s = points_node(*p.decoded).splats;
+        for (size_t i = 0; i < s.count; ++i) {
+            const UnpackedSplat u = unpack_splat(s, i);
             Vec3d position;
-            for (int a = 0; a < 3; ++a) position[a] = (meta_.origin[a] - eye[a]) + double(d.positions[3 * i + a]);
+            for (int a = 0; a < 3; ++a) position[a] = (s.origin[a] - eye[a]) + double(u.position[a]);
             mesh.positions.push_back(position);
-            if (all_normals) {
-                float n[3];
-                oct_decode(d.normals[i], n);
-                mesh.normals.push_back({n[0], n[1], n[2]});
-            }
-            if (all_colors) mesh.colors.push_back({d.colors[3 * i], d.colors[3 * i + 1], d.colors[3 * i + 2]});
+            if (all_normals) mesh.normals.push_back({u.normal[0], u.normal[1], u.normal[2]});
+            if (all_colors) mesh.colors.push_back({u.color[0], u.color[1], u.color[2]});
         }
     }
     return out;

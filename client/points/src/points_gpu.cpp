@@ -176,7 +176,6 @@ void find_uniforms(const GlProgram& p, U& u) {
     u.projection = p.uniform("projection");
     u.pixels_per_unit = p.uniform("pixels_per_unit");
     u.max_point_size = p.uniform("max_point_size");
-    u.radius_scale = p.uniform("radius_scale");
     u.oriented = p.uniform("oriented");
     u.flat_mode = p.uniform("flat_mode");
     u.flat_color = p.uniform("flat_color");
@@ -258,7 +257,6 @@ RenderStats PointsRenderer::draw(const Camera& camera_in, const std::vector<Draw
     glUniformMatrix4fv(u.projection, 1, GL_FALSE, glm::value_ptr(projection_f));
     glUniform1f(u.pixels_per_unit, float(projection[1][1] * camera.height / 2));
     glUniform1f(u.max_point_size, max_point_size_);
-    glUniform1f(u.radius_scale, kRadiusScale);
     glUniform1i(u.oriented, oriented ? 1 : 0);
     glUniform3fv(u.default_color, 1, kDefaultColor);
     glUniform1i(u.flat_mode, settings.flat ? 1 : 0);

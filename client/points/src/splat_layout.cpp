@@ -146,15 +146,25 @@ PackedSplats pack_splats(const DecodedPoints& points, const double dataset_origi
     return out;
 }
 
+SplatFields splat_fields(const PackedSplats& splats, size_t i) {
+    SplatFields f;
+    const size_t halves = splats.stride / 2;
+    const uint16_t* h = &splats.halves[halves * i];
+    const uint32_t w0 = uint32_t(h[0]) | uint32_t(h[1]) << 16;
+    for (int a = 0; a < 3; ++a) f.position[a] = float((w0 >> kPositionShift[a]) & kPositionLevels[a]) * splats.step[a];
+    const uint32_t w1 = uint32_t(h[2]) | (halves == 4 ? uint32_t(h[3]) << 16 : 0u);  // the 5-bit code crosses halves
+    f.radius_code = (w1 >> 12) & ((1u << splats.radius_bits) - 1);
+    return f;
+}
+
 UnpackedSplat unpack_splat(const PackedSplats& splats, size_t i) {
     UnpackedSplat s;
     const size_t halves = splats.stride / 2;
     const uint16_t* h = &splats.halves[halves * i];
-    const uint32_t w0 = uint32_t(h[0]) | uint32_t(h[1]) << 16;
     const uint32_t w1 = uint32_t(h[2]) | (halves == 4 ? uint32_t(h[3]) << 16 : 0u);
-    for (int a = 0; a < 3; ++a) s.position[a] = float((w0 >> kPositionShift[a]) & kPositionLevels[a]) * splats.step[a];
-    const uint32_t code = (w1 >> 12) & ((1u << splats.radius_bits) - 1);
-    s.radius = splats.radius_base * std::exp2(float(code) * splats.radius_log2_step);
+    const SplatFields f = splat_fields(splats, i);
+    s.position = f.position;
+    s.radius = splats.radius_base * std::exp2(float(f.radius_code) * splats.radius_log2_step);
     if (splats.has_normals) oct6_decode(w1 & 0xfffu, s.normal.data());
     for (int k = 0; k < 3; ++k)
         s.color[k] = splats.has_colors ? uint8_t(std::lround(float((w1 >> (17 + 5 * k)) & 31u) * 255.0f / 31.0f)) : 0;

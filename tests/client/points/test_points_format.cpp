@@ -6,6 +6,7 @@
 #include <chrono>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 #include <set>
 
 #include "base/error.h"
@@ -122,7 +123,7 @@ TEST(PointsDecode, EqualsThePointDatasetsDecodedPoints) {
         for (uint32_t n = 0; n < h.size(); ++n) {
             std::shared_ptr<const DecodedNode> out;
             ASSERT_EQ(format.decode(n, payloads[n].data(), payloads[n].size(), out), "");
-            points += points_node(*out).points.count;
+            points += points_node(*out).splats.count;
         }
         const double whole = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
         codec_seconds = run ? std::min(codec_seconds, codec) : codec;
@@ -133,19 +134,69 @@ TEST(PointsDecode, EqualsThePointDatasetsDecodedPoints) {
     for (uint32_t n = 0; n < h.size(); ++n) {
         std::shared_ptr<const DecodedNode> decoded = decode_node(format, file, n);
         ASSERT_TRUE(decoded);
-        const DecodedPoints& got = points_node(*decoded).points;
+        const PackedSplats& got = points_node(*decoded).splats;
         DecodedPoints want;
         ASSERT_EQ(file.decode(h.node(n).entry, want), "");
         ASSERT_EQ(got.count, want.count);
-        EXPECT_EQ(got.flags, want.flags);
-        EXPECT_EQ(got.positions, want.positions);
-        EXPECT_EQ(got.normals, want.normals);
-        EXPECT_EQ(got.colors, want.colors);
-        EXPECT_EQ(got.radii, want.radii);
+        EXPECT_EQ(got, pack_splats(want, file.meta().origin));
         EXPECT_EQ(decoded->part_primitives, std::vector<uint32_t>{uint32_t(got.count)});
-        EXPECT_EQ(decoded->bytes.gpu, uint64_t(got.count) * points_node(*decoded).splats.stride);
+        EXPECT_EQ(decoded->bytes.gpu, uint64_t(got.count) * got.stride);
         EXPECT_FALSE(decoded->data_bounds.empty());
         EXPECT_TRUE(h.node(n).bounds.contains(decoded->data_bounds));
+    }
+}
+
+// A resident node keeps only its packed splats: 8 bytes a point on the CPU with colours, 6
+// without (the decoded arrays beside them were 21 more).
+TEST(PointsDecode, ClientKeepsAtMost8BytesPerPoint) {
+    for (const PointSet& set : hierarchy_sets()) {
+        const std::string& path = test::points_dataset(set);
+        PointDataset file(path);
+        PointsFormat format(test::read_prefix(path));
+        uint64_t cpu = 0, points = 0;
+        for (uint32_t n = 0; n < format.hierarchy().size(); ++n) {
+            std::shared_ptr<const DecodedNode> decoded = decode_node(format, file, n);
+            ASSERT_TRUE(decoded);
+            cpu += decoded->bytes.cpu;
+            points += decoded->part_primitives[0];
+            EXPECT_EQ(decoded->bytes.cpu, decoded->bytes.gpu) << "node " << n;
+        }
+        std::printf("client CPU bytes per resident point: %.2f (%s)\n", double(cpu) / double(points),
+                    set.colors ? "colours" : "no colours");
+        EXPECT_LE(cpu, (set.colors ? 8u : 6u) * points);
+    }
+}
+
+// data_distance is the distance to the nearest drawn splat ball: never more than the distance
+// to a decoded splat ball (every packed splat covers its decoded one), and no less than it by
+// more than the packing's growth of a radius.
+TEST(PointsDistance, IsALowerBoundOfTheDecodedSplatsDistanceAndNearlyTight) {
+    PointSet set;
+    const std::string& path = test::points_dataset(set);
+    PointDataset file(path);
+    PointsFormat format(test::read_prefix(path));
+    const Hierarchy& h = format.hierarchy();
+    for (uint32_t n = 0; n < h.size(); n += 7) {
+        std::shared_ptr<const DecodedNode> decoded = decode_node(format, file, n);
+        DecodedPoints want;
+        ASSERT_EQ(file.decode(h.node(n).entry, want), "");
+        const PackedSplats& splats = points_node(*decoded).splats;
+        for (const std::array<double, 3>& eye : {std::array<double, 3>{0, 0, 0}, std::array<double, 3>{2.5, -1.0, 0.5},
+                                                 std::array<double, 3>{-0.3, 0.9, -3.0}}) {
+            double exact = INFINITY;
+            for (size_t i = 0; i < want.count; ++i) {
+                double d2 = 0;
+                for (int a = 0; a < 3; ++a) {
+                    const double d = file.meta().origin[a] + double(want.positions[3 * i + a]) - eye[a];
+                    d2 += d * d;
+                }
+                exact = std::min(exact, std::sqrt(d2) - double(want.radii[i]));
+            }
+            const std::optional<double> got = format.data_distance(n, *decoded, eye);
+            ASSERT_TRUE(got);
+            EXPECT_LE(*got, std::max(0.0, exact)) << "node " << n;
+            EXPECT_GE(*got, exact - 2.0 * double(splats.max_radius) - 2.0 * double(splats.position_error)) << "node " << n;
+        }
     }
 }
 
@@ -159,7 +210,8 @@ TEST(PointsPacking, PackedSplatsCoverTheDecodedOnesIn8BytesOr6WithoutColour) {
         for (uint32_t n = 0; n < format.hierarchy().size(); ++n) {
             std::shared_ptr<const DecodedNode> decoded = decode_node(format, file, n);
             const PointsNode& node = points_node(*decoded);
-            const DecodedPoints& d = node.points;
+            DecodedPoints d;
+            ASSERT_EQ(file.decode(format.hierarchy().node(n).entry, d), "");
             const PackedSplats& s = node.splats;
             ASSERT_EQ(s.stride, (d.flags & kPointHasColors) ? 8u : 6u) << "6 bytes without colours";
             ASSERT_EQ(s.halves.size(), s.stride / 2 * d.count);

@@ -134,9 +134,11 @@ TEST(SplatStore, KeepsPinnedAndUsedNodesAndEvictsTheLeastRecentlyUsedOverBudget)
     EXPECT_FALSE(store.resident(9));
 }
 
-// Drawn at the cut the session picks for 2 px, a dense sphere covers every pixel of its
+// Drawn at the cut the session picks for 2.5 px, a dense sphere covers every pixel of its
 // silhouette (bar a 2 px rim) in both shapes and both GPU layouts (8 bytes with colours, 6
-// without); frame times of the two shapes are reported.
+// without), splats drawn at their stored radius; frame times of the two shapes are reported.
+// (2.5 px: a node's error counts its mean splat radius, and the leaves' radii, which cover the
+// surface, are 2.2-2.5 px from views 1 and 2.)
 class DenseSphere : public ::testing::TestWithParam<std::tuple<SplatShape, bool>> {};
 
 TEST_P(DenseSphere, HasNoBackgroundPixelsInsideItsSilhouette) {
@@ -145,7 +147,7 @@ TEST_P(DenseSphere, HasNoBackgroundPixelsInsideItsSilhouette) {
     const bool colors = std::get<1>(GetParam());
     const std::string& path = test::points_dataset(dense_sphere(0, colors));
     SessionSettings settings;
-    settings.tolerance_px = 2.0;
+    settings.tolerance_px = 2.5;
     StreamingSession session(path, settings);
     const std::string shape = std::string(param_shape == SplatShape::Round ? "round" : "oriented") +
                               (colors ? "" : " colourless");

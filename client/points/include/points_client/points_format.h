@@ -30,12 +30,12 @@ namespace catpaq {
 Hierarchy build_points_hierarchy(const PointsMeta& meta, const std::vector<ArchiveEntry>& entries,
                                  const std::string& source);
 
-// A decoded node. DecodedNode's fields: bytes cpu = the decoded arrays and the packed splats;
-// gpu = PackedSplats::stride per point (what the renderer uploads); part_primitives = {points};
-// data_bounds = the box of the decoded splat balls (centre +- radius), within the node's box.
+// A decoded node: only its packed splats (8 or 6 bytes a point, what the renderer uploads; the
+// decoded arrays, 21 more bytes a point, are dropped after packing). DecodedNode's fields: bytes
+// cpu = gpu = PackedSplats::stride per point; part_primitives = {points}; data_bounds = the box
+// of the decoded splat balls (centre +- radius), within the node's box.
 class PointsNode : public DecodedNode {
 public:
-    DecodedPoints points;  // as decoded (positions relative to the dataset origin)
     PackedSplats splats;   // as uploaded
 };
 // The data of a PointsNode; throws Error for a node another format decoded.
@@ -52,11 +52,12 @@ public:
     // decode_point_node into a PointsNode (also checking the count against the index), packed.
     std::string decode(uint32_t node, const uint8_t* data, size_t size,
                        std::shared_ptr<const DecodedNode>& out) const override;
-    // The distance to the nearest splat ball (centre distance minus radius), a hair less.
+    // The distance to the nearest packed splat ball (centre distance minus radius, the splats as
+    // drawn: each covers its decoded splat), a hair less.
     std::optional<double> data_distance(uint32_t node, const DecodedNode& decoded,
                                         const std::array<double, 3>& eye) const override;
     // The drawn splat centres as vertices without triangles (normals, colours when present),
-    // relative to the eye.
+    // relative to the eye: the packed splats, as the shader decodes them.
     DrawnGeometry drawn_geometry(const std::vector<DecodedPart>& parts, const std::array<double, 3>& eye) const override;
     Aabb world_bounds() const override;
     int up_axis() const override;

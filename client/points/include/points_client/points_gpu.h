@@ -100,14 +100,9 @@ private:
 // (part id 0).
 class PointsRenderer : public NodeRenderer {
 public:
-    // Splats are drawn this much larger than their radius. The converter's radii (the side of
-    // the area per point of 16 neighbours) leave gaps where random sampling left a hole larger
-    // than a spacing: on a 200k-point uniformly random sphere, 91 pixels of the front surface
-    // showed the back through them at 1.0, 13 at 1.2, none at 1.4 (points_gl_tests,
-    // OrientedSplats.WriteTheSurfacesDepth). The blobs grow by as much; the silhouette by 0.4 of
-    // a radius, under a pixel at the tolerances the cut is made for.
-    static constexpr float kRadiusScale = 1.4f;
-
+    // Splats are drawn at their radius: the converter's radii cover the sampled surface
+    // (points/builder.h; a uniformly random 200k-point sphere shows no hole, points_gl_tests).
+    //
     // Compiles the programs; throws Error with the compiler's log.
     explicit PointsRenderer(const PointsMeta& meta);
     ~PointsRenderer() override;
@@ -139,7 +134,6 @@ private:
         int node_offset = -1, node_step = -1, radius_base = -1, radius_log2_step = -1, radius_bits = -1, has_normals = -1;
         int has_colors = -1;
         int default_color = -1, modelview = -1, projection = -1, pixels_per_unit = -1, max_point_size = -1, oriented = -1;
-        int radius_scale = -1;
         int flat_mode = -1, flat_color = -1, light_eye = -1, ambient = -1;
         int viewport = -1, projection_scale = -1, depth_coefficients = -1;
     };

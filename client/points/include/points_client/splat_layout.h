@@ -42,6 +42,8 @@ struct PackedSplats {
     bool has_normals = false, has_colors = false;
     float position_error = 0;             // largest |packed - decoded position| (world units)
     float max_radius = 0;                 // largest packed radius (world units)
+
+    bool operator==(const PackedSplats&) const = default;
 };
 
 // Packs a decoded node (the 6-byte layout when it has no colours); `dataset_origin` is the dataset's origin (world = origin + decoded
@@ -57,6 +59,15 @@ struct UnpackedSplat {
     std::array<uint8_t, 3> color{};
 };
 UnpackedSplat unpack_splat(const PackedSplats& splats, size_t i);
+
+// Splat i's position (as unpack_splat) and radius code, without the radius's exp2 or the normal
+// and colour: for loops over every splat of a node (PointsFormat::data_distance), which look
+// the radius up by code.
+struct SplatFields {
+    std::array<float, 3> position{};
+    uint32_t radius_code = 0;  // < 2^radius_bits
+};
+SplatFields splat_fields(const PackedSplats& splats, size_t i);
 
 // Octahedral code of a unit vector in 6 + 6 bits (u low), and its decode (the shader's mirror).
 uint32_t oct6_encode(const float n[3]);
