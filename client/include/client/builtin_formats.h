@@ -1,6 +1,6 @@
 #pragma once
-// The dataset formats this build streams (client/format.h): CATP now; AQP and point clouds
-// register here when they land. A session (SessionSettings::formats) or a test may use another
+// The dataset formats this build streams (client/format.h): CATP, AQP and points, registered in
+// client/src/builtin_formats.cpp. A session (SessionSettings::formats) or a test may use another
 // registry instead.
 #include "client/format.h"
 

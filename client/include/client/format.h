@@ -1,6 +1,6 @@
 #pragma once
-// The seam between the format-agnostic client and a dataset format (CATP today; AQP and point
-// clouds next).
+// The seam between the format-agnostic client and a dataset format (CATP, AQP and points:
+// client/catp, client/aqp, client/points).
 //
 // The generic side (fetcher, caches, cut engine, streaming session, viewer, the render, view and
 // info commands) knows nodes, keys, byte ranges, bounds, errors and dependencies: the Hierarchy.

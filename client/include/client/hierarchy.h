@@ -1,8 +1,8 @@
 #pragma once
 // The format-agnostic multiresolution DAG the cut engine (client/cut_engine.h) works on.
 //
-// A node is one unit of streaming and of refinement: a CATP diamond, later an AQP patch or a
-// point-cloud node; each format builds the hierarchy from its archive index (its adapter:
+// A node is one unit of streaming and of refinement: a CATP diamond, an AQP patch level or a
+// point-cloud kd-tree node; each format builds the hierarchy from its archive index (its adapter:
 // DatasetFormat::hierarchy in client/format.h; CATP's is build_catp_hierarchy in
 // catp_client/catp_format.h). Every node knows its parents and children (node indices), its
 // object-space error (monotone: a parent's error is >= each child's), a world-space box that
