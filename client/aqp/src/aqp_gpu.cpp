@@ -31,10 +31,6 @@ std::string aqp_fragment_shader(bool gles) { return shader_preamble(gles) + "#li
 
 // ---- the texture store --------------------------------------------------------------------
 
-PatchTextureStore::~PatchTextureStore() {
-    for (auto& [key, e] : entries_) destroy(e.gpu);
-}
-
 void PatchTextureStore::destroy(GpuPatch& gpu) {
     if (gpu.samples) glDeleteTextures(1, &gpu.samples);
     if (gpu.colors) glDeleteTextures(1, &gpu.colors);
@@ -86,69 +82,7 @@ void PatchTextureStore::upload(uint64_t key, const aqp::PatchGrid& grid, const a
         gpu.colors = make_texture(GL_RGBA8, grid.size, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
     }
     gpu.bytes = aqp_gpu_bytes(grid.level, meta.has_colors());
-    release(key);
-    gpu.last_used = frame_;
-    lru_.push_back(key);
-    entries_[key] = Entry{gpu, std::prev(lru_.end())};
-    bytes_ += gpu.bytes;
-    evict_to_budget();
-}
-
-const GpuPatch* PatchTextureStore::find(uint64_t key) const {
-    auto it = entries_.find(key);
-    return it == entries_.end() ? nullptr : &it->second.gpu;
-}
-
-bool PatchTextureStore::release(uint64_t key) {
-    auto it = entries_.find(key);
-    if (it == entries_.end()) return false;
-    bytes_ -= it->second.gpu.bytes;
-    destroy(it->second.gpu);
-    lru_.erase(it->second.lru);
-    entries_.erase(it);
-    return true;
-}
-
-void PatchTextureStore::set_budget(uint64_t bytes) {
-    budget_ = bytes;
-    evict_to_budget();
-}
-
-void PatchTextureStore::pin(uint64_t key) {
-    auto it = entries_.find(key);
-    if (it != entries_.end()) ++it->second.gpu.pins;
-}
-
-void PatchTextureStore::unpin_all() {
-    for (auto& [key, e] : entries_) e.gpu.pins = 0;
-}
-
-void PatchTextureStore::touch(Entry& e) {
-    e.gpu.last_used = frame_;
-    lru_.splice(lru_.end(), lru_, e.lru);  // most recently used at the back
-}
-
-void PatchTextureStore::mark_used(uint64_t key) {
-    auto it = entries_.find(key);
-    if (it != entries_.end()) touch(it->second);
-}
-
-size_t PatchTextureStore::evict_to_budget() {
-    size_t evicted = 0;
-    auto it = lru_.begin();
-    while (budget_ != 0 && bytes_ > budget_ && it != lru_.end()) {
-        const uint64_t key = *it++;
-        Entry& e = entries_.at(key);
-        if (e.gpu.pins > 0) continue;
-        if (e.gpu.last_used >= frame_) break;  // the rest of the list was used this frame too
-        release(key);
-        ++evicted;
-        if (on_evict_) {
-            on_evict_(key);
-            it = lru_.begin();  // the callback may release others, the one `it` points to among them
-        }
-    }
-    return evicted;
+    insert(key, gpu);
 }
 
 // ---- the renderer -------------------------------------------------------------------------

@@ -42,8 +42,6 @@ std::string points_shader_source(PointsShader kind, bool gles) {
 
 // ---- SplatStore ---------------------------------------------------------------------------
 
-SplatStore::~SplatStore() { clear(); }
-
 void SplatStore::upload(uint64_t key, const PackedSplats& splats) {
     if ((splats.stride != kSplatBytesWithColor && splats.stride != kSplatBytesWithoutColor) ||
         splats.halves.size() != splats.count * (splats.stride / 2) || splats.count == 0 || splats.count >= (1u << 24) ||
@@ -79,83 +77,13 @@ void SplatStore::upload(uint64_t key, const PackedSplats& splats) {
         fail("uploading node %llu failed (GL error 0x%x%s)", (unsigned long long)key, unsigned(error),
              error == GL_OUT_OF_MEMORY ? ": out of GPU memory" : "");
     }
-    if (const GpuSplats* earlier = find(key)) g.pins = earlier->pins;  // replacing keeps the pins
-    release(key);
-    lru_.push_back(key);
-    g.last_used = frame_;
-    bytes_ += g.bytes;
-    entries_.emplace(key, Entry{g, std::prev(lru_.end())});
-    evict_to_budget();
-}
-
-const GpuSplats* SplatStore::find(uint64_t key) const {
-    auto it = entries_.find(key);
-    return it == entries_.end() ? nullptr : &it->second.gpu;
+    insert(key, g);  // replacing keeps the pins
 }
 
 void SplatStore::destroy(GpuSplats& g) {
     if (g.vao) glDeleteVertexArrays(1, &g.vao);
     if (g.vbo) glDeleteBuffers(1, &g.vbo);
     g.vao = g.vbo = 0;
-}
-
-bool SplatStore::release(uint64_t key) {
-    auto it = entries_.find(key);
-    if (it == entries_.end()) return false;
-    bytes_ -= it->second.gpu.bytes;
-    destroy(it->second.gpu);
-    lru_.erase(it->second.lru);
-    entries_.erase(it);
-    return true;
-}
-
-void SplatStore::clear() {
-    for (auto& [key, e] : entries_) destroy(e.gpu);
-    entries_.clear();
-    lru_.clear();
-    bytes_ = 0;
-}
-
-void SplatStore::set_budget(uint64_t bytes) {
-    budget_ = bytes;
-    evict_to_budget();
-}
-
-void SplatStore::pin(uint64_t key) {
-    auto it = entries_.find(key);
-    if (it != entries_.end()) ++it->second.gpu.pins;
-}
-
-void SplatStore::unpin_all() {
-    for (auto& [key, e] : entries_) e.gpu.pins = 0;
-}
-
-void SplatStore::touch(Entry& e) {
-    e.gpu.last_used = frame_;
-    lru_.splice(lru_.end(), lru_, e.lru);
-}
-
-void SplatStore::mark_used(uint64_t key) {
-    auto it = entries_.find(key);
-    if (it != entries_.end()) touch(it->second);
-}
-
-size_t SplatStore::evict_to_budget() {
-    size_t evicted = 0;
-    auto it = lru_.begin();
-    while (over_budget() && it != lru_.end()) {
-        const uint64_t key = *it++;
-        Entry& e = entries_.at(key);
-        if (e.gpu.pins > 0) continue;
-        if (e.gpu.last_used >= frame_) break;  // the rest of the list was used this frame too
-        release(key);
-        ++evicted;
-        if (on_evict_) {
-            on_evict_(key);
-            it = lru_.begin();  // the callback may release other entries: start again
-        }
-    }
-    return evicted;
 }
 
 // ---- PointsRenderer -----------------------------------------------------------------------

@@ -26,6 +26,7 @@
 #include "aqp/format.h"
 #include "client/camera.h"
 #include "client/gl_program.h"
+#include "client/gpu_lru_store.h"
 #include "client/node_renderer.h"
 
 namespace catpaq {
@@ -35,47 +36,20 @@ struct GpuPatch {
     int level = 0;
     unsigned samples = 0, colors = 0;  // textures (colors 0 without colours)
     uint64_t bytes = 0;
-    int pins = 0;
-    uint64_t last_used = 0;  // frame of the last upload or mark_used
 };
 
-class PatchTextureStore {
+// The resident patch levels' textures under the shared GPU store policy (client/gpu_lru_store.h).
+class PatchTextureStore : public GpuLruStore<uint64_t, GpuPatch> {
 public:
-    PatchTextureStore() = default;
-    ~PatchTextureStore();  // deletes every texture (the context must still be current)
-    PatchTextureStore(const PatchTextureStore&) = delete;
-    PatchTextureStore& operator=(const PatchTextureStore&) = delete;
+    PatchTextureStore() : GpuLruStore(destroy) {}  // textures are deleted with the store (the context must still be current)
 
     // Uploads a decoded patch level under its node key (replacing an earlier upload). Throws
     // Error for a grid that does not fit `meta` (patch, level, sample counts, colours), leaving
     // the store unchanged. Counts as used this frame; then evicts down to the budget.
     void upload(uint64_t key, const aqp::PatchGrid& grid, const aqp::AqpMeta& meta);
-    bool resident(uint64_t key) const { return entries_.count(key) != 0; }
-    const GpuPatch* find(uint64_t key) const;
-    bool release(uint64_t key);  // false if it was not resident
-
-    uint64_t gpu_bytes() const { return bytes_; }
-    size_t size() const { return entries_.size(); }
-    void set_budget(uint64_t bytes);  // 0: unlimited; evicts at once
-    void pin(uint64_t key);
-    void unpin_all();
-    void begin_frame() { ++frame_; }
-    void mark_used(uint64_t key);
-    size_t evict_to_budget();
-    void set_eviction_callback(std::function<void(uint64_t key)> callback) { on_evict_ = std::move(callback); }
 
 private:
-    struct Entry {
-        GpuPatch gpu;
-        std::list<uint64_t>::iterator lru;  // front: least recently used
-    };
-    void destroy(GpuPatch& gpu);
-    void touch(Entry& e);
-
-    std::unordered_map<uint64_t, Entry> entries_;
-    std::list<uint64_t> lru_;
-    uint64_t bytes_ = 0, budget_ = 0, frame_ = 1;
-    std::function<void(uint64_t)> on_evict_;
+    static void destroy(GpuPatch& gpu);
 };
 
 // One patch level to draw.

@@ -28,6 +28,7 @@
 #include <vector>
 
 #include "client/gl_program.h"
+#include "client/gpu_lru_store.h"
 #include "client/node_renderer.h"
 #include "points/format.h"
 #include "points_client/splat_layout.h"
@@ -48,52 +49,19 @@ struct GpuSplats {
     float radius_base = 0, radius_log2_step = 0;
     int radius_bits = 5;
     bool has_normals = false, has_colors = false;
-    int pins = 0;
-    uint64_t last_used = 0;  // frame of the last upload or mark_used
 };
 
-class SplatStore {
+class SplatStore : public GpuLruStore<uint64_t, GpuSplats> {
 public:
-    SplatStore() = default;
-    ~SplatStore();  // deletes every GL object (the context must still be current)
-    SplatStore(const SplatStore&) = delete;
-    SplatStore& operator=(const SplatStore&) = delete;
+    SplatStore() : GpuLruStore(destroy) {}  // GL objects are deleted with the store (the context must still be current)
 
     // Uploads (replacing an earlier upload of) node `key`'s splats; it counts as used this
     // frame. Throws Error for splats that are inconsistent (word count) or that the GPU refuses
     // (out of memory), leaving the store as it was. Then evicts down to the budget.
     void upload(uint64_t key, const PackedSplats& splats);
-    bool resident(uint64_t key) const { return entries_.count(key) != 0; }
-    const GpuSplats* find(uint64_t key) const;
-    bool release(uint64_t key);  // false if it was not resident
-    void clear();
-
-    uint64_t gpu_bytes() const { return bytes_; }
-    size_t size() const { return entries_.size(); }
-    void set_budget(uint64_t bytes);  // 0: unlimited; evicts at once
-    uint64_t budget() const { return budget_; }
-    bool over_budget() const { return budget_ != 0 && bytes_ > budget_; }
-
-    void pin(uint64_t key);
-    void unpin_all();
-    void begin_frame() { ++frame_; }
-    void mark_used(uint64_t key);
-    // Evicts least recently used nodes, neither pinned nor used this frame, while over budget.
-    size_t evict_to_budget();
-    void set_eviction_callback(std::function<void(uint64_t key)> callback) { on_evict_ = std::move(callback); }
 
 private:
-    struct Entry {
-        GpuSplats gpu;
-        std::list<uint64_t>::iterator lru;  // front: least recently used
-    };
-    void destroy(GpuSplats& gpu);
-    void touch(Entry& e);
-
-    std::unordered_map<uint64_t, Entry> entries_;
-    std::list<uint64_t> lru_;
-    uint64_t bytes_ = 0, budget_ = 0, frame_ = 1;
-    std::function<void(uint64_t)> on_evict_;
+    static void destroy(GpuSplats& gpu);
 };
 
 // The point format's NodeRenderer: a SplatStore and the two splat programs. Parts are nodes
