@@ -131,10 +131,6 @@ void clear_gl_errors() {
 
 // ---- FragmentStore ------------------------------------------------------------------------
 
-FragmentStore::FragmentStore() = default;
-
-FragmentStore::~FragmentStore() { clear(); }
-
 void FragmentStore::upload(uint64_t diamond_key, int slot, const FragmentMesh& fragment) {
     std::array<LatticePoint, 4> corners = slot_corners(diamond_key, slot);
     validate_fragment(diamond_key, slot, fragment);
@@ -149,7 +145,7 @@ void FragmentStore::upload(uint64_t diamond_key, int slot, const FragmentMesh& f
     glEnableVertexAttribArray(0);
     glVertexAttribIPointer(0, 2, GL_UNSIGNED_INT, kPackedVertexBytes, nullptr);
     finish_upload(g, diamond_key, slot);
-    insert(Key{diamond_key, slot}, std::move(g));
+    store_.insert(Key{diamond_key, slot}, std::move(g));
 }
 
 void FragmentStore::upload_float(uint64_t diamond_key, int slot, const FragmentMesh& fragment, const CatpMeta& meta) {
@@ -191,103 +187,17 @@ void FragmentStore::upload_float(uint64_t diamond_key, int slot, const FragmentM
     glEnableVertexAttribArray(2);
     glVertexAttribPointer(2, 4, GL_UNSIGNED_BYTE, GL_TRUE, kFloatVertexBytes, reinterpret_cast<const void*>(offsetof(FloatVertex, color)));
     finish_upload(g, diamond_key, slot);
-    insert(Key{diamond_key, slot}, std::move(g));
-}
-
-void FragmentStore::insert(const Key& key, GpuFragment&& gpu) {
-    auto it = entries_.find(key);
-    if (it != entries_.end()) {
-        gpu.pins = it->second.gpu.pins;  // replacing keeps the pins
-        bytes_ -= it->second.gpu.bytes;
-        destroy(it->second.gpu);
-        lru_.erase(it->second.lru);
-        entries_.erase(it);
-    }
-    gpu.last_used = frame_;
-    bytes_ += gpu.bytes;
-    Entry e;
-    e.gpu = gpu;
-    e.lru = lru_.insert(lru_.end(), key);
-    entries_.emplace(key, std::move(e));
-    evict_to_budget();
+    store_.insert(Key{diamond_key, slot}, std::move(g));
 }
 
 void FragmentStore::destroy(GpuFragment& gpu) { delete_buffers(gpu); }
 
-void FragmentStore::touch(Entry& e) {
-    e.gpu.last_used = frame_;
-    lru_.splice(lru_.end(), lru_, e.lru);  // most recently used at the back
-}
-
-bool FragmentStore::resident(uint64_t diamond_key, int slot) const { return entries_.count(Key{diamond_key, slot}) != 0; }
-
-const GpuFragment* FragmentStore::find(uint64_t diamond_key, int slot) const {
-    auto it = entries_.find(Key{diamond_key, slot});
-    return it == entries_.end() ? nullptr : &it->second.gpu;
-}
-
-bool FragmentStore::release(uint64_t diamond_key, int slot) {
-    auto it = entries_.find(Key{diamond_key, slot});
-    if (it == entries_.end()) return false;
-    bytes_ -= it->second.gpu.bytes;
-    destroy(it->second.gpu);
-    lru_.erase(it->second.lru);
-    entries_.erase(it);
-    return true;
-}
-
-void FragmentStore::clear() {
-    for (auto& [key, e] : entries_) destroy(e.gpu);
-    entries_.clear();
-    lru_.clear();
-    bytes_ = 0;
-}
-
-void FragmentStore::set_budget(uint64_t bytes) {
-    budget_ = bytes;
-    evict_to_budget();
-}
-
-void FragmentStore::pin(uint64_t diamond_key, int slot) {
-    auto it = entries_.find(Key{diamond_key, slot});
-    if (it != entries_.end()) ++it->second.gpu.pins;
-}
-
-void FragmentStore::unpin(uint64_t diamond_key, int slot) {
-    auto it = entries_.find(Key{diamond_key, slot});
-    if (it != entries_.end() && it->second.gpu.pins > 0) --it->second.gpu.pins;
-}
-
-void FragmentStore::unpin_all() {
-    for (auto& [key, e] : entries_) e.gpu.pins = 0;
-}
-
-void FragmentStore::mark_used(uint64_t diamond_key, int slot) {
-    auto it = entries_.find(Key{diamond_key, slot});
-    if (it != entries_.end()) touch(it->second);
-}
-
-size_t FragmentStore::evict_to_budget() {
-    size_t evicted = 0;
-    auto it = lru_.begin();
-    while (over_budget() && it != lru_.end()) {
-        Key key = *it++;
-        Entry& e = entries_.at(key);
-        if (e.gpu.pins > 0) continue;
-        if (e.gpu.last_used >= frame_) break;  // the rest of the list was used this frame too
-        bytes_ -= e.gpu.bytes;
-        destroy(e.gpu);
-        lru_.erase(e.lru);
-        entries_.erase(key);
-        ++evicted;
-        if (on_evict_) {
-            on_evict_(key.diamond, key.slot);
-            // The callback may release other entries (the session drops a node's other slots
-            // with it), the one `it` points to among them: start again from the oldest.
-            it = lru_.begin();
-        }
+void FragmentStore::set_eviction_callback(std::function<void(uint64_t diamond_key, int slot)> callback) {
+    if (!callback) {
+        store_.set_eviction_callback(nullptr);
+        return;
     }
-    return evicted;
+    store_.set_eviction_callback([callback = std::move(callback)](const Key& key) { callback(key.diamond, key.slot); });
 }
 
 // ---- rendering ----------------------------------------------------------------------------

@@ -3,7 +3,7 @@
 // key, counted in bytes against a budget; pinned ones (the cut) and those used in the current
 // frame are never evicted; the others go least recently used first once the store is over its
 // budget, and each eviction is reported to a callback (the session then drops the node from its
-// residency). A format's store derives from it, builds its GL objects and calls insert();
+// residency). A format's store derives from it (or holds one), builds its GL objects and calls insert();
 // `Gpu` is its object (with a `uint64_t bytes` field), `destroy` deletes its GL names.
 //
 // Everything here needs a current GL context when objects are destroyed.
@@ -98,7 +98,6 @@ public:
     }
     void set_eviction_callback(std::function<void(const Key&)> callback) { on_evict_ = std::move(callback); }
 
-protected:
     // Takes an uploaded object under `key`, replacing an earlier one (whose pins it keeps); it
     // counts as used this frame. Then evicts down to the budget.
     void insert(const Key& key, Gpu gpu) {

@@ -30,6 +30,7 @@
 #include "catp/format.h"
 #include "client/camera.h"
 #include "client/gl_program.h"
+#include "client/gpu_lru_store.h"
 #include "client/node_renderer.h"
 #include "common_codec/fragment_codec.h"
 
@@ -64,16 +65,11 @@ struct GpuFragment {
     uint32_t index_count = 0;  // 3 per triangle
     uint64_t bytes = 0;        // vertex + index buffer bytes
     std::array<LatticePoint, 4> corners{};  // canonical corners of the slot's tetrahedron
-    int pins = 0;
-    uint64_t last_used = 0;    // frame number of the last upload or mark_used
 };
 
 class FragmentStore {
 public:
-    FragmentStore();
-    ~FragmentStore();  // deletes every GL object (the context must still be current)
-    FragmentStore(const FragmentStore&) = delete;
-    FragmentStore& operator=(const FragmentStore&) = delete;
+    FragmentStore() = default;  // GL objects are deleted with the store (the context must still be current)
 
     // Uploads (replacing any previous upload of the same item) slot `slot` of diamond
     // `diamond_key`. The fragment is validated first: the diamond and slot must exist, indices
@@ -85,37 +81,37 @@ public:
     // the dataset origin in world units) and uploads 28 bytes per vertex.
     void upload_float(uint64_t diamond_key, int slot, const FragmentMesh& fragment, const CatpMeta& meta);
 
-    bool resident(uint64_t diamond_key, int slot) const;
-    const GpuFragment* find(uint64_t diamond_key, int slot) const;
-    bool release(uint64_t diamond_key, int slot);  // false if it was not resident
-    void clear();
+    bool resident(uint64_t diamond_key, int slot) const { return store_.resident(Key{diamond_key, slot}); }
+    const GpuFragment* find(uint64_t diamond_key, int slot) const { return store_.find(Key{diamond_key, slot}); }
+    // false if it was not resident
+    bool release(uint64_t diamond_key, int slot) { return store_.release(Key{diamond_key, slot}); }
+    void clear() { store_.clear(); }
 
-    uint64_t gpu_bytes() const { return bytes_; }
-    size_t size() const { return entries_.size(); }
+    uint64_t gpu_bytes() const { return store_.gpu_bytes(); }
+    size_t size() const { return store_.size(); }
 
     // GPU memory budget in bytes (0: unlimited). Setting it evicts at once.
-    void set_budget(uint64_t bytes);
-    uint64_t budget() const { return budget_; }
-    bool over_budget() const { return budget_ != 0 && bytes_ > budget_; }
+    void set_budget(uint64_t bytes) { store_.set_budget(bytes); }
+    uint64_t budget() const { return store_.budget(); }
+    bool over_budget() const { return store_.over_budget(); }
 
     // Pinned fragments are never evicted (pins nest: pin twice, unpin twice).
-    void pin(uint64_t diamond_key, int slot);
-    void unpin(uint64_t diamond_key, int slot);
-    void unpin_all();
+    void pin(uint64_t diamond_key, int slot) { store_.pin(Key{diamond_key, slot}); }
+    void unpin(uint64_t diamond_key, int slot) { store_.unpin(Key{diamond_key, slot}); }
+    void unpin_all() { store_.unpin_all(); }
 
     // Frames: fragments marked used in the current frame are never evicted; marks of earlier
     // frames only order the eviction (least recently used first).
-    void begin_frame() { ++frame_; }
-    uint64_t frame() const { return frame_; }
-    void mark_used(uint64_t diamond_key, int slot);  // no-op if not resident
+    void begin_frame() { store_.begin_frame(); }
+    uint64_t frame() const { return store_.frame(); }
+    void mark_used(uint64_t diamond_key, int slot) { store_.mark_used(Key{diamond_key, slot}); }  // no-op if not resident
 
     // Evicts least recently used fragments that are neither pinned nor used this frame until
     // gpu_bytes() <= budget(); returns how many were evicted. May stay over budget.
-    size_t evict_to_budget();
-    // Called for every evicted fragment (not for release() or clear()).
-    void set_eviction_callback(std::function<void(uint64_t diamond_key, int slot)> callback) {
-        on_evict_ = std::move(callback);
-    }
+    size_t evict_to_budget() { return store_.evict_to_budget(); }
+    // Called for every evicted fragment (not for release() or clear()). The callback may release
+    // other fragments (the session drops a node's other slots with it).
+    void set_eviction_callback(std::function<void(uint64_t diamond_key, int slot)> callback);
 
 private:
     struct Key {
@@ -126,18 +122,10 @@ private:
     struct KeyHash {
         size_t operator()(const Key& k) const { return size_t((k.diamond * 8 + uint64_t(k.slot)) * 0x9E3779B97F4A7C15ull >> 7); }
     };
-    struct Entry {
-        GpuFragment gpu;
-        std::list<Key>::iterator lru;  // position in lru_ (front = least recently used)
-    };
-    void insert(const Key& key, GpuFragment&& gpu);
-    void destroy(GpuFragment& gpu);
-    void touch(Entry& e);
+    static void destroy(GpuFragment& gpu);
 
-    std::unordered_map<Key, Entry, KeyHash> entries_;
-    std::list<Key> lru_;
-    uint64_t bytes_ = 0, budget_ = 0, frame_ = 1;
-    std::function<void(uint64_t, int)> on_evict_;
+    // The policy every format's store shares (client/gpu_lru_store.h).
+    GpuLruStore<Key, GpuFragment, KeyHash> store_{destroy};
 };
 
 // The per-frame transform the renderer uses: the integer lattice anchor nearest the eye
