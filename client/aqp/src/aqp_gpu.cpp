@@ -136,27 +136,7 @@ RenderStats AqpRenderer::render(const Camera& camera_in, const std::vector<AqpDr
                                glm::dvec3(meta_.bounds_max[0], meta_.bounds_max[1], meta_.bounds_max[2]));
     const bool gles = current_context_is_gles();
 
-    glViewport(0, 0, camera.width, camera.height);
-    if (settings.clear) {
-        glClearColor(settings.background[0], settings.background[1], settings.background[2], settings.background[3]);
-        if (gles)
-            glClearDepthf(1.0f);
-        else
-            glClearDepth(1.0);
-        glDepthMask(GL_TRUE);
-        glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-    }
-    glEnable(GL_DEPTH_TEST);
-    glDepthFunc(GL_LESS);
-    glDisable(GL_BLEND);
-    if (settings.cull_back_faces) {
-        glEnable(GL_CULL_FACE);
-        glCullFace(GL_BACK);
-        glFrontFace(GL_CCW);
-    } else {
-        glDisable(GL_CULL_FACE);
-    }
-    if (!gles) glPolygonMode(GL_FRONT_AND_BACK, settings.wireframe ? GL_LINE : GL_FILL);
+    begin_draw(camera, settings, true);
 
     // The frame: the grid point nearest the eye; positions are (grid point - anchor) * step.
     const std::array<int64_t, 3> anchor = aqp_frame_anchor(meta_, {camera.eye.x, camera.eye.y, camera.eye.z});

@@ -56,6 +56,11 @@ struct RenderStats {
     size_t missing = 0;  // items that were not resident (skipped)
 };
 
+// The GL state every format's draw starts from: the camera's viewport, the clear `settings` asks
+// for, depth test (less, written), no blending; for triangles also back-face culling and
+// wireframe as asked (points: no culling). Needs a current GL context.
+void begin_draw(const Camera& camera, const RenderSettings& settings, bool triangles);
+
 class NodeRenderer {
 public:
     virtual ~NodeRenderer() = default;

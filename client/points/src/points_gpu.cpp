@@ -153,20 +153,7 @@ RenderStats PointsRenderer::draw(const Camera& camera_in, const std::vector<Draw
         camera.fit_clip_planes(glm::dvec3(meta_.bounds_min[0], meta_.bounds_min[1], meta_.bounds_min[2]),
                                glm::dvec3(meta_.bounds_max[0], meta_.bounds_max[1], meta_.bounds_max[2]));
     const bool gles = current_context_is_gles();
-    glViewport(0, 0, camera.width, camera.height);
-    if (settings.clear) {
-        glClearColor(settings.background[0], settings.background[1], settings.background[2], settings.background[3]);
-        if (gles)
-            glClearDepthf(1.0f);
-        else
-            glClearDepth(1.0);
-        glDepthMask(GL_TRUE);
-        glClear(GL_COLOR_BUFFER_BIT | GL_DEPTH_BUFFER_BIT);
-    }
-    glEnable(GL_DEPTH_TEST);
-    glDepthFunc(GL_LESS);
-    glDisable(GL_BLEND);
-    glDisable(GL_CULL_FACE);
+    begin_draw(camera, settings, false);
     if (!gles) glEnable(GL_PROGRAM_POINT_SIZE);
 
     const bool oriented = settings.splats == SplatShape::Oriented;
