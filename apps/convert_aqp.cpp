@@ -13,6 +13,7 @@
 #include "base/error.h"
 #include "catp/format.h"
 #include "mesh/io.h"
+#include "mesh/precision.h"
 #include "points/point_cloud.h"
 
 namespace catpaq {
@@ -149,7 +150,7 @@ void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job, const aqp:
 int convert_aqp(Options& options, const ConvertJob& job) {
     aqp::AqpBuildOptions o;
     const std::string precision = options.get("precision", "0.1e");
-    if (!aqp::parse_aqp_precision(precision, o.precision))
+    if (!parse_precision(precision, o.precision))
         usage_error("--precision: '%s' is not a positive distance in model units (0.001) or in mean edges (0.1e)",
                     precision.c_str());
     o.patch_level = int(options.integer("patch-level", -1, 1, aqp::kMaxPatchLevel));

@@ -191,16 +191,6 @@ AqpMeta make_meta(const QuadLayout& layout, const Quantization& q, const std::ve
 
 }  // namespace
 
-bool parse_aqp_precision(const std::string& text, AqpPrecision& out) {
-    if (text.empty()) return false;
-    const bool edges = text.back() == 'e' || text.back() == 'E';
-    const std::string number = edges ? text.substr(0, text.size() - 1) : text;
-    char* end = nullptr;
-    const double v = std::strtod(number.c_str(), &end);
-    if (number.empty() || end != number.c_str() + number.size() || !(v > 0) || !std::isfinite(v)) return false;
-    out = edges ? AqpPrecision{0, v} : AqpPrecision{v, 0};
-    return true;
-}
 
 void build_aqp_dataset(const Mesh& input, const std::string& out_path, const AqpBuildOptions& o, AqpBuildReport* report_out) {
     const auto start = Clock::now();

@@ -26,17 +26,9 @@
 #include "aqp/clean.h"
 #include "aqp/domain.h"
 #include "mesh/mesh.h"
+#include "mesh/precision.h"
 
 namespace catpaq::aqp {
-
-// The quantization's largest distance from a sample's true position: `model_units` if positive,
-// else `mean_edges` times the input's mean edge length.
-struct AqpPrecision {
-    double model_units = 0;
-    double mean_edges = 0.1;
-};
-// Parses "0.001" (model units) or "0.1e" (a fraction of the mean input edge); false if invalid.
-bool parse_aqp_precision(const std::string& text, AqpPrecision& out);
 
 struct AqpBuildOptions {
     // Finest level k (patches of (2^k + 1)^2 samples), 1 to kMaxPatchLevel; -1 chooses it from
@@ -47,7 +39,7 @@ struct AqpBuildOptions {
     size_t domain_triangles = 0;  // base triangles; 0: default_domain_triangles
     int smoothing_sweeps = 4;     // parameter smoothing (DomainOptions)
     double min_component_area_fraction = 1e-3;  // CleanOptions
-    AqpPrecision precision;
+    Precision precision;  // the quantization's largest distance from a sample's true position
     int png_compression = 6;      // zlib level of the node images (9: 4% smaller, encoding 7.6x slower on a 1M scan)
     // Refuse to start when the estimated working memory exceeds this many bytes (0: no limit).
     uint64_t memory_budget = 0;

@@ -25,17 +25,12 @@
 
 #include "catp/format.h"
 #include "mesh/mesh.h"
+#include "mesh/precision.h"
 
 namespace catpaq {
 
-// The finest level's largest distance from the input the converter guarantees: `model_units` if
-// positive, else `mean_edges` times the input's mean edge length.
-struct Precision {
-    double model_units = 0;
-    double mean_edges = 0.1;
-};
-// Parses "0.001" (model units) or "0.1e" (a fraction of the mean input edge); false if invalid.
-bool parse_precision(const std::string& text, Precision& out);
+// The finest level's largest distance from the input the converter guarantees: Precision
+// (mesh/precision.h), in model units or mean input edges.
 
 // Vertex layouts to choose from (common_codec/packed_vertex.h).
 enum class LayoutChoice : uint8_t {
