@@ -10,6 +10,8 @@
 
 #include <gtest/gtest.h>
 
+#include "shell_run.h"
+
 #include "base/child_process.h"
 #include "catp/builder.h"
 #include "client/gl_context.h"
@@ -20,6 +22,8 @@
 
 namespace fs = std::filesystem;
 using namespace catpaq;
+
+using namespace catpaq::client_test;
 
 namespace {
 
@@ -52,20 +56,6 @@ const std::string& sphere_dataset() {
     return path;
 }
 
-std::string catpaq_binary() { return std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq"; }
-
-// Runs a shell command; returns its exit status (or -1) and its combined output.
-int run(const std::string& command, std::string& output) {
-    output.clear();
-    FILE* p = popen((command + " 2>&1").c_str(), "r");
-    if (!p) return -1;
-    char buf[4096];
-    size_t n;
-    while ((n = fread(buf, 1, sizeof buf, p)) > 0) output.append(buf, n);
-    int status = pclose(p);
-    if (status == -1 || !WIFEXITED(status)) return -1;
-    return WEXITSTATUS(status);
-}
 
 }  // namespace
 

@@ -28,8 +28,10 @@ inline fs::path scratch() {
     return dir;
 }
 
-inline ToolRun run(const std::string& args) {
-    std::string command = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq " + args + " 2>&1";
+// Runs the tool with `args`; its stdout and stderr together, or with `stdout_only` its stdout
+// alone (stderr goes to the test's: for --json reports).
+inline ToolRun run(const std::string& args, bool stdout_only = false) {
+    std::string command = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq " + args + (stdout_only ? "" : " 2>&1");
     ToolRun r;
     FILE* pipe = popen(command.c_str(), "r");
     char buffer[4096];

@@ -16,19 +16,6 @@ using namespace catpaq::cli_test;
 
 namespace {
 
-// The tool's standard output alone (its stderr goes to the test's), and the exit status.
-ToolRun run_stdout(const std::string& args) {
-    std::string command = std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq " + args;
-    ToolRun r;
-    FILE* pipe = popen(command.c_str(), "r");
-    char buffer[4096];
-    size_t n;
-    while ((n = fread(buffer, 1, sizeof buffer, pipe)) > 0) r.output.append(buffer, n);
-    int status = pclose(pipe);
-    r.status = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    return r;
-}
-
 void write_xyz(const fs::path& path, const PointCloud& cloud) {
     std::ofstream out(path);
     out.precision(17);
@@ -47,7 +34,7 @@ Mesh translated(Mesh m, double dx) {
 TEST(CliFormats, AqpConvertsReportsJsonAndVerifiesAgainstTheOriginal) {
     fs::path in = scratch() / "aqp_sphere.ply", out = scratch() / "aqp_sphere.cpq";
     write_ply(in.string(), make_sphere(8000, 5));
-    ToolRun c = run_stdout("convert " + in.string() + " -o " + out.string() + " --format aqp --json --quiet");
+    ToolRun c = run("convert " + in.string() + " -o " + out.string() + " --format aqp --json --quiet", true);
     ASSERT_EQ(c.status, 0) << c.output;
     const nlohmann::json report = nlohmann::json::parse(c.output);
     EXPECT_EQ(report.at("format"), "aqp");
@@ -89,8 +76,8 @@ TEST(CliFormats, PointsConvertAndVerifyEveryInputPointIsCovered) {
     fs::path in = scratch() / "cloud.xyz", moved = scratch() / "cloud_moved.xyz", out = scratch() / "cloud.cpq";
     PointCloud cloud = sample_surface(make_sphere(4000, 3), 30000, 9, false, false);
     write_xyz(in, cloud);
-    ToolRun c = run_stdout("convert " + in.string() + " -o " + out.string() +
-                           " --format points --node-points 2000 --json --quiet");
+    ToolRun c = run("convert " + in.string() + " -o " + out.string() +
+                           " --format points --node-points 2000 --json --quiet", true);
     ASSERT_EQ(c.status, 0) << c.output;
     const nlohmann::json report = nlohmann::json::parse(c.output);
     EXPECT_EQ(report.at("format"), "points");
@@ -121,8 +108,8 @@ TEST(CliFormats, PointsFromAMeshTakeItsVerticesOrSurfaceSamples) {
     ASSERT_EQ(vertices.status, 0) << vertices.output;
     EXPECT_NE(vertices.output.find("left out: " + std::to_string(sphere.triangle_count()) + " faces"), std::string::npos)
         << vertices.output;
-    ToolRun sampled = run_stdout("convert " + in.string() + " -o " + out.string() +
-                                 " --format points --surface-samples 7000 --json --quiet");
+    ToolRun sampled = run("convert " + in.string() + " -o " + out.string() +
+                                 " --format points --surface-samples 7000 --json --quiet", true);
     ASSERT_EQ(sampled.status, 0) << sampled.output;
     EXPECT_EQ(nlohmann::json::parse(sampled.output).at("input").at("points").get<size_t>(), 7000u);
 }
@@ -167,7 +154,7 @@ TEST(CliFormats, AqpRefusesWhatItCannotConvertAndWritesNothing) {
 TEST(CliFormats, AqpFromAPointCloudReconstructsAClosedSurfaceFirst) {
     fs::path in = scratch() / "aqp_cloud.xyz", out = scratch() / "aqp_cloud.cpq";
     write_xyz(in, sample_surface(make_sphere(4000, 3), 6000, 11, false, false));
-    ToolRun c = run_stdout("convert " + in.string() + " -o " + out.string() + " --format aqp --json --quiet");
+    ToolRun c = run("convert " + in.string() + " -o " + out.string() + " --format aqp --json --quiet", true);
     ASSERT_EQ(c.status, 0) << c.output;
     const nlohmann::json report = nlohmann::json::parse(c.output);
     EXPECT_EQ(report.at("poisson").at("input_points").get<size_t>(), 6000u);
