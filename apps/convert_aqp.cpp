@@ -11,8 +11,8 @@
 #include "aqp/format.h"
 #include "aqp_reconstruct/poisson.h"
 #include "base/error.h"
-#include "catp/format.h"
 #include "mesh/io.h"
+#include "mesh/up_axis.h"
 #include "mesh/precision.h"
 #include "points/point_cloud.h"
 

@@ -7,9 +7,9 @@
 
 #include "apps/convert_formats.h"
 #include "base/error.h"
-#include "catp/format.h"
 #include "base/output_path.h"
 #include "mesh/io.h"
+#include "mesh/up_axis.h"
 #include "points/builder.h"
 #include "points/sampling.h"
 

@@ -30,20 +30,14 @@
 #include <string>
 #include <vector>
 
-#include "common_codec/fragment_codec.h"
 #include "catp/lattice.h"
+#include "common_codec/fragment_codec.h"
+#include "mesh/up_axis.h"
 
 namespace catpaq {
 
 constexpr uint32_t kCatpMetaVersion = 3;
 
-// Which world axis points up (for viewers; stored from the input's convention or `convert --up`).
-enum class UpAxis : uint8_t { Unknown = 0, PosX, PosY, PosZ, NegX, NegY, NegZ };
-// "x", "y", "z", "-x", "-y", "-z" (or "" for Unknown); parse returns false on anything else.
-const char* up_axis_name(UpAxis axis);
-bool parse_up_axis(const std::string& text, UpAxis& out);
-// The unit vector of an axis (+z for Unknown).
-std::array<double, 3> up_axis_vector(UpAxis axis);
 constexpr uint16_t kCatpLeafFlag = 1u << 8;
 
 struct CatpMeta {

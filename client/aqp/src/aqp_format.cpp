@@ -9,6 +9,7 @@
 #include "aqp/dataset.h"
 #include "aqp_client/stitch.h"
 #include "base/error.h"
+#include "mesh/up_axis.h"
 #include "common_codec/octahedral.h"
 
 namespace catpaq {
@@ -291,13 +292,7 @@ Aabb AqpFormat::world_bounds() const {
     return box;
 }
 
-// The recorded up axis (AqpMeta::up_axis, UpAxis numbering) as the seam's 1 (y) or 2 (z).
-int AqpFormat::up_axis() const {
-    const uint32_t up = meta_.up_axis;
-    if (up == 2 || up == 5) return 1;
-    if (up == 3 || up == 6) return 2;
-    return 0;
-}
+int AqpFormat::up_axis() const { return viewer_up_axis(up_axis_from_code(meta_.up_axis)); }
 
 FormatSummary AqpFormat::summary() const {
     const AqpMeta& m = meta_;
@@ -318,8 +313,7 @@ FormatSummary AqpFormat::summary() const {
     std::string precision = strprintf("%.6g (step %.6g)", m.precision, m.step);
     if (m.mean_edge > 0) precision += strprintf(", %.3g mean input edges of %.6g", m.precision / m.mean_edge, m.mean_edge);
     s.lines.emplace_back("precision", precision);
-    static const char* const kAxes[] = {"not recorded (z assumed)", "x", "y", "z", "-x", "-y", "-z"};
-    s.lines.emplace_back("up axis", kAxes[m.up_axis <= 6 ? m.up_axis : 0]);
+    s.lines.emplace_back("up axis", up_axis_summary(up_axis_from_code(m.up_axis)));
     return s;
 }
 

@@ -165,12 +165,7 @@ Aabb CatpFormat::world_bounds() const {
     return box;
 }
 
-int CatpFormat::up_axis() const {
-    UpAxis up = index_.meta().up;
-    if (up == UpAxis::PosY || up == UpAxis::NegY) return 1;
-    if (up == UpAxis::PosZ || up == UpAxis::NegZ) return 2;
-    return 0;
-}
+int CatpFormat::up_axis() const { return viewer_up_axis(index_.meta().up); }
 
 FormatSummary CatpFormat::summary() const {
     const CatpMeta& m = index_.meta();
@@ -193,7 +188,7 @@ FormatSummary CatpFormat::summary() const {
         if (m.mean_edge > 0) precision += strprintf(" (%.3g mean input edges of %.6g)", m.precision / m.mean_edge, m.mean_edge);
         s.lines.emplace_back("precision", precision);
     }
-    s.lines.emplace_back("up axis", m.up == UpAxis::Unknown ? "not recorded (z assumed)" : up_axis_name(m.up));
+    s.lines.emplace_back("up axis", up_axis_summary(m.up));
     return s;
 }
 

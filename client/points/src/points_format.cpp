@@ -7,6 +7,7 @@
 #include <unordered_map>
 
 #include "base/error.h"
+#include "mesh/up_axis.h"
 #include "common_codec/octahedral.h"
 
 namespace catpaq {
@@ -201,14 +202,7 @@ Aabb PointsFormat::world_bounds() const {
     return box;
 }
 
-// The recorded up axis (PointsMeta::up_axis, catp/format.h's UpAxis numbering: 2 and 5 are y,
-// 3 and 6 z) as the seam's 1 (y) or 2 (z).
-int PointsFormat::up_axis() const {
-    const uint8_t up = meta_.up_axis;
-    if (up == 2 || up == 5) return 1;
-    if (up == 3 || up == 6) return 2;
-    return 0;
-}
+int PointsFormat::up_axis() const { return viewer_up_axis(up_axis_from_code(meta_.up_axis)); }
 
 FormatSummary PointsFormat::summary() const {
     const PointsMeta& m = meta_;
@@ -237,8 +231,7 @@ FormatSummary PointsFormat::summary() const {
     if (m.flags & kPointsMetaInputColors)
         s.lines.emplace_back("colours", strprintf("YCoCg, %u luma and %u chroma bits", unsigned(m.color_bits.luma),
                                                   unsigned(m.color_bits.chroma)));
-    static const char* const kAxes[] = {"not recorded (z assumed)", "x", "y", "z", "-x", "-y", "-z"};
-    s.lines.emplace_back("up axis", kAxes[m.up_axis <= 6 ? m.up_axis : 0]);
+    s.lines.emplace_back("up axis", up_axis_summary(up_axis_from_code(m.up_axis)));
     return s;
 }
 
