@@ -687,11 +687,7 @@ def fmt_bytes(n):
     return "%d B" % n
 
 
-def md_table(header, rows):
-    out = ["| " + " | ".join(header) + " |", "|" + "|".join("---" for _ in header) + "|"]
-    for r in rows:
-        out.append("| " + " | ".join(str(c) for c in r) + " |")
-    return "\n".join(out)
+md_table = report_formats.md_table  # one markdown table writer for every section
 
 
 def first_ok(rows, size):
