@@ -206,34 +206,12 @@ RenderStats AqpRenderer::render(const Camera& camera_in, const std::vector<AqpDr
 namespace {
 
 // AQP's NodeRenderer: a node's one part is its patch level's textures.
-class AqpNodeRenderer : public NodeRenderer {
+class AqpNodeRenderer : public WholeNodeRenderer<PatchTextureStore> {
 public:
     explicit AqpNodeRenderer(const AqpFormat& format) : format_(format), renderer_(store_, format.meta()) {}
 
     void upload(const HierarchyNode& node, const DecodedNode& decoded) override {
         store_.upload(node.key, aqp_grid(decoded), format_.meta());
-    }
-    bool resident(uint64_t key, uint8_t part) const override { return part == 0 && store_.resident(key); }
-    void release(uint64_t key, uint8_t part) override {
-        if (part == 0) store_.release(key);
-    }
-    void begin_frame() override { store_.begin_frame(); }
-    void unpin_all() override { store_.unpin_all(); }
-    void pin(uint64_t key, uint8_t part) override {
-        if (part == 0) store_.pin(key);
-    }
-    void mark_used(uint64_t key, uint8_t part) override {
-        if (part == 0) store_.mark_used(key);
-    }
-    size_t evict_to_budget() override { return store_.evict_to_budget(); }
-    void set_budget(uint64_t bytes) override { store_.set_budget(bytes); }
-    uint64_t gpu_bytes() const override { return store_.gpu_bytes(); }
-    void set_eviction_callback(std::function<void(uint64_t key, uint8_t part)> callback) override {
-        if (!callback) {
-            store_.set_eviction_callback(nullptr);
-            return;
-        }
-        store_.set_eviction_callback([callback = std::move(callback)](uint64_t key) { callback(key, 0); });
     }
     RenderStats draw(const Camera& camera, const std::vector<DrawnPart>& parts, const RenderSettings& settings) override {
         items_.clear();
@@ -244,8 +222,7 @@ public:
 
 private:
     const AqpFormat& format_;
-    PatchTextureStore store_;
-    AqpRenderer renderer_;  // after store_: it draws from it
+    AqpRenderer renderer_;  // draws from store_ (the base's, constructed first)
     std::vector<AqpDrawItem> items_;
 };
 

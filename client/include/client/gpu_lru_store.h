@@ -15,6 +15,8 @@
 #include <unordered_map>
 #include <utility>
 
+#include "client/node_renderer.h"
+
 namespace catpaq {
 
 template <class Key, class Gpu, class Hash = std::hash<Key>>
@@ -127,6 +129,39 @@ private:
     std::list<Key> lru_;
     uint64_t bytes_ = 0, budget_ = 0, frame_ = 1;
     std::function<void(const Key&)> on_evict_;
+};
+
+// The NodeRenderer's store half for formats whose nodes are drawn whole (one part, id 0), kept in
+// a store keyed by node key (a GpuLruStore<uint64_t, ...>): AQP and points. The format adds
+// upload() and draw().
+template <class Store>
+class WholeNodeRenderer : public NodeRenderer {
+public:
+    bool resident(uint64_t key, uint8_t part) const override { return part == 0 && store_.resident(key); }
+    void release(uint64_t key, uint8_t part) override {
+        if (part == 0) store_.release(key);
+    }
+    void begin_frame() override { store_.begin_frame(); }
+    void unpin_all() override { store_.unpin_all(); }
+    void pin(uint64_t key, uint8_t part) override {
+        if (part == 0) store_.pin(key);
+    }
+    void mark_used(uint64_t key, uint8_t part) override {
+        if (part == 0) store_.mark_used(key);
+    }
+    size_t evict_to_budget() override { return store_.evict_to_budget(); }
+    void set_budget(uint64_t bytes) override { store_.set_budget(bytes); }
+    uint64_t gpu_bytes() const override { return store_.gpu_bytes(); }
+    void set_eviction_callback(std::function<void(uint64_t key, uint8_t part)> callback) override {
+        if (!callback) {
+            store_.set_eviction_callback(nullptr);
+            return;
+        }
+        store_.set_eviction_callback([callback = std::move(callback)](const uint64_t& key) { callback(key, 0); });
+    }
+
+protected:
+    Store store_;
 };
 
 }  // namespace catpaq

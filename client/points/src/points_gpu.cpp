@@ -139,13 +139,6 @@ void PointsRenderer::upload(const HierarchyNode& node, const DecodedNode& decode
     store_.upload(node.key, points_node(decoded).splats);
 }
 
-void PointsRenderer::set_eviction_callback(std::function<void(uint64_t key, uint8_t part)> callback) {
-    if (!callback) {
-        store_.set_eviction_callback(nullptr);
-        return;
-    }
-    store_.set_eviction_callback([callback = std::move(callback)](uint64_t key) { callback(key, 0); });
-}
 
 RenderStats PointsRenderer::draw(const Camera& camera_in, const std::vector<DrawnPart>& parts, const RenderSettings& settings) {
     Camera camera = camera_in;

@@ -66,7 +66,7 @@ private:
 
 // The point format's NodeRenderer: a SplatStore and the two splat programs. Parts are nodes
 // (part id 0).
-class PointsRenderer : public NodeRenderer {
+class PointsRenderer : public WholeNodeRenderer<SplatStore> {
 public:
     // Splats are drawn at their radius: the converter's radii cover the sampled surface
     // (points/builder.h; a uniformly random 200k-point sphere shows no hole, points_gl_tests).
@@ -76,22 +76,6 @@ public:
     ~PointsRenderer() override;
 
     void upload(const HierarchyNode& node, const DecodedNode& decoded) override;
-    bool resident(uint64_t key, uint8_t part) const override { return part == 0 && store_.resident(key); }
-    void release(uint64_t key, uint8_t part) override {
-        if (part == 0) store_.release(key);
-    }
-    void begin_frame() override { store_.begin_frame(); }
-    void unpin_all() override { store_.unpin_all(); }
-    void pin(uint64_t key, uint8_t part) override {
-        if (part == 0) store_.pin(key);
-    }
-    void mark_used(uint64_t key, uint8_t part) override {
-        if (part == 0) store_.mark_used(key);
-    }
-    size_t evict_to_budget() override { return store_.evict_to_budget(); }
-    void set_budget(uint64_t bytes) override { store_.set_budget(bytes); }
-    uint64_t gpu_bytes() const override { return store_.gpu_bytes(); }
-    void set_eviction_callback(std::function<void(uint64_t key, uint8_t part)> callback) override;
     // RenderStats: draws = nodes drawn, vertices = splats drawn, triangles 0.
     RenderStats draw(const Camera& camera, const std::vector<DrawnPart>& parts, const RenderSettings& settings) override;
 
@@ -106,7 +90,6 @@ private:
         int viewport = -1, projection_scale = -1, depth_coefficients = -1;
     };
     PointsMeta meta_;
-    SplatStore store_;
     GlProgram round_, oriented_;
     Uniforms round_u_, oriented_u_;
     float max_point_size_ = 1;
