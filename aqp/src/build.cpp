@@ -328,7 +328,7 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
                     g.normal[at] = normals[s];
                     if (colors) g.color[at] = samples[s].color;
                 }
-            std::vector<uint8_t> node = encode_patch_node(g, l > 0 ? &coarser : nullptr, colors, o.png_compression);
+            std::vector<uint8_t> node = encode_patch_node(g, l > 0 ? &coarser : nullptr, NodeLayout{colors, true}, o.png_compression);
             std::swap(coarser, g);
             ArchiveEntry entry;
             entry.key = aqp_node_key(uint32_t(p), l);

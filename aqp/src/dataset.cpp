@@ -47,7 +47,7 @@ PatchGrid AqpDataset::decode(uint32_t patch, int level, const PatchGrid& coarser
     const uint8_t* bytes = archive_->node(index, &error);
     if (!bytes) fail("'%s' patch %u level %d: %s", path_.c_str(), patch, level, error.c_str());
     PatchGrid grid;
-    if (std::string e = decode_patch_node(bytes, archive_->entries()[index].size, patch, level, meta_.has_colors(),
+    if (std::string e = decode_patch_node(bytes, archive_->entries()[index].size, patch, level, meta_.node_layout(),
                                           level > 0 ? &coarser : nullptr, grid);
         !e.empty())
         fail("'%s' patch %u level %d: %s", path_.c_str(), patch, level, e.c_str());

@@ -49,8 +49,9 @@ std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
     ByteReader r(data + 8, size - 8);
     const uint32_t version = r.u32();
     if (!r.ok()) return "AQP metadata truncated";
-    if (version != 1 && version != kAqpMetaVersion)
+    if (version < 1 || version > kAqpMetaVersion)
         return strprintf("unsupported AQP metadata version %u (this build reads 1 to %u)", version, kAqpMetaVersion);
+    m.version = version;
     m.patch_level = r.u32();
     const uint32_t patch_count = r.u32();
     m.base_vertices = r.u32();
@@ -142,46 +143,140 @@ int predict_from_coarser(const PatchGrid& c, int channel, int i, int j) {
     return (at(ci, cj) + at(ci + 1, cj + 1)) >> 1;
 }
 
-std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coarser, bool colors, int compression) {
-    const size_t n = size_t(g.size) * g.size;
-    assert(g.size == (1 << g.level) + 1 && g.position.size() == n && g.normal.size() == n);
-    assert(!colors || g.color.size() == n);
-    assert((g.level == 0) == (coarser == nullptr));
-    assert(!coarser || coarser->size == g.size / 2 + 1);
-    PngImage image;
-    image.width = 2 * g.size;
-    image.height = g.size;
-    image.channels = 3;
-    image.bit_depth = 16;
-    image.values.resize(image.value_count());
+namespace {
+
+constexpr int kChannels = 8;  // x y z (16 bits), normal u v, red green blue (8 bits)
+
+int channel_count(const NodeLayout& layout) { return layout.colors ? 8 : 5; }
+
+// The values a node stores, channel-major (value[c * n*n + sample]): the samples' own values at
+// level 0, else their zigzag-coded differences from the prediction by `coarser`.
+std::vector<uint32_t> node_values(const PatchGrid& g, const PatchGrid* coarser, int channels) {
+    const size_t n = g.position.size();
+    std::vector<uint32_t> v(size_t(channels) * n);
     for (int j = 0; j < g.size; ++j)
         for (int i = 0; i < g.size; ++i) {
-            uint32_t v[8];
-            for (int c = 0; c < 8; ++c) {
-                const int value = channel_value(g, g.index(i, j), c);
-                v[c] = coarser ? zigzag(value - predict_from_coarser(*coarser, c, i, j), channel_bits(c)) : uint32_t(value);
+            const size_t s = g.index(i, j);
+            for (int c = 0; c < channels; ++c) {
+                const int value = channel_value(g, s, c);
+                v[size_t(c) * n + s] =
+                    coarser ? zigzag(value - predict_from_coarser(*coarser, c, i, j), channel_bits(c)) : uint32_t(value);
             }
-            uint16_t* left = &image.values[(size_t(j) * image.width + i) * 3];
-            uint16_t* right = &image.values[(size_t(j) * image.width + g.size + i) * 3];
-            for (int c = 0; c < 3; ++c) left[c] = uint16_t(v[c]);
-            right[0] = uint16_t(v[3] << 8 | v[4]);
-            right[1] = uint16_t(v[5] << 8 | v[6]);
-            right[2] = uint16_t(v[7] << 8);
         }
-    return png_encode(image, compression);
+    return v;
 }
 
-std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, bool colors,
+// Version 3: one byte plane per 8-bit channel and two (high, low) per 16-bit one, n x n each,
+// stacked in an 8-bit grey image. Planes keep alike bytes together: a position's high byte is
+// nearly always 0 in a delta level, and deflate sees long runs of it instead of every sixth byte.
+PngImage byte_planes(const std::vector<uint32_t>& v, int side, int channels) {
+    const size_t n = size_t(side) * side;
+    PngImage im;
+    im.width = side;
+    im.channels = 1;
+    im.bit_depth = 8;
+    im.height = 0;
+    for (int c = 0; c < channels; ++c) {
+        const uint32_t* values = &v[size_t(c) * n];
+        if (channel_bits(c) == 16) {
+            for (size_t s = 0; s < n; ++s) im.values.push_back(uint16_t(values[s] >> 8));
+            for (size_t s = 0; s < n; ++s) im.values.push_back(uint16_t(values[s] & 0xff));
+            im.height += 2 * side;
+        } else {
+            im.values.insert(im.values.end(), values, values + n);
+            im.height += side;
+        }
+    }
+    return im;
+}
+
+// Versions 1-2: RGB 16-bit, positions on the left half, normals and colours on the right.
+PngImage rgb16_pixels(const std::vector<uint32_t>& v, int side, int channels) {
+    const size_t n = size_t(side) * side;
+    auto at = [&](int c, size_t s) { return c < channels ? v[size_t(c) * n + s] : 0u; };
+    PngImage im;
+    im.width = 2 * side;
+    im.height = side;
+    im.channels = 3;
+    im.bit_depth = 16;
+    im.values.resize(im.value_count());
+    for (int j = 0; j < side; ++j)
+        for (int i = 0; i < side; ++i) {
+            const size_t s = size_t(j) * side + i;
+            uint16_t* left = &im.values[(size_t(j) * im.width + i) * 3];
+            uint16_t* right = &im.values[(size_t(j) * im.width + side + i) * 3];
+            for (int c = 0; c < 3; ++c) left[c] = uint16_t(at(c, s));
+            right[0] = uint16_t(at(3, s) << 8 | at(4, s));
+            right[1] = uint16_t(at(5, s) << 8 | at(6, s));
+            right[2] = uint16_t(at(7, s) << 8);
+        }
+    return im;
+}
+
+// The inverse of byte_planes / rgb16_pixels on a decoded image of the expected shape; an empty
+// string, or what is wrong (bits outside the channels).
+std::string unpack_values(const PngImage& im, int side, int channels, bool planes, std::vector<uint32_t>& v) {
+    const size_t n = size_t(side) * side;
+    v.assign(size_t(channels) * n, 0);
+    if (planes) {
+        const uint16_t* byte = im.values.data();
+        for (int c = 0; c < channels; ++c) {
+            uint32_t* values = &v[size_t(c) * n];
+            if (channel_bits(c) == 16) {
+                for (size_t s = 0; s < n; ++s) values[s] = uint32_t(byte[s]) << 8 | byte[n + s];
+                byte += 2 * n;
+            } else {
+                for (size_t s = 0; s < n; ++s) values[s] = byte[s];
+                byte += n;
+            }
+        }
+        return "";
+    }
+    for (int j = 0; j < side; ++j)
+        for (int i = 0; i < side; ++i) {
+            const size_t s = size_t(j) * side + i;
+            const uint16_t* left = &im.values[(size_t(j) * im.width + i) * 3];
+            const uint16_t* right = &im.values[(size_t(j) * im.width + side + i) * 3];
+            if ((right[2] & 0xff) != 0 || (channels < kChannels && (right[1] != 0 || right[2] != 0)))
+                return strprintf("AQP node sample (%d, %d) has bits set outside its channels", i, j);
+            const uint32_t all[kChannels] = {left[0], left[1], left[2], uint32_t(right[0] >> 8), uint32_t(right[0] & 0xff),
+                                             uint32_t(right[1] >> 8), uint32_t(right[1] & 0xff), uint32_t(right[2] >> 8)};
+            for (int c = 0; c < channels; ++c) v[size_t(c) * n + s] = all[c];
+        }
+    return "";
+}
+
+}  // namespace
+
+std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coarser, NodeLayout layout, int compression) {
+    const size_t n = size_t(g.size) * g.size;
+    assert(g.size == (1 << g.level) + 1 && g.position.size() == n && g.normal.size() == n);
+    assert(!layout.colors || g.color.size() == n);
+    assert((g.level == 0) == (coarser == nullptr));
+    assert(!coarser || coarser->size == g.size / 2 + 1);
+    const int channels = channel_count(layout);
+    const std::vector<uint32_t> values = node_values(g, coarser, channels);
+    return png_encode(layout.byte_planes ? byte_planes(values, g.size, channels) : rgb16_pixels(values, g.size, channels),
+                      compression);
+}
+
+std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, NodeLayout layout,
                               const PatchGrid* coarser, PatchGrid& out) {
     if (level < 0 || level > kMaxPatchLevel) return strprintf("patch level %d out of range", level);
     if (level == 0) coarser = nullptr;
     const int side = (1 << level) + 1;
+    const bool colors = layout.colors;
     if (level > 0 && (!coarser || coarser->size != side / 2 + 1 || coarser->position.size() != size_t(coarser->size) * coarser->size ||
                       coarser->normal.size() != coarser->position.size() ||
                       coarser->color.size() != (colors ? coarser->position.size() : 0)))
         return strprintf("decoding level %d needs the patch's decoded level %d", level, level - 1);
+    const int channels = channel_count(layout);
     PngImage image;
-    if (std::string e = png_decode(data, size, 2 * side, side, 3, 16, image); !e.empty()) return "AQP node image: " + e;
+    const std::string e = layout.byte_planes ? png_decode(data, size, side, side * (channels + 3), 1, 8, image)
+                                             : png_decode(data, size, 2 * side, side, 3, 16, image);
+    if (!e.empty()) return "AQP node image: " + e;
+    std::vector<uint32_t> v;
+    if (std::string bad = unpack_values(image, side, channels, layout.byte_planes, v); !bad.empty()) return bad;
     out.patch = patch;
     out.level = level;
     out.size = side;
@@ -191,18 +286,13 @@ std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, 
     out.color.assign(colors ? n : 0, Rgb8{0, 0, 0});
     for (int j = 0; j < side; ++j)
         for (int i = 0; i < side; ++i) {
-            const uint16_t* left = &image.values[(size_t(j) * image.width + i) * 3];
-            const uint16_t* right = &image.values[(size_t(j) * image.width + side + i) * 3];
-            const uint32_t v[8] = {left[0], left[1], left[2], uint32_t(right[0] >> 8), uint32_t(right[0] & 0xff),
-                                   uint32_t(right[1] >> 8), uint32_t(right[1] & 0xff), uint32_t(right[2] >> 8)};
-            if ((right[2] & 0xff) != 0 || (!colors && (right[1] != 0 || right[2] != 0)))
-                return strprintf("AQP node sample (%d, %d) has bits set outside its channels", i, j);
-            int value[8];
-            for (int c = 0; c < 8; ++c) {
-                const int mask = (1 << channel_bits(c)) - 1;
-                value[c] = coarser ? (predict_from_coarser(*coarser, c, i, j) + unzigzag(v[c])) & mask : int(v[c]);
-            }
             const size_t s = out.index(i, j);
+            int value[kChannels] = {};
+            for (int c = 0; c < channels; ++c) {
+                const uint32_t stored = v[size_t(c) * n + s];
+                const int mask = (1 << channel_bits(c)) - 1;
+                value[c] = coarser ? (predict_from_coarser(*coarser, c, i, j) + unzigzag(stored)) & mask : int(stored);
+            }
             out.position[s] = {uint16_t(value[0]), uint16_t(value[1]), uint16_t(value[2])};
             out.normal[s] = uint16_t(value[3] | (value[4] << 8));
             if (colors) out.color[s] = {uint8_t(value[5]), uint8_t(value[6]), uint8_t(value[7])};

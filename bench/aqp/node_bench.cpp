@@ -1,7 +1,7 @@
 // aqp_node_bench: how to lay out an AQP node's samples in PNG, measured on a dataset's own
 // samples. Every node of DATASET.cpq is decoded and re-encoded in several layouts; for each the
-// total payload, bits per distinct finest sample and encoding time are printed, with the
-// dataset's own layout first as the baseline.
+// total payload, bits per distinct finest sample and encoding time are printed, as ratios to
+// three-png, the first. The stored payload printed above the table is the dataset's own layout.
 //
 //   three-png     position RGB16, normal GA8, colour RGB8: one PNG each
 //   one-png       one RGB16 PNG per node, twice as wide: positions on the left, on the right
@@ -9,12 +9,21 @@
 //   one-png-delta as one-png, but levels above 0 store each sample's difference from its
 //                 prediction by the coarser level (the average of the two coarse neighbours
 //                 along the row, the column, or the (i,j)-(i+1,j+1) diagonal), zigzag coded;
-//                 samples the coarser level has are 0
+//                 samples the coarser level has are 0 (the dataset layout of versions 1-2)
 //   three-png-delta  the same differences in three PNGs
 //   one-png-delta-geo  as one-png-delta, but normals as differences from the normal of the
 //                 decoded positions' grid (integer cross product of central differences): worse
 //                 (a 50k sphere at 33 x 33: 45.9 bits per sample against 20.6), the quantized
 //                 positions are too coarse a few samples apart to predict 8-bit normals
+//   planes-delta  the deltas of one-png-delta as byte planes (x high, x low, ... normal u, v,
+//                 red, green, blue) in one 8-bit grey PNG: the dataset layout since version 3
+//                 (200k scan-like mesh with colours, 17 x 17: 40.8 bits per sample against 47.7;
+//                 bunny: 34.7 against 41.6)
+//   planes-new    as planes-delta, leaving out the samples a coarser level has (always 0): mixed
+//                 (scan 41.5, bunny 32.2), and the planes lose their grid rows
+//   planes-cubic-pos  as planes-delta, positions between coarse samples predicted by the 4-tap
+//                 cubic (-1 9 9 -1) / 16 where four coarse taps exist: 0.3% smaller on the scan,
+//                 0.4% larger on the bunny, not worth a second predictor
 // and the one-png-delta nodes with only the positions, the normals or the colours kept (the other
 // channels zero), to show where the bytes go.
 //
@@ -75,6 +84,43 @@ std::vector<Sample> level_delta(const std::vector<Sample>& fine, const std::vect
                 else if (j % 2 == 0) prediction = (c(i / 2, j / 2).v[ch] + c(i / 2 + 1, j / 2).v[ch]) >> 1;
                 else if (i % 2 == 0) prediction = (c(i / 2, j / 2).v[ch] + c(i / 2, j / 2 + 1).v[ch]) >> 1;
                 else prediction = (c(i / 2, j / 2).v[ch] + c(i / 2 + 1, j / 2 + 1).v[ch]) >> 1;
+                o.v[ch] = zigzag(f.v[ch] - prediction, bits);
+            }
+        }
+    return out;
+}
+
+// As level_delta, but positions between coarse samples predicted by the 4-tap cubic
+// (-1 9 9 -1) / 16 along the row, column or diagonal where all four coarse taps exist (on a
+// patch edge they stay on the edge), linearly elsewhere (planes-cubic-pos).
+std::vector<Sample> level_delta_cubic(const std::vector<Sample>& fine, const std::vector<Sample>& coarse, int size) {
+    const int cs = size / 2 + 1;
+    auto c = [&](int i, int j, int ch) -> int { return coarse[size_t(j) * cs + i].v[ch]; };
+    auto inside = [&](int i, int j) { return i >= 0 && j >= 0 && i < cs && j < cs; };
+    std::vector<Sample> out(fine.size());
+    for (int j = 0; j < size; ++j)
+        for (int i = 0; i < size; ++i) {
+            const Sample& f = fine[size_t(j) * size + i];
+            Sample& o = out[size_t(j) * size + i];
+            const int ci = i / 2, cj = j / 2;
+            int di = 0, dj = 0;
+            if (i % 2 && j % 2) di = 1, dj = 1;
+            else if (i % 2) di = 1;
+            else if (j % 2) dj = 1;
+            for (int ch = 0; ch < 8; ++ch) {
+                const int bits = ch < 3 ? 16 : 8;
+                int prediction;
+                if (di == 0 && dj == 0) prediction = c(ci, cj, ch);
+                else {
+                    const int a = c(ci, cj, ch), b = c(ci + di, cj + dj, ch);
+                    // an edge sample (row 0 / last, column 0 / last) only uses its own edge: taps stay on it
+                    if (ch < 3 && inside(ci - di, cj - dj) && inside(ci + 2 * di, cj + 2 * dj)) {
+                        const int z = c(ci - di, cj - dj, ch), w = c(ci + 2 * di, cj + 2 * dj, ch);
+                        int p = (9 * (a + b) - z - w + 8) >> 4;
+                        prediction = std::clamp(p, 0, 65535);
+                    } else
+                        prediction = (a + b) >> 1;
+                }
                 o.v[ch] = zigzag(f.v[ch] - prediction, bits);
             }
         }
@@ -149,6 +195,31 @@ size_t one_png(const std::vector<Sample>& s, int size, int compression) {
     return png_encode(im, compression).size();
 }
 
+
+// Byte planes in one 8-bit grey PNG, n wide (planes-delta, planes-new). `skip_old`: leave out the
+// samples the coarser level has.
+size_t planes_png(const std::vector<Sample>& s, int size, bool colors, bool skip_old, int compression) {
+    std::vector<int> order;
+    for (int j = 0; j < size; ++j)
+        for (int i = 0; i < size; ++i)
+            if (!(skip_old && i % 2 == 0 && j % 2 == 0)) order.push_back(j * size + i);
+    std::vector<uint16_t> bytes;
+    const int planes_n = colors ? 11 : 8;
+    for (int pl = 0; pl < planes_n; ++pl)
+        for (int idx : order) {
+            const Sample& x = s[size_t(idx)];
+            int v;
+            if (pl < 6) v = pl % 2 == 0 ? x.v[pl / 2] >> 8 : x.v[pl / 2] & 0xff;
+            else v = x.v[pl - 3];
+            bytes.push_back(uint16_t(v));
+        }
+    const int w = size;
+    const int h = int((bytes.size() + w - 1) / w);
+    bytes.resize(size_t(w) * h, 0);
+    PngImage im{w, h, 1, 8, std::move(bytes)};
+    return png_encode(im, compression).size();
+}
+
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -171,9 +242,9 @@ int main(int argc, char** argv) {
             const char* name;
             size_t bytes = 0;
             double seconds = 0;
-        } variants[9] = {{"three-png"},           {"one-png"},          {"one-png-delta"},    {"three-png-delta"},
+        } variants[12] = {{"three-png"},           {"one-png"},          {"one-png-delta"},    {"three-png-delta"},
                          {"  positions only"},    {"  normals only"},   {"  colours only"},
-                         {"one-png-delta-geo"},   {"  geo normals only"}};
+                         {"one-png-delta-geo"},   {"  geo normals only"}, {"planes-delta"}, {"planes-new"}, {"planes-cubic-pos"}};
         size_t finest_patch_samples = 0;
         for (uint32_t p = 0; p < d.patch_count(); ++p) {
             std::vector<Sample> coarser;
@@ -199,6 +270,11 @@ int main(int argc, char** argv) {
                         for (int ch : {0, 1, 2, 5, 6, 7}) x.v[ch] = 0;
                     timed(variants[8], [&] { return one_png(only, g.size, compression); });
                 }
+                timed(variants[9], [&] { return planes_png(delta, g.size, colors, false, compression); });
+                timed(variants[10], [&] { return planes_png(delta, g.size, colors, l > 0, compression); });
+                timed(variants[11], [&] {
+                    return planes_png(l > 0 ? level_delta_cubic(s, coarser, g.size) : delta, g.size, colors, false, compression);
+                });
                 // The one-png-delta node with all but some channels zeroed: where the bytes go.
                 for (int part = 0; part < 3; ++part) {
                     std::vector<Sample> only = delta;

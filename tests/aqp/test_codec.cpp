@@ -137,8 +137,10 @@ TEST(AqpPng, DecoderSurvivesCorruptBytes) {
     EXPECT_GT(refused, 1900u);  // PNG's CRCs catch nearly all
 }
 
-TEST(AqpFormat, PatchNodeRoundTripIsExactAtEveryLevel) {
-    for (bool colors : {false, true}) {
+TEST(AqpFormat, PatchNodeRoundTripIsExactAtEveryLevelInBothLayouts) {
+    for (bool colors : {false, true})
+    for (bool planes : {true, false}) {
+        const NodeLayout layout{colors, planes};
         PatchGrid finest = grid_at(5, 42, colors, 11);
         std::vector<PatchGrid> levels{finest};
         while (levels.back().level > 0) levels.push_back(coarser_of(levels.back()));
@@ -146,9 +148,12 @@ TEST(AqpFormat, PatchNodeRoundTripIsExactAtEveryLevel) {
         PatchGrid decoded_coarser;
         for (const PatchGrid& g : levels) {
             const PatchGrid* coarser = g.level > 0 ? &decoded_coarser : nullptr;
-            std::vector<uint8_t> node = encode_patch_node(g, coarser, colors);
+            std::vector<uint8_t> node = encode_patch_node(g, coarser, layout);
             PatchGrid out;
-            ASSERT_EQ(decode_patch_node(node.data(), node.size(), 42, g.level, colors, coarser, out), "") << g.level;
+            ASSERT_EQ(decode_patch_node(node.data(), node.size(), 42, g.level, layout, coarser, out), "") << g.level;
+            // A node read as the other layout is refused (its image has another shape).
+            PatchGrid wrong;
+            EXPECT_NE(decode_patch_node(node.data(), node.size(), 42, g.level, NodeLayout{colors, !planes}, coarser, wrong), "");
             EXPECT_EQ(out.position, g.position);
             EXPECT_EQ(out.normal, g.normal);
             EXPECT_EQ(out.color, g.color);
@@ -160,13 +165,14 @@ TEST(AqpFormat, PatchNodeRoundTripIsExactAtEveryLevel) {
 TEST(AqpFormat, PatchNodeDecoderRefusesTruncationsAndMissingCoarserLevels) {
     PatchGrid g = grid_at(3, 7, true, 12);
     PatchGrid c = coarser_of(g);
-    std::vector<uint8_t> node = encode_patch_node(g, &c, true);
+    const NodeLayout with{true, true}, without{false, true};
+    std::vector<uint8_t> node = encode_patch_node(g, &c, with);
     PatchGrid out;
-    for (size_t n = 0; n < node.size(); ++n) EXPECT_NE(decode_patch_node(node.data(), n, 7, 3, true, &c, out), "");
-    EXPECT_NE(decode_patch_node(node.data(), node.size(), 7, 3, true, nullptr, out), "");  // no coarser level
-    EXPECT_NE(decode_patch_node(node.data(), node.size(), 7, 2, true, &c, out), "");       // another level
-    EXPECT_NE(decode_patch_node(node.data(), node.size(), 7, 3, false, &c, out), "");      // colours unexpected
-    EXPECT_NE(decode_patch_node(node.data(), node.size(), 7, 99, true, &c, out), "");      // level out of range
+    for (size_t n = 0; n < node.size(); ++n) EXPECT_NE(decode_patch_node(node.data(), n, 7, 3, with, &c, out), "");
+    EXPECT_NE(decode_patch_node(node.data(), node.size(), 7, 3, with, nullptr, out), "");  // no coarser level
+    EXPECT_NE(decode_patch_node(node.data(), node.size(), 7, 2, with, &c, out), "");       // another level
+    EXPECT_NE(decode_patch_node(node.data(), node.size(), 7, 3, without, &c, out), "");    // colours unexpected
+    EXPECT_NE(decode_patch_node(node.data(), node.size(), 7, 99, with, &c, out), "");      // level out of range
 }
 
 TEST(AqpFormat, MetadataRoundTripsAndHasGoldenBytes) {
@@ -199,7 +205,7 @@ TEST(AqpFormat, MetadataRoundTripsAndHasGoldenBytes) {
     EXPECT_EQ(u32_at(156 + 58 + 40), 7u);               // patch 1, origin x
     EXPECT_EQ(bytes[156 + 58 + 52] | bytes[156 + 58 + 53] << 8, 100);  // patch 1, extent x
     // Golden: any change to the layout must be deliberate (and the version bumped).
-    EXPECT_EQ(checksum64(bytes.data(), bytes.size()), 9929628843665436787ull);  // version 2
+    EXPECT_EQ(checksum64(bytes.data(), bytes.size()), 16444494129994587719ull);  // version 3 (only the version field differs from 2)
     AqpMeta out;
     ASSERT_EQ(decode_aqp_meta(bytes.data(), bytes.size(), out), "");
     EXPECT_EQ(encode_aqp_meta(out), bytes);
@@ -216,6 +222,7 @@ TEST(AqpFormat, VersionOneMetadataReadsWithoutAnUpAxis) {
     AqpMeta out;
     ASSERT_EQ(decode_aqp_meta(v1.data(), v1.size(), out), "");
     EXPECT_EQ(out.up_axis, 0u);
+    EXPECT_FALSE(out.node_layout().byte_planes);  // versions 1-2 store RGB16 node images
     EXPECT_EQ(out.patches.size(), 2u);
     EXPECT_EQ(out.patches[1].extent[0], 100);
 }
@@ -238,6 +245,6 @@ TEST(AqpFormat, MetadataDecoderRefusesTruncationsAndBrokenFields) {
     EXPECT_TRUE(refused([](AqpMeta& m) { m.atlas_columns = 3; }));
     EXPECT_TRUE(refused([](AqpMeta& m) { m.up_axis = 7; }));
     std::vector<uint8_t> other_version = bytes;
-    other_version[8] = 3;
+    other_version[8] = uint8_t(kAqpMetaVersion + 1);
     EXPECT_NE(decode_aqp_meta(other_version.data(), other_version.size(), out).find("version"), std::string::npos);
 }

@@ -56,7 +56,7 @@ void rewrite_with_edit(const std::string& from, const std::string& to, uint32_t 
         std::vector<PatchGrid> levels = d.decode_levels(patch, level);
         edit(levels.back());
         std::vector<uint8_t> node =
-            encode_patch_node(levels.back(), level > 0 ? &levels[level - 1] : nullptr, d.meta().has_colors());
+            encode_patch_node(levels.back(), level > 0 ? &levels[level - 1] : nullptr, d.meta().node_layout());
         w.add_node(entries[i], node.data(), node.size());
     }
     w.finish(d.archive().meta());
@@ -164,6 +164,43 @@ TEST(AqpDataset, VerifyCatchesACoarseSampleThatIsNotTheFineOne) {
     AqpVerifyReport r = verify_aqp(AqpDataset(broken));
     EXPECT_EQ(r.nesting_mismatches, 1u);
     EXPECT_FALSE(r.ok());
+}
+
+// Datasets written before byte planes (meta version 2, RGB16 node images) still read: the same
+// dataset rewritten in the old layout decodes to the same samples at every level.
+TEST(AqpDataset, AVersionTwoDatasetWithRgb16NodesDecodesTheSameSamples) {
+    const std::string path = sphere_dataset().path;
+    const std::string old_path = (test::scratch_dir() / "version2.cpq").string();
+    AqpDataset d(path);
+    ASSERT_TRUE(d.meta().node_layout().byte_planes);
+    {
+        ArchiveWriter w(old_path, ArchiveKind::Aqp);
+        const std::vector<ArchiveEntry>& entries = d.archive().entries();
+        const NodeLayout old_layout{d.meta().has_colors(), false};
+        for (const ArchiveEntry& e : entries) {
+            const uint32_t patch = aqp_key_patch(e.key);
+            const int level = aqp_key_level(e.key);
+            std::vector<PatchGrid> levels = d.decode_levels(patch, level);
+            std::vector<uint8_t> node = encode_patch_node(levels.back(), level > 0 ? &levels[level - 1] : nullptr, old_layout);
+            w.add_node(e, node.data(), node.size());
+        }
+        std::vector<uint8_t> meta = d.archive().meta();
+        meta[8] = 2;  // version 2: the layout before byte planes, otherwise the same bytes
+        w.finish(meta);
+    }
+    AqpDataset old(old_path);
+    EXPECT_EQ(old.meta().version, 2u);
+    EXPECT_FALSE(old.meta().node_layout().byte_planes);
+    EXPECT_EQ(old.meta().up_axis, d.meta().up_axis);
+    for (uint32_t p = 0; p < d.patch_count(); p += 7) {
+        const std::vector<PatchGrid> now = d.decode_levels(p, d.finest_level());
+        const std::vector<PatchGrid> then = old.decode_levels(p, d.finest_level());
+        for (size_t l = 0; l < now.size(); ++l) {
+            EXPECT_EQ(then[l].position, now[l].position) << p << " " << l;
+            EXPECT_EQ(then[l].normal, now[l].normal);
+            EXPECT_EQ(then[l].color, now[l].color);
+        }
+    }
 }
 
 TEST(AqpDataset, ACorruptNodeIsReportedNotACrash) {

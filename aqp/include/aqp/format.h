@@ -15,15 +15,17 @@
 //              u32 origin[3] (quantization grid) | u16 extent[3] (largest local coordinate)
 //
 // Node (key = patch << 8 | level, level = level, count = samples, error = bound in world units):
-// the bytes of one PNG file, RGB 16-bit, 2n x n pixels for n = 2^level + 1 samples per side
-// (nothing else: the index names the node, the archive checksums it). Pixel (i, j) holds
-//   sample (i, j)'s local position x y z; pixel (n + i, j) holds normal u << 8 | v (the bytes of
-//   common_codec/octahedral.h), red << 8 | green, blue << 8 (0 without colours). Row j is grid
-//   row j (v = j / 2^level), column i is u = i / 2^level.
+// the bytes of one PNG file (nothing else: the index names the node, the archive checksums it).
+// Version 3: an 8-bit grey image n wide and P x n high for n = 2^level + 1 samples per side,
+// P byte planes of n x n one below the other: x high, x low, y high, y low, z high, z low
+// (16-bit local position), normal u, normal v (the bytes of common_codec/octahedral.h), then
+// red, green, blue with colours (P = 11, else 8). Row j of a plane is grid row j
+// (v = j / 2^level), column i is u = i / 2^level. Versions 1-2: RGB 16-bit, 2n x n pixels,
+// pixel (i, j) local x y z, pixel (n + i, j) normal u << 8 | v, red << 8 | green, blue << 8.
 // Level 0 stores the values; a finer level stores every channel's difference from its prediction
 // by the coarser level (predict_from_coarser), modulo 2^16 (8-bit channels modulo 2^8), zigzag
-// coded: decoding level l needs levels 0..l-1. (bench/aqp/node_bench: 40-48% smaller than one PNG
-// per attribute with full levels, docs/formats/aqp.md.)
+// coded: decoding level l needs levels 0..l-1. (bench/aqp/node_bench measures the layouts:
+// deltas in byte planes are 14-17% smaller than in RGB16 pixels, docs/formats/aqp.md.)
 #include <array>
 #include <cstdint>
 #include <string>
@@ -34,7 +36,7 @@
 
 namespace catpaq::aqp {
 
-constexpr uint32_t kAqpMetaVersion = 2;  // 1 still reads (no up axis)
+constexpr uint32_t kAqpMetaVersion = 3;  // 1 (no up axis) and 2 (RGB16 nodes) still read
 constexpr int kMaxPatchLevel = 10;
 constexpr uint32_t kAqpColorFlag = 1;
 
@@ -45,7 +47,14 @@ struct AqpPatchInfo {
     std::array<uint16_t, 3> extent{};  // largest local coordinate per axis
 };
 
+// How a dataset's node images are laid out (AqpMeta::node_layout).
+struct NodeLayout {
+    bool colors = false;
+    bool byte_planes = true;  // version 3: 8-bit grey byte planes; versions 1-2: RGB16 pixels
+};
+
 struct AqpMeta {
+    uint32_t version = kAqpMetaVersion;  // as read; encode_aqp_meta always writes the current one
     uint32_t patch_level = 0;  // finest level k: patches of (2^k + 1)^2 samples
     uint32_t base_vertices = 0, base_triangles = 0, border_edges = 0;
     uint32_t flags = 0;
@@ -60,6 +69,7 @@ struct AqpMeta {
     std::vector<AqpPatchInfo> patches;
 
     bool has_colors() const { return flags & kAqpColorFlag; }
+    NodeLayout node_layout() const { return {has_colors(), version >= 3}; }
     // World coordinate `axis` of local coordinate `local` of patch p.
     double world(uint32_t p, int axis, uint32_t local) const {
         return origin[axis] + step * double(uint64_t(patches[p].origin[axis]) + local);
@@ -94,13 +104,15 @@ struct PatchGrid {
 // only, so patches sharing an edge decode it identically.
 int predict_from_coarser(const PatchGrid& coarser, int channel, int i, int j);
 
-// The node payload of `grid` (PNG at zlib level `compression`); `coarser` is the same patch one
-// level down (nullptr at level 0).
-std::vector<uint8_t> encode_patch_node(const PatchGrid& grid, const PatchGrid* coarser, bool colors, int compression = 6);
-// Decodes a node, which must be patch `patch` at `level` (0 <= level <= kMaxPatchLevel), carry
-// colours exactly when `colors`, and come with the patch's decoded coarser level when level > 0.
-// Safe on untrusted bytes: empty string on success, else what is wrong.
-std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, bool colors,
+// The node payload of `grid` (PNG at zlib level `compression`) in `layout`; `coarser` is the same
+// patch one level down (nullptr at level 0). Writers use the current layout; the older one is
+// kept for tests of old datasets.
+std::vector<uint8_t> encode_patch_node(const PatchGrid& grid, const PatchGrid* coarser, NodeLayout layout,
+                                       int compression = 6);
+// Decodes a node, which must be patch `patch` at `level` (0 <= level <= kMaxPatchLevel), be laid
+// out as `layout` (colours exactly when layout.colors), and come with the patch's decoded coarser
+// level when level > 0. Safe on untrusted bytes: empty string on success, else what is wrong.
+std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, NodeLayout layout,
                               const PatchGrid* coarser, PatchGrid& out);
 
 }  // namespace catpaq::aqp

@@ -161,7 +161,7 @@ std::string AqpFormat::decode(uint32_t node, const uint8_t* data, size_t size, s
         return strprintf("patch %u level %d is stored as a difference from level %d, which was not given", patch, level,
                          level - 1);
     auto decoded = std::make_shared<AqpNode>();
-    if (std::string e = aqp::decode_patch_node(data, size, patch, level, meta_.has_colors(), nullptr, decoded->grid); !e.empty())
+    if (std::string e = aqp::decode_patch_node(data, size, patch, level, meta_.node_layout(), nullptr, decoded->grid); !e.empty())
         return e;
     account(*decoded);
     out = std::move(decoded);
@@ -177,7 +177,7 @@ std::string AqpFormat::decode_with_parent(uint32_t node, const DecodedNode& pare
     if (level == 0 || !coarser || coarser->grid.patch != patch || coarser->grid.level != level - 1)
         return strprintf("patch %u level %d: the parent given is not the same patch one level down", patch, level);
     auto decoded = std::make_shared<AqpNode>();
-    if (std::string e = aqp::decode_patch_node(data, size, patch, level, meta_.has_colors(), &coarser->grid, decoded->grid);
+    if (std::string e = aqp::decode_patch_node(data, size, patch, level, meta_.node_layout(), &coarser->grid, decoded->grid);
         !e.empty())
         return e;
     account(*decoded);
