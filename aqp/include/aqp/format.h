@@ -3,7 +3,7 @@
 // pairs. Byte tables: docs/formats/aqp.md. All integers little-endian.
 //
 // Meta:
-//   char[8] "AQPMETA\0" | u32 version (1) | u32 finest level k | u32 patch count
+//   char[8] "AQPMETA\0" | u32 version (3) | u32 finest level k | u32 patch count
 //   u32 base vertices | u32 base triangles | u32 border edges | u32 flags (bit 0: colours)
 //   f64 origin[3] | f64 step        world = origin + step * (patch origin + local), per axis
 //   f64 bounds_min[3] | f64 bounds_max[3]   (world, of the samples)
