@@ -43,7 +43,7 @@ static const char* kRenderUsage =
     "  --coalesce-gap BYTES   nodes (or parts) queued together whose byte ranges lie within BYTES\n"
     "                         of each other share one request (default 64; -1: one request\n"
     "                         per node, to compare)\n"
-    "  --new-requests N       nodes the cut engine may newly request per frame (default 256: a\n"
+    "  --new-requests N       nodes the cut engine may newly request per frame (default 1024: a\n"
     "                         level's small nodes are seen together and coalesced)\n"
     "  --max-triangles N      triangle budget per frame\n"
     "  --gpu-budget SIZE      GPU bytes of the cut (e.g. 256M)\n"
@@ -165,7 +165,7 @@ int cmd_render(int argc, char** argv) {
     settings.skip_factor = options.number("skip", 8, 0, 1e6);
     settings.fetch_parts = !options.flag("fetch-whole-nodes");
     if (options.has("new-requests")) {
-        settings.budgets.max_new_requests = uint32_t(options.integer("new-requests", 256, 1, 1 << 20));
+        settings.budgets.max_new_requests = uint32_t(options.integer("new-requests", 1024, 1, 1 << 20));
         settings.budgets.max_outstanding_requests =
             std::max(settings.budgets.max_outstanding_requests, settings.budgets.max_new_requests);
     }
