@@ -256,8 +256,11 @@ std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coar
     assert(!coarser || coarser->size == g.size / 2 + 1);
     const int channels = channel_count(layout);
     const std::vector<uint32_t> values = node_values(g, coarser, channels);
+    // No row filters: deltas are residuals already, and libpng's filter heuristic picks filters
+    // that cost bytes (a 1M-triangle scan-like mesh's dataset 1.8% smaller, the bunny's 0.7%;
+    // keeping the filters on level 0, which holds values, was slightly larger still).
     return png_encode(layout.byte_planes ? byte_planes(values, g.size, channels) : rgb16_pixels(values, g.size, channels),
-                      compression);
+                      compression, false);
 }
 
 std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, NodeLayout layout,

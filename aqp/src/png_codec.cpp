@@ -77,12 +77,13 @@ void unpack_row(PngImage& image, int y, const uint8_t* row) {
     }
 }
 
-bool encode_rows(png_structp png, png_infop info, const PngImage& image, int compression, uint8_t* row) {
+bool encode_rows(png_structp png, png_infop info, const PngImage& image, int compression, bool adaptive_filters,
+                 uint8_t* row) {
     if (setjmp(png_jmpbuf(png))) return false;
     png_set_IHDR(png, info, png_uint_32(image.width), png_uint_32(image.height), image.bit_depth,
                  color_type(image.channels), PNG_INTERLACE_NONE, PNG_COMPRESSION_TYPE_DEFAULT, PNG_FILTER_TYPE_DEFAULT);
     png_set_compression_level(png, compression);
-    png_set_filter(png, PNG_FILTER_TYPE_BASE, PNG_ALL_FILTERS);
+    png_set_filter(png, PNG_FILTER_TYPE_BASE, adaptive_filters ? PNG_ALL_FILTERS : PNG_FILTER_NONE);
     png_write_info(png, info);
     for (int y = 0; y < image.height; ++y) {
         pack_row(image, y, row);
@@ -112,7 +113,7 @@ bool decode_rows(png_structp png, png_infop info, PngImage& out, uint8_t* row, s
 
 }  // namespace
 
-std::vector<uint8_t> png_encode(const PngImage& image, int compression) {
+std::vector<uint8_t> png_encode(const PngImage& image, int compression, bool adaptive_filters) {
     assert(image.width > 0 && image.height > 0 && image.channels >= 1 && image.channels <= 4);
     assert(image.bit_depth == 8 || image.bit_depth == 16);
     assert(image.values.size() == image.value_count());
@@ -128,7 +129,7 @@ std::vector<uint8_t> png_encode(const PngImage& image, int compression) {
         fail("PNG encoder: libpng could not start");
     }
     png_set_write_fn(png, &context, write_bytes, flush_bytes);
-    const bool ok = encode_rows(png, info, image, compression, row.data());
+    const bool ok = encode_rows(png, info, image, compression, adaptive_filters, row.data());
     png_destroy_write_struct(&png, &info);
     if (!ok) fail("PNG encoder: %s", context.message);
     return out;

@@ -84,17 +84,19 @@ AqpMeta small_meta() {
 
 }  // namespace
 
-TEST(AqpPng, RoundTripIsExactForEveryChannelCountAndDepth) {
+TEST(AqpPng, RoundTripIsExactForEveryChannelCountAndDepthWithAndWithoutRowFilters) {
     for (int depth : {8, 16})
         for (int channels = 1; channels <= 4; ++channels)
             for (bool smooth : {false, true})
-                for (auto [w, h] : {std::pair{1, 1}, std::pair{3, 5}, std::pair{66, 33}}) {
-                    PngImage in = random_image(w, h, channels, depth, uint64_t(depth * 100 + channels), smooth);
-                    std::vector<uint8_t> bytes = png_encode(in);
-                    PngImage out;
-                    ASSERT_EQ(png_decode(bytes.data(), bytes.size(), w, h, channels, depth, out), "");
-                    EXPECT_EQ(out.values, in.values) << depth << "-bit, " << channels << " channels, " << w << "x" << h;
-                }
+                for (bool filters : {true, false})
+                    for (auto [w, h] : {std::pair{1, 1}, std::pair{3, 5}, std::pair{66, 33}}) {
+                        PngImage in = random_image(w, h, channels, depth, uint64_t(depth * 100 + channels), smooth);
+                        std::vector<uint8_t> bytes = png_encode(in, 6, filters);
+                        PngImage out;
+                        ASSERT_EQ(png_decode(bytes.data(), bytes.size(), w, h, channels, depth, out), "");
+                        EXPECT_EQ(out.values, in.values)
+                            << depth << "-bit, " << channels << " channels, " << w << "x" << h << (filters ? "" : ", no filters");
+                    }
 }
 
 TEST(AqpPng, FullAlphaRangeIsNotPremultiplied) {

@@ -20,8 +20,10 @@ struct PngImage {
 };
 
 // Encodes `image` (caller bug if its fields are inconsistent). `compression` is zlib's level
-// (0-9). Adaptive row filters (libpng's heuristic over all five). Throws Error if libpng fails.
-std::vector<uint8_t> png_encode(const PngImage& image, int compression = 6);
+// (0-9). `adaptive_filters`: libpng's heuristic over all five row filters; false: no filter
+// (for data that is already a prediction residual, where the heuristic's picks cost bytes).
+// Throws Error if libpng fails.
+std::vector<uint8_t> png_encode(const PngImage& image, int compression = 6, bool adaptive_filters = true);
 
 // Decodes PNG bytes, which must hold exactly the expected size, channels and bit depth (a data
 // image of another shape is an error, not something to convert). Safe on untrusted bytes: returns
