@@ -332,6 +332,37 @@ TEST(AqpStore, BudgetEvictsLeastRecentlyUsedNeverPinnedOrUsedThisFrame) {
     EXPECT_EQ(store.size(), 3u);
 }
 
+// The renderer's template grids (an index buffer per level drawn) are GPU memory: counted in its
+// GPU bytes, and taken from the cache budget before the textures'.
+TEST(AqpStore, TheRenderersGpuBytesCountTheTemplateGridsOfTheLevelsDrawn) {
+    GL_TEST_CONTEXT();
+    const test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Sphere));
+    const Hierarchy& h = o.format->hierarchy();
+    std::unique_ptr<NodeRenderer> renderer = create_aqp_renderer(*o.format);
+    const int level = int(o.format->meta().patch_level);
+    const uint32_t node = h.find(aqp::aqp_node_key(0, level));
+    ASSERT_NE(node, kNoNode);
+    renderer->begin_frame();
+    renderer->upload(h.node(node), *test::decode_chain(o, node));
+    const uint64_t texture = aqp_gpu_bytes(level, o.format->meta().has_colors());
+    EXPECT_EQ(renderer->gpu_bytes(), texture);  // no template before the first draw
+    Camera camera = cameras_around(*o.format, 64, 48)[0];
+    Framebuffer fb(camera.width, camera.height);
+    fb.bind();
+    renderer->draw(camera, {DrawnPart{h.node(node).key, 0}}, RenderSettings{});
+    // The level's grid: 2 (n - 1)^2 triangles of 16-bit indices.
+    const uint64_t grid = uint64_t(2) << (2 * level);
+    EXPECT_EQ(renderer->gpu_bytes(), texture + grid * 3 * 2);
+    // A cache budget of exactly that keeps the texture; one byte less leaves the texture less
+    // than its size, and it goes (it is neither pinned nor used in a new frame).
+    renderer->set_budget(texture + grid * 3 * 2);
+    renderer->begin_frame();
+    EXPECT_EQ(renderer->evict_to_budget(), 0u);
+    EXPECT_TRUE(renderer->resident(h.node(node).key, 0));
+    renderer->set_budget(texture + grid * 3 * 2 - 1);
+    EXPECT_FALSE(renderer->resident(h.node(node).key, 0));
+}
+
 // Steps a session until it settles (or a generous frame limit).
 SessionFrameStats settle(StreamingSession& session, const Camera& camera) {
     SessionFrameStats s = session.step(camera);
@@ -433,9 +464,8 @@ TEST(AqpSession, AColdStartNeedsFarFewerRequestsWhenAdjacentNodesShareTransfers)
     SessionSettings settings;
     settings.tolerance_px = 2.5;
     // Enough new requests per frame for a level's patches in view to be listed, and queued, at
-    // once (the default 16 lists the nearest few, rarely neighbours in the file).
-    settings.budgets.max_new_requests = 1024;
-    settings.budgets.max_outstanding_requests = 1024;
+    // once (the default; 16 lists the nearest few, rarely neighbours in the file).
+    ASSERT_GE(settings.budgets.max_new_requests, 1024u);
     SessionSettings alone = settings;
     alone.fetcher.coalesce_gap_bytes = -1;
     StreamingSession coalesced(path, settings), separate(path, alone);

@@ -119,6 +119,7 @@ const AqpRenderer::Template& AqpRenderer::grid_template(int level) {
     glBindVertexArray(t.vao);  // no attributes: the vertex shader reads gl_VertexID
     glGenBuffers(1, &t.ibo);
     glBindBuffer(GL_ELEMENT_ARRAY_BUFFER, t.ibo);
+    template_bytes_ += indices.size() * (t.index32 ? 4 : 2);
     if (t.index32) {
         glBufferData(GL_ELEMENT_ARRAY_BUFFER, GLsizeiptr(indices.size() * 4), indices.data(), GL_STATIC_DRAW);
     } else {
@@ -219,8 +220,26 @@ public:
             if (p.part == 0) items_.push_back({p.key});
         return renderer_.render(camera, items_, settings);
     }
+    // The template grids are GPU memory too: counted, and the textures get what the cache
+    // budget leaves them (the templates of the levels drawn so far: 16 KB up to level 5).
+    uint64_t gpu_bytes() const override { return store_.gpu_bytes() + renderer_.template_bytes(); }
+    void set_budget(uint64_t bytes) override {
+        budget_ = bytes;
+        apply_budget();
+    }
+    size_t evict_to_budget() override {
+        apply_budget();
+        return store_.evict_to_budget();
+    }
 
 private:
+    void apply_budget() {
+        if (budget_ == 0) return store_.set_budget(0);  // unlimited
+        const uint64_t templates = renderer_.template_bytes();
+        store_.set_budget(budget_ > templates ? budget_ - templates : 1);
+    }
+
+    uint64_t budget_ = 0;
     const AqpFormat& format_;
     AqpRenderer renderer_;  // draws from store_ (the base's, constructed first)
     std::vector<AqpDrawItem> items_;

@@ -72,6 +72,8 @@ public:
     RenderStats render(const Camera& camera, const std::vector<AqpDrawItem>& items, const RenderSettings& settings);
 
     const GlProgram& program() const { return program_; }
+    // GPU bytes of the template grids built so far (index buffers; one per level drawn).
+    uint64_t template_bytes() const { return template_bytes_; }
 
 private:
     struct Template {
@@ -89,6 +91,7 @@ private:
             patch_offset = -1, step = -1, mvp = -1, flat_mode = -1, flat_color = -1, light = -1, ambient = -1;
     } u_;
     std::vector<Template> templates_;  // by level
+    uint64_t template_bytes_ = 0;
     std::vector<int> drawn_level_;     // per patch, this frame (-1: not drawn)
     std::vector<const GpuPatch*> drawn_;
 };
