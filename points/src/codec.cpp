@@ -7,6 +7,7 @@
 #include <cassert>
 #include <cmath>
 #include <cstring>
+#include <utility>
 
 #include "base/bytes.h"
 #include "base/checksum.h"
@@ -529,54 +530,101 @@ inline void escape_mask(const uint8_t* q, uint64_t mask[2]) {
     }
 }
 
+// Unzigzag of four values, their running sums continuing from carry (all four lanes hold the
+// previous sum), stored at `sums`; carry becomes the last sum.
+__attribute__((always_inline)) inline void store_running_sums(__m128i v, __m128i& carry, uint32_t* sums) {
+    const __m128i zero = _mm_setzero_si128();
+    __m128i d = _mm_xor_si128(_mm_srli_epi32(v, 1), _mm_sub_epi32(zero, _mm_and_si128(v, _mm_set1_epi32(1))));
+    d = _mm_add_epi32(d, _mm_slli_si128(d, 4));
+    d = _mm_add_epi32(d, _mm_slli_si128(d, 8));
+    d = _mm_add_epi32(d, carry);
+    carry = _mm_shuffle_epi32(d, 0xff);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(sums), d);
+}
+
+// Values 4m .. 4m + 3 of a block whose group holds an escape: the high bits of quotient
+// kRiceEscape come from the exception array; a longer unary run is corrupt (returns false).
+inline bool patch_escapes(StreamParts& s, const uint8_t* q, uint32_t k, __m128i field, __m128i& v) {
+    alignas(16) uint32_t values[4];
+    _mm_store_si128(reinterpret_cast<__m128i*>(values), field);
+    bool ok = true;
+    for (uint32_t lane = 0; lane < 4; ++lane) {
+        const uint32_t qi = q[lane];
+        ok &= qi <= kRiceEscape;
+        if (qi >= kRiceEscape) values[lane] |= s.exceptions.get(s.escape_bits - k) << k;
+        else values[lane] |= qi << k;
+    }
+    v = _mm_load_si128(reinterpret_cast<const __m128i*>(values));
+    return ok;
+}
+
+// The four quotients at q as 32-bit lanes.
+__attribute__((always_inline)) inline __m128i load_quotients(const uint8_t* q) {
+    int32_t q4;
+    std::memcpy(&q4, q, 4);
+    const __m128i zero = _mm_setzero_si128();
+    return _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(q4), zero), zero);
+}
+
 // Decodes a full block four values per step: the vertical layout puts values 4m .. 4m + 3 at
 // the same bit offset of the four word lanes, so one shift pair extracts their low bits; then
 // the quotient, unzigzag and the running sum (a prefix sum in the register). A step with an
-// escape patches it through memory (measured: most blocks hold one or two escapes, so sending
-// whole blocks to the scalar path was the decoder's bound).
-const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t& running, uint32_t* sums) {
+// escape patches it through memory (measured: half the blocks hold one or more escapes, so
+// sending such blocks to the scalar path was the decoder's bound).
+//
+// K is the block's Rice parameter as a constant, the 32 steps unrolled: every shift and offset
+// is then an immediate (measured: the generic loop spent half its instructions computing
+// them). The parameters measured on scans are 0-6; larger ones take the generic loop (K = -1).
+template <int K>
+const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime, uint32_t& running, uint32_t* sums) {
+    const uint32_t k = K >= 0 ? uint32_t(K) : k_runtime;
     const __m128i mask = _mm_set1_epi32(int32_t((uint64_t(1) << k) - 1));
     const __m128i k_count = _mm_cvtsi32_si128(int(k));
-    const __m128i zero = _mm_setzero_si128(), one = _mm_set1_epi32(1);
     uint64_t escapes[2];
     escape_mask(q, escapes);
     const uint8_t* low = s.low;
     __m128i carry = _mm_set1_epi32(int32_t(running));
-    for (uint32_t m = 0; m < kRiceBlock / 4; ++m) {
+    bool ok = true;
+    auto step = [&](uint32_t m) __attribute__((always_inline)) {
         const uint32_t bit = m * k, j = bit >> 5, shift = bit & 31;
-        const __m128i a = _mm_loadu_si128(reinterpret_cast<const __m128i*>(low + 16 * j));
-        const __m128i b = _mm_loadu_si128(reinterpret_cast<const __m128i*>(low + 16 * j + 16));
-        // A shift by 32 gives zero: the second word adds nothing when the field is in the first.
-        __m128i field = _mm_or_si128(_mm_srl_epi32(a, _mm_cvtsi32_si128(int(shift))),
-                                     _mm_sll_epi32(b, _mm_cvtsi32_si128(int(32 - shift))));
-        field = _mm_and_si128(field, mask);
-        int32_t q4;
-        std::memcpy(&q4, q + 4 * m, 4);
-        const __m128i quotient = _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(q4), zero), zero);
-        __m128i v = _mm_or_si128(_mm_sll_epi32(quotient, k_count), field);
-        if (const uint32_t escaped = uint32_t(escapes[m >> 4] >> (4 * (m & 15))) & 15) [[unlikely]] {
-            // Quotient kRiceEscape: the high bits come from the exception array; a longer
-            // unary run is corrupt.
-            alignas(16) uint32_t values[4];
-            _mm_store_si128(reinterpret_cast<__m128i*>(values), field);
-            for (uint32_t lane = 0; lane < 4; ++lane) {
-                const uint32_t qi = q[4 * m + lane];
-                if (qi > kRiceEscape) return "unary run too long";
-                if (qi == kRiceEscape) values[lane] |= s.exceptions.get(s.escape_bits - k) << k;
-                else values[lane] |= qi << k;
-            }
-            (void)escaped;
-            v = _mm_load_si128(reinterpret_cast<const __m128i*>(values));
+        __m128i field = _mm_setzero_si128();
+        if (k > 0) {
+            field = _mm_srl_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(low + 16 * j)), _mm_cvtsi32_si128(int(shift)));
+            // A shift by 32 gives zero: the second word adds nothing when the field is in the first.
+            if (K < 0 || shift + k > 32)
+                field = _mm_or_si128(field, _mm_sll_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(low + 16 * j + 16)),
+                                                          _mm_cvtsi32_si128(int(32 - shift))));
+            field = _mm_and_si128(field, mask);
         }
-        __m128i d = _mm_xor_si128(_mm_srli_epi32(v, 1), _mm_sub_epi32(zero, _mm_and_si128(v, one)));
-        d = _mm_add_epi32(d, _mm_slli_si128(d, 4));
-        d = _mm_add_epi32(d, _mm_slli_si128(d, 8));
-        d = _mm_add_epi32(d, carry);
-        carry = _mm_shuffle_epi32(d, 0xff);
-        _mm_storeu_si128(reinterpret_cast<__m128i*>(sums + 4 * m), d);
+        __m128i v = _mm_or_si128(_mm_sll_epi32(load_quotients(q + 4 * m), k_count), field);
+        if ((escapes[m >> 4] >> (4 * (m & 15))) & 15) [[unlikely]]
+            ok &= patch_escapes(s, q + 4 * m, k, field, v);
+        store_running_sums(v, carry, sums + 4 * m);
+    };
+    if constexpr (K >= 0) {
+        [&]<uint32_t... M>(std::integer_sequence<uint32_t, M...>) __attribute__((always_inline)) {
+            (step(M), ...);
+        }(std::make_integer_sequence<uint32_t, kRiceBlock / 4>{});
+    } else {
+        for (uint32_t m = 0; m < kRiceBlock / 4; ++m) step(m);
     }
     running = uint32_t(_mm_cvtsi128_si32(carry));
-    return nullptr;
+    return ok ? nullptr : "unary run too long";
+}
+
+// get_block_sse2 for the block's parameter k.
+const char* get_block_any_k(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t& running, uint32_t* sums) {
+    switch (k) {
+        case 0: return get_block_sse2<0>(s, q, k, running, sums);
+        case 1: return get_block_sse2<1>(s, q, k, running, sums);
+        case 2: return get_block_sse2<2>(s, q, k, running, sums);
+        case 3: return get_block_sse2<3>(s, q, k, running, sums);
+        case 4: return get_block_sse2<4>(s, q, k, running, sums);
+        case 5: return get_block_sse2<5>(s, q, k, running, sums);
+        case 6: return get_block_sse2<6>(s, q, k, running, sums);
+        case 7: return get_block_sse2<7>(s, q, k, running, sums);
+        default: return get_block_sse2<-1>(s, q, k, running, sums);
+    }
 }
 #endif
 
@@ -688,7 +736,7 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uin
         const bool full = last - first == kRiceBlock;
         const char* why = nullptr;
 #ifdef __SSE2__
-        if (full) why = get_block_sse2(s, q + first, kb, running, sums + first);
+        if (full) why = get_block_any_k(s, q + first, kb, running, sums + first);
         else why = get_block_scalar(s, first, last, kb, full, running, sums);
 #else
         why = get_block_scalar(s, first, last, kb, full, running, sums);

@@ -126,6 +126,23 @@ TEST(PointCodec, NodesWithoutNormalsOrColoursAndSinglePointsRoundTrip) {
     EXPECT_LE(distance(&out.positions[0], &node.positions[0]), out.position_error);
 }
 
+TEST(PointCodec, LargeResidualsAndEscapesRoundTrip) {
+    // Tiny radii on a unit patch: a fine grid, so position deltas take Rice parameters past the
+    // decoder's specialized ones (0-7), and outliers among them escape.
+    Node node = make_node(1500, 10);
+    for (float& r : node.radii) r = 1e-6f;
+    for (size_t i = 0; i < 1500; i += 97) node.positions[3 * i + 2] += 0.5;  // outliers
+    std::vector<uint32_t> order;
+    DecodedPoints out;
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{}, &order);
+    ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), out), "");
+    ASSERT_EQ(out.count, 1500u);
+    for (size_t i = 0; i < out.count; ++i) {
+        ASSERT_LE(distance(&out.positions[3 * i], &node.positions[3 * order[i]]), out.position_error) << i;
+        for (int c = 0; c < 3; ++c) ASSERT_EQ(out.colors[3 * i + c], node.colors[3 * order[i] + c]);
+    }
+}
+
 TEST(PointCodec, CoincidentPointsRoundTrip) {
     Node node = make_node(200, 5);
     for (size_t i = 0; i < 200; ++i)
