@@ -143,6 +143,33 @@ TEST(PointCodec, LargeResidualsAndEscapesRoundTrip) {
     }
 }
 
+TEST(PointCodec, BaselineAndAvx2KernelsDecodeAlike) {
+    // The decoder picks its SIMD kernels at run time: both must give the same points, on small
+    // residuals (specialized Rice parameters), large ones and escapes, at every colour precision.
+    std::vector<std::vector<uint8_t>> nodes;
+    for (uint64_t seed = 20; seed < 26; ++seed) {
+        Node node = make_node(1000 + 300 * seed, seed);
+        if (seed % 2) for (float& r : node.radii) r *= 1e-4f;
+        for (size_t i = 0; i < node.radii.size(); i += 61) node.positions[3 * i + 1] += 0.3;
+        const uint8_t luma = uint8_t(1 + seed % 8), chroma = uint8_t(1 + (seed * 3) % 9);
+        nodes.push_back(encode_point_node(node.view(), PointEncodeSettings{ColorBits{luma, chroma}}));
+        nodes.push_back(encode_point_node(node.view(), PointEncodeSettings{}));
+    }
+    const bool had_avx2 = use_point_decoder_avx2(true);
+    for (const std::vector<uint8_t>& bytes : nodes) {
+        DecodedPoints baseline, fast;
+        use_point_decoder_avx2(false);
+        ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), baseline), "");
+        use_point_decoder_avx2(true);
+        ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), fast), "");
+        EXPECT_EQ(baseline.positions, fast.positions);
+        EXPECT_EQ(baseline.normals, fast.normals);
+        EXPECT_EQ(baseline.colors, fast.colors);
+        EXPECT_EQ(baseline.radii, fast.radii);
+    }
+    use_point_decoder_avx2(had_avx2);
+}
+
 TEST(PointCodec, CoincidentPointsRoundTrip) {
     Node node = make_node(200, 5);
     for (size_t i = 0; i < 200; ++i)

@@ -84,6 +84,11 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
 // never reads outside [data, data + size).
 std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& out);
 
+// For tests and benchmarks: whether decode_point_node may use its AVX2 kernels (by default it
+// does where the CPU has AVX2, else the SSE2 ones of baseline x86-64; outputs are identical).
+// Returns whether they are in use after the call. Not thread safe: call before decoding.
+bool use_point_decoder_avx2(bool enable);
+
 // Reads only the fixed header: the point count and flags. Empty string on success.
 std::string peek_point_node(const uint8_t* data, size_t size, size_t& count, uint8_t& flags);
 
