@@ -117,18 +117,18 @@ void put_parameter(BitWriter& w, uint32_t previous, uint32_t k) {
 }
 
 // Chooses the block's Rice parameter: the cheapest k (values and parameter code) among those
-// near log2 of the mean, and never above the escape width (an escape codes W - k bits).
-uint32_t choose_k(const uint32_t* values, size_t n, uint32_t escape_bits, uint32_t previous) {
+// near log2 of the mean.
+uint32_t choose_k(const uint32_t* values, size_t n, uint32_t previous) {
     uint64_t sum = 0;
     for (size_t i = 0; i < n; ++i) sum += values[i];
     uint32_t guess = n ? bit_width32(uint32_t(std::min<uint64_t>(sum / n, UINT32_MAX))) : 0;
-    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(std::min(guess + 1, escape_bits), kRiceMaxK);
+    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(guess + 1, kRiceMaxK);
     lo = std::min(lo, hi);
     uint32_t best_k = lo;
     uint64_t best = UINT64_MAX;
     for (uint32_t k = lo; k <= hi; ++k) {
         uint64_t cost = parameter_bits(previous, k);
-        for (size_t i = 0; i < n; ++i) cost += rice_cost(values[i], k, escape_bits);
+        for (size_t i = 0; i < n; ++i) cost += rice_cost(values[i], k);
         if (cost < best) best = cost, best_k = k;
     }
     return best_k;
@@ -150,21 +150,24 @@ void put_vertical_block(std::vector<uint8_t>& out, const uint32_t* values, uint3
         for (int b = 0; b < 4; ++b) out.push_back(uint8_t(words[w] >> (8 * b)));
 }
 
+// An escape's excess quotient e in the Exp-Golomb code of escape_cost.
+void put_escape(BitWriter& w, uint32_t e) {
+    const uint32_t n = escape_prefix(e);
+    w.put(uint64_t(1) << n, n + 1);
+    w.put((uint64_t(e) >> kEscapeOrder) + 1, n);  // put keeps the n low bits: the top bit goes
+    w.put(e, kEscapeOrder);
+}
+
 // The encoder's work space for streams, reused from stream to stream.
 struct StreamBuffers {
     BitWriter parameters, unary, partial, exceptions;
     std::vector<uint8_t> low;
 };
 
-// Writes one stream (docs/formats/points.md, "Streams"): the escape width, the blocks'
-// parameters, the unary quotients, the low bits (full blocks vertical, then the partial block
+// Writes one stream (docs/formats/points.md, "Streams"): the blocks' parameters, the unary quotients, the low bits (full blocks vertical, then the partial block
 // packed) and the escaped values' high bits.
 void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, StreamBuffers& s) {
     const size_t n = values.size();
-    uint32_t largest = 0;
-    for (uint32_t v : values) largest = std::max(largest, v);
-    const uint32_t escape_bits = bit_width32(largest);
-    out.u8(uint8_t(escape_bits));
     s.parameters.clear();
     s.unary.clear();
     s.partial.clear();
@@ -173,14 +176,14 @@ void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, StreamBuff
     uint32_t previous = kNoPrevious;
     for (size_t first = 0; first < n; first += kRiceBlock) {
         const size_t end = std::min(n, first + kRiceBlock);
-        const uint32_t k = choose_k(values.data() + first, end - first, escape_bits, previous);
+        const uint32_t k = choose_k(values.data() + first, end - first, previous);
         put_parameter(s.parameters, previous, k);
         previous = k;
         for (size_t i = first; i < end; ++i) {
             const uint32_t q = values[i] >> k;
             if (q >= kRiceEscape) {
                 s.unary.put(uint64_t(1) << kRiceEscape, kRiceEscape + 1);
-                s.exceptions.put(q, escape_bits - k);
+                put_escape(s.exceptions, q - kRiceEscape);
             } else {
                 s.unary.put(uint64_t(1) << q, q + 1);
             }
@@ -501,8 +504,7 @@ struct StreamParts {
     const uint8_t* q;        // quotients, one byte per value
     const uint8_t* low;      // the current full block's low bits
     BitReader partial;       // the partial block's low bits
-    BitReader exceptions;    // escaped values' high bits
-    uint32_t escape_bits;
+    BitReader exceptions;    // escaped values' excess quotients
 };
 
 // Decodes values [first, end) of a block one at a time: the partial block, blocks with escapes
@@ -513,9 +515,10 @@ const char* get_block_scalar(StreamParts& s, size_t first, size_t end, uint32_t 
         const uint32_t low = full ? vertical_field(s.low, i - first, k) : s.partial.get(k);
         const uint32_t q = s.q[i];
         uint32_t v;
+        uint64_t escaped;
         if (q < kRiceEscape) v = (q << k) | low;
-        else if (q == kRiceEscape) v = (s.exceptions.get(s.escape_bits - k) << k) | low;
-        else return "unary run too long";
+        else if (q == kRiceEscape && s.exceptions.escape_quotient(escaped)) v = uint32_t(escaped << k) | low;
+        else return q == kRiceEscape ? "bad escape" : "unary run too long";
         running += uint32_t(unzigzag(v));
         sums[i] = running;
     }
@@ -550,15 +553,15 @@ __attribute__((always_inline)) inline void store_running_sums(__m128i v, __m128i
 }
 
 // Adds the quotients q[0, count) to the low bits in values[0, count): quotient kRiceEscape
-// takes the high bits from the exception array instead; a longer unary run is corrupt
-// (returns false). For the steps that hold an escape.
+// takes its excess from the exception array; a longer unary run or a bad excess code is
+// corrupt (returns false). For the steps that hold an escape.
 inline bool patch_escapes(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t* values, uint32_t count) {
     bool ok = true;
     for (uint32_t lane = 0; lane < count; ++lane) {
-        const uint32_t qi = q[lane];
+        uint64_t qi = q[lane];
         ok &= qi <= kRiceEscape;
-        if (qi >= kRiceEscape) values[lane] |= s.exceptions.get(s.escape_bits - k) << k;
-        else values[lane] |= qi << k;
+        if (qi >= kRiceEscape) ok &= s.exceptions.escape_quotient(qi);
+        values[lane] |= uint32_t(qi << k);
     }
     return ok;
 }
@@ -618,7 +621,7 @@ const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime,
         for (uint32_t m = 0; m < kRiceBlock / 4; ++m) step(m);
     }
     running = uint32_t(_mm_cvtsi128_si32(carry));
-    return ok ? nullptr : "unary run too long";
+    return ok ? nullptr : "unary run too long or bad escape";
 }
 
 #if CATPAQ_POINTS_AVX2
@@ -678,7 +681,7 @@ const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, 
         (step(2 * M), ...);
     }(std::make_integer_sequence<uint32_t, kRiceBlock / 8>{});
     running = uint32_t(_mm_cvtsi128_si32(_mm256_castsi256_si128(carry)));
-    return ok ? nullptr : "unary run too long";
+    return ok ? nullptr : "unary run too long or bad escape";
 }
 #pragma GCC pop_options
 
@@ -790,9 +793,6 @@ void colors_from_sums(const uint32_t* const sums[3], size_t n, int luma_shift, i
 // bytes follow end) into sums[i], the running sum (mod 2^32) of the unzigzagged values 0..i.
 // work: n + 16 bytes for the quotients. Advances cursor past the stream.
 const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* work, uint32_t* sums) {
-    if (cursor == end) return "truncated stream";
-    const uint32_t escape_bits = *cursor++;
-    if (escape_bits > 32) return "bad escape width";
     const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
     // Block parameters: checked here, kept as bytes after the quotients.
     uint8_t* ks = work + n + 16;
@@ -805,7 +805,7 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uin
             else if (parameters.get(1) == 0) k = parameters.get(1) ? k + 1 : k - 1;
             else k = parameters.get(5);
         }
-        if (k > kRiceMaxK || k > escape_bits) return "bad Rice parameter";
+        if (k > kRiceMaxK) return "bad Rice parameter";
         ks[b] = uint8_t(k);
         if ((b + 1) * kRiceBlock <= n) full_low_bytes += 16 * size_t(k);
     }
@@ -817,7 +817,7 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uin
     const size_t partial_bytes = (rest * (rest ? ks[blocks - 1] : 0) + 7) / 8;
     if (full_low_bytes + partial_bytes > size_t(end - cursor)) return "truncated stream";
     StreamParts s{q, cursor, {cursor + full_low_bytes, cursor + full_low_bytes + partial_bytes},
-                  {cursor + full_low_bytes + partial_bytes, end}, escape_bits};
+                  {cursor + full_low_bytes + partial_bytes, end}};
     uint32_t running = 0;
     for (size_t b = 0; b < blocks; ++b) {
         const size_t first = b * kRiceBlock, last = std::min(n, first + kRiceBlock);

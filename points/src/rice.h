@@ -8,8 +8,9 @@
 // a fixed width per block, so they decode without any serial dependency: for a full block, in
 // the "vertical" layout of SIMD bit packing (four interleaved 32-bit word lanes, value i in lane
 // i % 4), where one SSE2 shift extracts four values at once. Quotients of kRiceEscape or more
-// are coded as kRiceEscape, and the value's high bits (v >> k, W - k bits where W is the bit
-// width of the stream's largest value) go to an exception array after the low bits.
+// are coded as kRiceEscape, and the excess q - kRiceEscape goes to an exception array after the
+// low bits, in an Exp-Golomb code of order kEscapeOrder (measured on scans: 23% fewer bits for
+// the escapes than their high bits at the stream's largest width, 0.017 bytes per point).
 //
 // Why not one interleaved Rice bit stream (format version 1): its decoder is a serial chain of
 // count-zeros-then-shift steps per value, which kept the node decoder at 30-45 M points/s
@@ -27,7 +28,9 @@ namespace catpaq::points_detail {
 constexpr size_t kRiceBlock = 128;
 constexpr uint32_t kRiceEscape = 8;
 constexpr uint32_t kRiceMaxK = 31;  // also the width of an absolute k in the parameter string
-// The decoder reads up to this many bytes past the end of a stream's parts (16-byte loads of
+constexpr uint32_t kEscapeOrder = 2;
+constexpr uint32_t kEscapeMaxPrefix = 30;  // the Exp-Golomb prefix of any 32-bit excess
+// The decoder reads up to this many bytes past the end of a stream's parts (32-byte loads of
 // the low bits, 8-byte loads of the partial block and exceptions): it pads its copy of the node.
 constexpr size_t kRicePadding = 64;
 
@@ -37,10 +40,15 @@ __attribute__((always_inline)) inline int32_t unzigzag(uint32_t v) { return int3
 // Bits needed to write v (0 for 0).
 inline uint32_t bit_width32(uint32_t v) { return uint32_t(std::bit_width(v)); }
 
-// Cost in bits of coding v with parameter k under escape width w.
-inline uint64_t rice_cost(uint32_t v, uint32_t k, uint32_t w) {
+// Bits of the Exp-Golomb code (order kEscapeOrder) of an escape's excess e: n zeros, a one,
+// the n bits of x = (e >> kEscapeOrder) + 1 below its top bit, then e's kEscapeOrder low bits.
+inline uint32_t escape_prefix(uint32_t e) { return uint32_t(std::bit_width((uint64_t(e) >> kEscapeOrder) + 1)) - 1; }
+inline uint64_t escape_cost(uint32_t e) { return 2 * escape_prefix(e) + 1 + kEscapeOrder; }
+
+// Cost in bits of coding v with parameter k.
+inline uint64_t rice_cost(uint32_t v, uint32_t k) {
     uint32_t q = v >> k;
-    return q >= kRiceEscape ? kRiceEscape + 1 + (w - k) + k : q + 1 + k;
+    return q >= kRiceEscape ? kRiceEscape + 1 + k + escape_cost(q - kRiceEscape) : q + 1 + k;
 }
 
 // Appends bits least significant first.
@@ -90,6 +98,27 @@ struct BitReader {
         uint32_t v = uint32_t((word >> (bit & 7)) & ((uint64_t(1) << nbits) - 1));
         bit += nbits;
         return v;
+    }
+    // Zero bits up to the next one bit, which is consumed too; above `most`, corrupt: returns
+    // most + 1 (and consumes nothing).
+    uint32_t zeros_then_one(uint32_t most) {  // most <= 48
+        if ((bit >> 3) >= uint64_t(end - begin) + 8) return most + 1;
+        uint64_t word;
+        std::memcpy(&word, begin + (bit >> 3), 8);
+        if constexpr (std::endian::native == std::endian::big) word = __builtin_bswap64(word);
+        const uint32_t zeros = uint32_t(__builtin_ctzll((word >> (bit & 7)) | (uint64_t(1) << 56)));
+        if (zeros > most) return most + 1;
+        bit += zeros + 1;
+        return zeros;
+    }
+    // An escape's quotient: kRiceEscape plus the Exp-Golomb excess (escape_cost); false if its
+    // prefix is longer than any 32-bit value's.
+    bool escape_quotient(uint64_t& q) {
+        const uint32_t n = zeros_then_one(kEscapeMaxPrefix);
+        if (n > kEscapeMaxPrefix) return false;
+        const uint64_t x = (uint64_t(1) << n) | get(n);
+        q = kRiceEscape + (((x - 1) << kEscapeOrder) | get(kEscapeOrder));
+        return true;
     }
     bool overrun() const { return bit > 8 * uint64_t(end - begin); }
     size_t bytes() const { return size_t((bit + 7) >> 3); }
