@@ -685,8 +685,9 @@ const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, 
 }
 #pragma GCC pop_options
 
-// Whether the AVX2 kernels run: the CPU has AVX2 and no test switched them off.
-bool g_use_avx2 = __builtin_cpu_supports("avx2");
+// Whether the AVX2 kernels run: the CPU (and OS) has AVX2 and no test switched them off.
+// __builtin_cpu_init first: this runs among the static constructors.
+bool g_use_avx2 = (__builtin_cpu_init(), __builtin_cpu_supports("avx2"));
 #endif
 
 // get_block_sse2 (or get_block_avx2) for the block's parameter k.
