@@ -240,7 +240,9 @@ TEST(PointCodec, CorruptStreamsWithAValidChecksumNeverCrash) {
     DecodedPoints out;
     uint64_t state = 99;
     size_t rejected = 0, trials = 0;
+    const bool had_avx2 = use_point_decoder_avx2(true);
     for (int trial = 0; trial < 3000; ++trial) {
+        use_point_decoder_avx2(trial % 2 == 0);  // both kernels (where the CPU has AVX2)
         std::vector<uint8_t> bad = bytes;
         size_t flips = 1 + test::next_random(state) % 4;
         for (size_t f = 0; f < flips; ++f) bad[8 + test::next_random(state) % (bad.size() - 16)] ^= uint8_t(1 + test::next_random(state) % 255);
@@ -251,6 +253,7 @@ TEST(PointCodec, CorruptStreamsWithAValidChecksumNeverCrash) {
         if (!problem.empty()) ++rejected;
         else EXPECT_EQ(out.positions.size(), 3 * out.count);
     }
+    use_point_decoder_avx2(had_avx2);
     // Many forged nodes break a structural check (stream lengths, counts, header values):
     // about half of these (measured).
     EXPECT_GT(rejected, trials / 3);
