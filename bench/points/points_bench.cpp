@@ -20,7 +20,9 @@
 //
 // usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]
 //                     [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]
-// (--skip-rate skips the split and rate parts; sizes like 3e7 work for larger runs.)
+//        points_bench --decode-only DATASET [--decode-runs 5]
+// (--skip-rate skips the split and rate parts; sizes like 3e7 work for larger runs; --decode-only
+// runs only the decode part on a dataset kept from an earlier run, for quick codec iterations.)
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
@@ -215,6 +217,17 @@ DecodeResult measure_decode(const std::string& path, int runs) {
     return result;
 }
 
+void print_decode(const std::string& dataset, int runs) {
+    std::printf("\n== decode, one thread (%s)\n", dataset.c_str());
+    DecodeResult d = measure_decode(dataset, runs);
+    std::printf("ours:      %8.1f M points/s  %6.3f B/point\n", d.points_per_second / 1e6, d.bytes_per_point);
+    std::printf("meshopt:   %8.1f M points/s  %6.3f B/point (vertex codec on the same decoded points)\n",
+                d.meshopt_points_per_second / 1e6, d.meshopt_bytes_per_point);
+    std::printf("ratio:     %8.2f x speed     %6.3f x size\n", d.points_per_second / d.meshopt_points_per_second,
+                d.bytes_per_point / d.meshopt_bytes_per_point);
+    std::fflush(stdout);
+}
+
 std::vector<size_t> parse_sizes(const std::string& text) {
     std::vector<size_t> sizes;
     std::stringstream in(text);
@@ -229,7 +242,8 @@ int main(int argc, char** argv) {
     try {
         Options options(argc, argv,
                         "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]\n"
-                        "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n",
+                        "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n"
+                        "       points_bench --decode-only DATASET [--decode-runs 5]\n",
                         {"with-normals", "skip-rate"});
         if (options.help()) {
             std::printf("%s", options.usage().c_str());
@@ -259,7 +273,12 @@ int main(int argc, char** argv) {
         else if (split != "midpoint") usage_error("--split: midpoint or balanced");
         const int runs = int(options.integer("decode-runs", 5, 1, 100));
         std::string keep = options.get("keep", "");
+        const std::string decode_only = options.get("decode-only", "");
         options.finish();
+        if (!decode_only.empty()) {
+            print_decode(decode_only, runs);
+            return 0;
+        }
         fs::path dir = keep.empty() ? fs::temp_directory_path() / ("points_bench_" + std::to_string(getpid())) : fs::path(keep);
         fs::create_directories(dir);
 
@@ -286,13 +305,7 @@ int main(int argc, char** argv) {
             if (last_dataset.empty()) last_dataset = output;
         }
 
-        std::printf("\n== decode, one thread (%s)\n", last_dataset.c_str());
-        DecodeResult d = measure_decode(last_dataset, runs);
-        std::printf("ours:      %8.1f M points/s  %6.3f B/point\n", d.points_per_second / 1e6, d.bytes_per_point);
-        std::printf("meshopt:   %8.1f M points/s  %6.3f B/point (vertex codec on the same decoded points)\n",
-                    d.meshopt_points_per_second / 1e6, d.meshopt_bytes_per_point);
-        std::printf("ratio:     %8.2f x speed     %6.3f x size\n", d.points_per_second / d.meshopt_points_per_second,
-                    d.bytes_per_point / d.meshopt_bytes_per_point);
+        print_decode(last_dataset, runs);
 
         if (!skip_rate) {
             std::printf("\n== split rules (%zu points; CPU s of the whole conversion)\n", sizes.front());

@@ -7,12 +7,24 @@
 #include <cassert>
 #include <cmath>
 #include <cstring>
+#include <utility>
 
 #include "base/bytes.h"
 #include "base/checksum.h"
 #include "base/error.h"
 #include "common_codec/octahedral.h"
 #include "rice.h"
+
+#ifdef __SSE2__
+#include <emmintrin.h>
+#endif
+// AVX2 kernels compiled alongside the baseline ones and chosen at run time (GCC's target pragma).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define CATPAQ_POINTS_AVX2 1
+#include <immintrin.h>
+#else
+#define CATPAQ_POINTS_AVX2 0
+#endif
 
 namespace catpaq {
 
@@ -86,43 +98,107 @@ uint64_t spread_bits21(uint64_t x) {  // 21 bits -> every third bit of 63
 // ---------------------------------------------------------------------------------------------
 // Encoder
 
-// Chooses the block's Rice parameter: the cheapest k among those near log2 of the mean.
-uint32_t choose_k(const uint32_t* values, size_t n, uint32_t escape_bits) {
+// Bits of block parameter k after a block with parameter `previous` (the first block has
+// previous = kNoPrevious): "0" the same k, "10s" one less (s = 0) or one more (s = 1), "11"
+// and k in 5 bits; the first block's k is 5 bits. Neighbouring blocks mostly share k: this
+// took the parameters from 5 bits per block to about 2.
+constexpr uint32_t kNoPrevious = 64;
+uint32_t parameter_bits(uint32_t previous, uint32_t k) {
+    if (previous == kNoPrevious) return 5;
+    if (k == previous) return 1;
+    if (k + 1 == previous || k == previous + 1) return 3;
+    return 7;
+}
+void put_parameter(BitWriter& w, uint32_t previous, uint32_t k) {
+    if (previous == kNoPrevious) w.put(k, 5);
+    else if (k == previous) w.put(0, 1);
+    else if (k + 1 == previous || k == previous + 1) w.put(1u | (k > previous ? 4u : 0u), 3);
+    else w.put(3u | k << 2, 7);
+}
+
+// Chooses the block's Rice parameter: the cheapest k (values and parameter code) among those
+// near log2 of the mean.
+uint32_t choose_k(const uint32_t* values, size_t n, uint32_t previous) {
     uint64_t sum = 0;
     for (size_t i = 0; i < n; ++i) sum += values[i];
     uint32_t guess = n ? bit_width32(uint32_t(std::min<uint64_t>(sum / n, UINT32_MAX))) : 0;
-    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(std::min(guess + 1, escape_bits), kRiceMaxK);
+    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(guess + 1, kRiceMaxK);
+    lo = std::min(lo, hi);
     uint32_t best_k = lo;
     uint64_t best = UINT64_MAX;
-    for (uint32_t k = lo; k <= std::max(lo, hi); ++k) {
-        uint64_t cost = 0;
-        for (size_t i = 0; i < n; ++i) cost += rice_cost(values[i], k, escape_bits);
+    for (uint32_t k = lo; k <= hi; ++k) {
+        uint64_t cost = parameter_bits(previous, k);
+        for (size_t i = 0; i < n; ++i) cost += rice_cost(values[i], k);
         if (cost < best) best = cost, best_k = k;
     }
     return best_k;
 }
 
-// Writes one stream: escape width, the blocks' k (5 bits each), four lane sizes, the lanes.
-void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, BitWriter lanes[kRiceLanes]) {
-    const size_t n = values.size();
-    uint32_t largest = 0;
-    for (uint32_t v : values) largest = std::max(largest, v);
-    const uint32_t escape_bits = bit_width32(largest);
-    out.u8(uint8_t(escape_bits));
-    const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
-    BitWriter ks;
-    for (int l = 0; l < kRiceLanes; ++l) lanes[l].clear();
-    for (size_t b = 0; b < blocks; ++b) {
-        size_t first = b * kRiceBlock, end = std::min(n, first + kRiceBlock);
-        uint32_t k = choose_k(values.data() + first, end - first, escape_bits);
-        ks.put(k, 5);
-        for (size_t i = first; i < end; ++i) rice_put(lanes[i % kRiceLanes], values[i], k, escape_bits);
+// The low bits of a full block in the vertical layout: value i is the (i / 4)-th k-bit field of
+// lane i % 4, a little-endian string of 32-bit words stored interleaved (word j of lane l at
+// word 4j + l), 16k bytes in all.
+void put_vertical_block(std::vector<uint8_t>& out, const uint32_t* values, uint32_t k) {
+    uint32_t words[4 * kRiceMaxK] = {};
+    const uint64_t mask = (uint64_t(1) << k) - 1;
+    for (size_t i = 0; i < kRiceBlock; ++i) {
+        const uint32_t lane = uint32_t(i % 4), bit = uint32_t(i / 4) * k, j = bit >> 5, shift = bit & 31;
+        const uint64_t field = (values[i] & mask) << shift;
+        words[4 * j + lane] |= uint32_t(field);
+        if (shift + k > 32) words[4 * j + 4 + lane] |= uint32_t(field >> 32);
     }
-    std::vector<uint8_t>& k_bytes = ks.finish();
-    out.raw(k_bytes.data(), k_bytes.size());
-    for (int l = 0; l < kRiceLanes; ++l) out.varint(lanes[l].finish().size());
-    for (int l = 0; l < kRiceLanes; ++l) {
-        std::vector<uint8_t>& bytes = lanes[l].finish();
+    for (size_t w = 0; w < 4 * size_t(k); ++w)
+        for (int b = 0; b < 4; ++b) out.push_back(uint8_t(words[w] >> (8 * b)));
+}
+
+// An escape's excess quotient e in the Exp-Golomb code of escape_cost.
+void put_escape(BitWriter& w, uint32_t e) {
+    const uint32_t n = escape_prefix(e);
+    w.put(uint64_t(1) << n, n + 1);
+    w.put((uint64_t(e) >> kEscapeOrder) + 1, n);  // put keeps the n low bits: the top bit goes
+    w.put(e, kEscapeOrder);
+}
+
+// The encoder's work space for streams, reused from stream to stream.
+struct StreamBuffers {
+    BitWriter parameters, unary, partial, exceptions;
+    std::vector<uint8_t> low;
+};
+
+// Writes one stream (docs/formats/points.md, "Streams"): the blocks' parameters, the unary quotients, the low bits (full blocks vertical, then the partial block
+// packed) and the escaped values' high bits.
+void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, StreamBuffers& s) {
+    const size_t n = values.size();
+    s.parameters.clear();
+    s.unary.clear();
+    s.partial.clear();
+    s.exceptions.clear();
+    s.low.clear();
+    uint32_t previous = kNoPrevious;
+    for (size_t first = 0; first < n; first += kRiceBlock) {
+        const size_t end = std::min(n, first + kRiceBlock);
+        const uint32_t k = choose_k(values.data() + first, end - first, previous);
+        put_parameter(s.parameters, previous, k);
+        previous = k;
+        for (size_t i = first; i < end; ++i) {
+            const uint32_t q = values[i] >> k;
+            if (q >= kRiceEscape) {
+                s.unary.put(uint64_t(1) << kRiceEscape, kRiceEscape + 1);
+                put_escape(s.exceptions, q - kRiceEscape);
+            } else {
+                s.unary.put(uint64_t(1) << q, q + 1);
+            }
+        }
+        if (end - first == kRiceBlock) put_vertical_block(s.low, values.data() + first, k);
+        else
+            for (size_t i = first; i < end; ++i) s.partial.put(values[i], k);
+    }
+    for (BitWriter* part : {&s.parameters, &s.unary}) {
+        std::vector<uint8_t>& bytes = part->finish();
+        out.raw(bytes.data(), bytes.size());
+    }
+    out.raw(s.low.data(), s.low.size());
+    for (BitWriter* part : {&s.partial, &s.exceptions}) {
+        std::vector<uint8_t>& bytes = part->finish();
         out.raw(bytes.data(), bytes.size());
     }
 }
@@ -189,7 +265,7 @@ struct StreamWriter {
     ByteWriter& out;
     const std::vector<uint32_t>& order;
     std::vector<uint32_t> residuals;
-    BitWriter lanes[kRiceLanes];
+    StreamBuffers buffers;
 
     template <class Value>
     size_t put_deltas(Value value) {  // value(input index) -> int32
@@ -201,7 +277,7 @@ struct StreamWriter {
             previous = v;
         }
         size_t before = out.size();
-        put_stream(out, residuals, lanes);
+        put_stream(out, residuals, buffers);
         return out.size() - before;
     }
 };
@@ -363,91 +439,417 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
 
 namespace {
 
-// Decodes one stream of `n` values from [cursor, end) (end: the unpadded end of the node's
-// streams; kRicePadding readable bytes follow it), handing value i to sink(i, value) in order.
-// The sinks reconstruct attributes as the values arrive (prefix sums, dequantization), so no
-// value makes a round trip through memory. Advances cursor past the stream.
-template <class Sink>
-__attribute__((always_inline)) inline const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n,
-                                                             Sink&& sink) {
-    ByteReader r(cursor, size_t(end - cursor));
-    const uint32_t escape_bits = r.u8();
-    if (escape_bits > 32) return "bad escape width";
-    const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
-    const size_t k_size = (blocks * 5 + 7) / 8;
-    const uint8_t* k_bytes = r.take(k_size);
-    uint64_t lane_size[kRiceLanes];
-    uint64_t total = 0;
-    for (int l = 0; l < kRiceLanes; ++l) {
-        lane_size[l] = r.varint();
-        total += lane_size[l];
-    }
-    if (!r.ok() || total > r.remaining()) return "truncated stream";
-    RiceLane lanes[kRiceLanes];
-    const uint8_t* lane_begin[kRiceLanes];
-    const uint8_t* lane_end[kRiceLanes];
-    const uint8_t* at = r.cursor();
-    for (int l = 0; l < kRiceLanes; ++l) {
-        lane_begin[l] = at;
-        lanes[l].p = at;
-        at += lane_size[l];
-        lane_end[l] = at;
-    }
-    for (size_t b = 0; b < blocks; ++b) {
-        // k: 5 bits at bit 5b of k_bytes (read bytewise: the k array is not padded).
-        const size_t bit = 5 * b;
-        const uint32_t two = k_bytes[bit >> 3] | ((bit >> 3) + 1 < k_size ? uint32_t(k_bytes[(bit >> 3) + 1]) << 8 : 0u);
-        const uint32_t k = (two >> (bit & 7)) & 31;
-        const uint64_t k_mask = (uint64_t(1) << k) - 1;
-        for (int l = 0; l < kRiceLanes; ++l)
-            if (lanes[l].p > lane_end[l] + 8) return "stream overrun";
-        const size_t first = b * kRiceBlock;
-        const uint32_t longest = kRiceEscape + std::max(escape_bits, k);  // bits of the block's longest code
-        if (first + kRiceBlock <= n) {
-            RiceLane l[kRiceLanes];
-            for (int j = 0; j < kRiceLanes; ++j) l[j] = lanes[j];
-            if (longest <= kRicePairBits) {
-                for (size_t i = first; i < first + kRiceBlock; i += 2 * kRiceLanes) {
-                    uint32_t v[2 * kRiceLanes];
-#pragma GCC unroll 8
-                    for (int j = 0; j < kRiceLanes; ++j) l[j].refill();
-#pragma GCC unroll 8
-                    for (int j = 0; j < kRiceLanes; ++j) v[j] = l[j].get(k, k_mask, escape_bits);
-#pragma GCC unroll 8
-                    for (int j = 0; j < kRiceLanes; ++j) v[kRiceLanes + j] = l[j].get(k, k_mask, escape_bits);
-#pragma GCC unroll 16
-                    for (int j = 0; j < 2 * kRiceLanes; ++j) sink(i + size_t(j), v[j]);
-                }
+// The unary quotients a byte of the unary string holds (bits least significant first): the
+// zeros before each of its one bits, `count` of them, in the bytes of `q`; then the zeros after
+// its last one bit (`tail`, which add to the next byte's first quotient). Decoding a byte per
+// look-up rather than a bit per step: measured, the count-zeros loop was the decoder's bound.
+struct UnaryByte {
+    uint64_t q;
+    uint32_t count, tail;
+};
+constexpr std::array<UnaryByte, 256> make_unary_table() {
+    std::array<UnaryByte, 256> table{};
+    for (uint32_t byte = 0; byte < 256; ++byte) {
+        UnaryByte e{0, 0, 0};
+        uint64_t zeros = 0;
+        for (uint32_t bit = 0; bit < 8; ++bit) {
+            if (byte >> bit & 1) {
+                e.q |= zeros << (8 * e.count++);
+                zeros = 0;
             } else {
-                for (size_t i = first; i < first + kRiceBlock; i += kRiceLanes) {
-                    uint32_t v[kRiceLanes];
-#pragma GCC unroll 8
-                    for (int j = 0; j < kRiceLanes; ++j) l[j].refill();
-#pragma GCC unroll 8
-                    for (int j = 0; j < kRiceLanes; ++j) v[j] = l[j].get(k, k_mask, escape_bits);
-#pragma GCC unroll 8
-                    for (int j = 0; j < kRiceLanes; ++j) sink(i + size_t(j), v[j]);
-                }
-            }
-            for (int j = 0; j < kRiceLanes; ++j) lanes[j] = l[j];
-        } else {
-            for (size_t i = first; i < n; ++i) {
-                RiceLane& lane = lanes[i % kRiceLanes];
-                lane.refill();
-                sink(i, lane.get(k, k_mask, escape_bits));
+                ++zeros;
             }
         }
+        e.tail = uint32_t(zeros);
+        table[byte] = e;
     }
-    // Every lane must end exactly where its size says (the encoder pads to a byte with zeros).
-    for (int l = 0; l < kRiceLanes; ++l) {
-        uint64_t used = lanes[l].consumed_bits(lane_begin[l]);
-        if ((used + 7) / 8 != lane_size[l]) return "stream length mismatch";
+    return table;
+}
+constexpr std::array<UnaryByte, 256> kUnaryTable = make_unary_table();
+
+// Decodes the n unary quotients at the start of [cursor, end) into q[0, n) (q has 8 bytes of
+// slack after n); a run of more than kRiceEscape zeros yields a quotient above it, which the
+// caller rejects. Advances cursor past the string (which ends at its n-th one bit's byte).
+const char* get_unary(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* q) {
+    const uint8_t* p = cursor;
+    uint8_t* out = q;
+    uint8_t* const out_end = q + n;
+    uint64_t carry = 0;  // zeros since the last one bit, capped so that q stays a byte
+    while (out < out_end) {
+        if (p == end) return "truncated unary string";
+        const UnaryByte& e = kUnaryTable[*p++];
+        const uint64_t quotients = e.q + carry;
+        std::memcpy(out, &quotients, 8);
+        out += e.count;
+        carry = e.count ? e.tail : std::min<uint64_t>(carry + 8, 2 * kRiceEscape);
     }
-    cursor = lane_end[kRiceLanes - 1];
+    if (out != out_end) return "unary string has too many values";
+    cursor = p;
+    return nullptr;
+}
+
+// The k-bit field i (< kRiceBlock) of a full block's vertical low bits (put_vertical_block).
+__attribute__((always_inline)) inline uint32_t vertical_field(const uint8_t* words, size_t i, uint32_t k) {
+    const uint32_t bit = uint32_t(i / 4) * k, j = bit >> 5;
+    const uint8_t* at = words + 4 * (4 * j + i % 4);
+    uint32_t w0, w1;
+    std::memcpy(&w0, at, 4);
+    std::memcpy(&w1, at + 16, 4);
+    const uint64_t two = uint64_t(w0) | uint64_t(w1) << 32;
+    return uint32_t((two >> (bit & 31)) & ((uint64_t(1) << k) - 1));
+}
+
+// Where a stream's parts are while its blocks are decoded.
+struct StreamParts {
+    const uint8_t* q;        // quotients, one byte per value
+    const uint8_t* low;      // the current full block's low bits
+    BitReader partial;       // the partial block's low bits
+    BitReader exceptions;    // escaped values' excess quotients
+};
+
+// Decodes values [first, end) of a block one at a time: the partial block, blocks with escapes
+// and builds without SSE2. Running sums continue from `running`.
+const char* get_block_scalar(StreamParts& s, size_t first, size_t end, uint32_t k, bool full, uint32_t& running,
+                             uint32_t* sums) {
+    for (size_t i = first; i < end; ++i) {
+        const uint32_t low = full ? vertical_field(s.low, i - first, k) : s.partial.get(k);
+        const uint32_t q = s.q[i];
+        uint32_t v;
+        uint64_t escaped;
+        if (q < kRiceEscape) v = (q << k) | low;
+        else if (q == kRiceEscape && s.exceptions.escape_quotient(escaped)) v = uint32_t(escaped << k) | low;
+        else return q == kRiceEscape ? "bad escape" : "unary run too long";
+        running += uint32_t(unzigzag(v));
+        sums[i] = running;
+    }
+    return nullptr;
+}
+
+#ifdef __SSE2__
+// Bit i set where the quotient q[i] (i < kRiceBlock) is kRiceEscape or more.
+inline void escape_mask(const uint8_t* q, uint64_t mask[2]) {
+    const __m128i below = _mm_set1_epi8(char(kRiceEscape - 1));
+    for (int half = 0; half < 2; ++half) {
+        uint64_t bits = 0;
+        for (int c = 0; c < 4; ++c) {
+            const __m128i q16 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(q + 64 * half + 16 * c));
+            const uint32_t plain = uint32_t(_mm_movemask_epi8(_mm_cmpeq_epi8(_mm_max_epu8(q16, below), below)));
+            bits |= uint64_t(~plain & 0xffff) << (16 * c);
+        }
+        mask[half] = bits;
+    }
+}
+
+// Unzigzag of four values, their running sums continuing from carry (all four lanes hold the
+// previous sum), stored at `sums`; carry becomes the last sum. The carry chain is one add per
+// step: the group's own total is broadcast before the carry joins.
+__attribute__((always_inline)) inline void store_running_sums(__m128i v, __m128i& carry, uint32_t* sums) {
+    const __m128i zero = _mm_setzero_si128();
+    __m128i d = _mm_xor_si128(_mm_srli_epi32(v, 1), _mm_sub_epi32(zero, _mm_and_si128(v, _mm_set1_epi32(1))));
+    d = _mm_add_epi32(d, _mm_slli_si128(d, 4));
+    d = _mm_add_epi32(d, _mm_slli_si128(d, 8));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(sums), _mm_add_epi32(d, carry));
+    carry = _mm_add_epi32(carry, _mm_shuffle_epi32(d, 0xff));
+}
+
+// Adds the quotients q[0, count) to the low bits in values[0, count): quotient kRiceEscape
+// takes its excess from the exception array; a longer unary run or a bad excess code is
+// corrupt (returns false). For the steps that hold an escape.
+inline bool patch_escapes(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t* values, uint32_t count) {
+    bool ok = true;
+    for (uint32_t lane = 0; lane < count; ++lane) {
+        uint64_t qi = q[lane];
+        ok &= qi <= kRiceEscape;
+        if (qi >= kRiceEscape) ok &= s.exceptions.escape_quotient(qi);
+        values[lane] |= uint32_t(qi << k);
+    }
+    return ok;
+}
+
+// The four quotients at q as 32-bit lanes.
+__attribute__((always_inline)) inline __m128i load_quotients(const uint8_t* q) {
+    int32_t q4;
+    std::memcpy(&q4, q, 4);
+    const __m128i zero = _mm_setzero_si128();
+    return _mm_unpacklo_epi16(_mm_unpacklo_epi8(_mm_cvtsi32_si128(q4), zero), zero);
+}
+
+// Decodes a full block four values per step: the vertical layout puts values 4m .. 4m + 3 at
+// the same bit offset of the four word lanes, so one shift pair extracts their low bits; then
+// the quotient, unzigzag and the running sum (a prefix sum in the register). A step with an
+// escape patches it through memory (measured: half the blocks hold one or more escapes, so
+// sending such blocks to the scalar path was the decoder's bound).
+//
+// K is the block's Rice parameter as a constant, the 32 steps unrolled: every shift and offset
+// is then an immediate (measured: the generic loop spent half its instructions computing
+// them). The parameters measured on scans are 0-6; larger ones take the generic loop (K = -1).
+template <int K>
+const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime, uint32_t& running, uint32_t* sums) {
+    const uint32_t k = K >= 0 ? uint32_t(K) : k_runtime;
+    const __m128i mask = _mm_set1_epi32(int32_t((uint64_t(1) << k) - 1));
+    const __m128i k_count = _mm_cvtsi32_si128(int(k));
+    uint64_t escapes[2];
+    escape_mask(q, escapes);
+    const uint8_t* low = s.low;
+    __m128i carry = _mm_set1_epi32(int32_t(running));
+    bool ok = true;
+    auto step = [&](uint32_t m) __attribute__((always_inline)) {
+        const uint32_t bit = m * k, j = bit >> 5, shift = bit & 31;
+        __m128i field = _mm_setzero_si128();
+        if (k > 0) {
+            field = _mm_srl_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(low + 16 * j)), _mm_cvtsi32_si128(int(shift)));
+            // A shift by 32 gives zero: the second word adds nothing when the field is in the first.
+            if (K < 0 || shift + k > 32)
+                field = _mm_or_si128(field, _mm_sll_epi32(_mm_loadu_si128(reinterpret_cast<const __m128i*>(low + 16 * j + 16)),
+                                                          _mm_cvtsi32_si128(int(32 - shift))));
+            field = _mm_and_si128(field, mask);
+        }
+        __m128i v = _mm_or_si128(_mm_sll_epi32(load_quotients(q + 4 * m), k_count), field);
+        if ((escapes[m >> 4] >> (4 * (m & 15))) & 15) [[unlikely]] {
+            alignas(16) uint32_t values[4];
+            _mm_store_si128(reinterpret_cast<__m128i*>(values), field);
+            ok &= patch_escapes(s, q + 4 * m, k, values, 4);
+            v = _mm_load_si128(reinterpret_cast<const __m128i*>(values));
+        }
+        store_running_sums(v, carry, sums + 4 * m);
+    };
+    if constexpr (K >= 0) {
+        [&]<uint32_t... M>(std::integer_sequence<uint32_t, M...>) __attribute__((always_inline)) {
+            (step(M), ...);
+        }(std::make_integer_sequence<uint32_t, kRiceBlock / 4>{});
+    } else {
+        for (uint32_t m = 0; m < kRiceBlock / 4; ++m) step(m);
+    }
+    running = uint32_t(_mm_cvtsi128_si32(carry));
+    return ok ? nullptr : "unary run too long or bad escape";
+}
+
+#if CATPAQ_POINTS_AVX2
+#pragma GCC push_options
+#pragma GCC target("avx2")
+// get_block_sse2 eight values per step, for CPUs with AVX2 (chosen at run time: the build
+// targets baseline x86-64). Steps m and m + 1 of the four-lane layout share one 256-bit
+// register, each half shifted by its own offset (variable shifts); the running sum spans the
+// two halves. Measured: the SSE2 block loop was half the decoder's instructions.
+template <int K>
+const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, uint32_t* sums) {
+    constexpr uint32_t k = uint32_t(K);
+    const __m256i mask = _mm256_set1_epi32(int32_t((uint64_t(1) << k) - 1));
+    const __m256i zero = _mm256_setzero_si256(), one = _mm256_set1_epi32(1), last = _mm256_set1_epi32(7);
+    uint64_t escapes[2];
+    escape_mask(q, escapes);
+    const uint8_t* low = s.low;
+    __m256i carry = _mm256_set1_epi32(int32_t(running));
+    bool ok = true;
+    // 16 bytes of lane words at word row j0 (low half) and j1 (high half).
+    auto rows = [&](uint32_t j0, uint32_t j1) __attribute__((always_inline)) {
+        const __m128i* at = reinterpret_cast<const __m128i*>(low);
+        if (j1 == j0) return _mm256_broadcastsi128_si256(_mm_loadu_si128(at + j0));
+        if (j1 == j0 + 1) return _mm256_loadu_si256(reinterpret_cast<const __m256i*>(at + j0));
+        return _mm256_inserti128_si256(_mm256_castsi128_si256(_mm_loadu_si128(at + j0)), _mm_loadu_si128(at + j1), 1);
+    };
+    auto step = [&](uint32_t m) __attribute__((always_inline)) {  // values 4m .. 4m + 7
+        __m256i field = zero;
+        if (k > 0) {
+            const uint32_t bit0 = m * k, bit1 = bit0 + k;
+            const uint32_t j0 = bit0 >> 5, j1 = bit1 >> 5, s0 = bit0 & 31, s1 = bit1 & 31;
+            field = _mm256_srlv_epi32(rows(j0, j1), _mm256_setr_epi32(s0, s0, s0, s0, s1, s1, s1, s1));
+            // Counts of 32 give zero: the next word adds nothing where the field is in the first.
+            if (s0 + k > 32 || s1 + k > 32)
+                field = _mm256_or_si256(field, _mm256_sllv_epi32(rows(j0 + 1, j1 + 1),
+                                                                 _mm256_setr_epi32(32 - s0, 32 - s0, 32 - s0, 32 - s0,
+                                                                                   32 - s1, 32 - s1, 32 - s1, 32 - s1)));
+            field = _mm256_and_si256(field, mask);
+        }
+        const __m256i quotient = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q + 4 * m)));
+        __m256i v = _mm256_or_si256(_mm256_slli_epi32(quotient, int(k)), field);
+        if ((escapes[m >> 4] >> (4 * (m & 15))) & 0xff) [[unlikely]] {
+            alignas(32) uint32_t values[8];
+            _mm256_store_si256(reinterpret_cast<__m256i*>(values), field);
+            ok &= patch_escapes(s, q + 4 * m, k, values, 8);
+            v = _mm256_load_si256(reinterpret_cast<const __m256i*>(values));
+        }
+        __m256i d = _mm256_xor_si256(_mm256_srli_epi32(v, 1), _mm256_sub_epi32(zero, _mm256_and_si256(v, one)));
+        d = _mm256_add_epi32(d, _mm256_slli_si256(d, 4));  // prefix sums within each half
+        d = _mm256_add_epi32(d, _mm256_slli_si256(d, 8));
+        // The low half's total into the high half.
+        d = _mm256_add_epi32(d, _mm256_permute2x128_si256(_mm256_shuffle_epi32(d, 0xff), _mm256_shuffle_epi32(d, 0xff), 0x08));
+        _mm256_storeu_si256(reinterpret_cast<__m256i*>(sums + 4 * m), _mm256_add_epi32(d, carry));
+        carry = _mm256_add_epi32(carry, _mm256_permutevar8x32_epi32(d, last));
+    };
+    [&]<uint32_t... M>(std::integer_sequence<uint32_t, M...>) __attribute__((always_inline)) {
+        (step(2 * M), ...);
+    }(std::make_integer_sequence<uint32_t, kRiceBlock / 8>{});
+    running = uint32_t(_mm_cvtsi128_si32(_mm256_castsi256_si128(carry)));
+    return ok ? nullptr : "unary run too long or bad escape";
+}
+#pragma GCC pop_options
+
+// Whether the AVX2 kernels run: the CPU (and OS) has AVX2 and no test switched them off.
+// __builtin_cpu_init first: this runs among the static constructors.
+bool g_use_avx2 = (__builtin_cpu_init(), __builtin_cpu_supports("avx2"));
+#endif
+
+// get_block_sse2 (or get_block_avx2) for the block's parameter k.
+const char* get_block_any_k(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t& running, uint32_t* sums) {
+#if CATPAQ_POINTS_AVX2
+    if (g_use_avx2) {
+        switch (k) {
+            case 0: return get_block_avx2<0>(s, q, running, sums);
+            case 1: return get_block_avx2<1>(s, q, running, sums);
+            case 2: return get_block_avx2<2>(s, q, running, sums);
+            case 3: return get_block_avx2<3>(s, q, running, sums);
+            case 4: return get_block_avx2<4>(s, q, running, sums);
+            case 5: return get_block_avx2<5>(s, q, running, sums);
+            case 6: return get_block_avx2<6>(s, q, running, sums);
+            case 7: return get_block_avx2<7>(s, q, running, sums);
+            default: break;
+        }
+    }
+#endif
+    switch (k) {
+        case 0: return get_block_sse2<0>(s, q, k, running, sums);
+        case 1: return get_block_sse2<1>(s, q, k, running, sums);
+        case 2: return get_block_sse2<2>(s, q, k, running, sums);
+        case 3: return get_block_sse2<3>(s, q, k, running, sums);
+        case 4: return get_block_sse2<4>(s, q, k, running, sums);
+        case 5: return get_block_sse2<5>(s, q, k, running, sums);
+        case 6: return get_block_sse2<6>(s, q, k, running, sums);
+        case 7: return get_block_sse2<7>(s, q, k, running, sums);
+        default: return get_block_sse2<-1>(s, q, k, running, sums);
+    }
+}
+#endif
+
+// Positions from the three axes' running sums: p[3i + a] = origin[a] + float(q mod 2^24) * step,
+// the float operations of grid_position (no fused multiply-add), four points per step with the
+// axes transposed into x y z order in registers. GCC vectorized this loop only partly: it was a
+// fifth of the decoder's time.
+void positions_from_sums(const uint32_t* const sums[3], size_t n, const float origin[3], float step, float* p) {
+    const uint32_t grid_mask = (1u << kMaxGridBits) - 1;
+    size_t i = 0;
+#ifdef __SSE2__
+    const __m128i mask = _mm_set1_epi32(int32_t(grid_mask));
+    const __m128 step4 = _mm_set1_ps(step);
+    __m128 o[3];
+    for (int a = 0; a < 3; ++a) o[a] = _mm_set1_ps(origin[a]);
+    for (; i + 4 <= n; i += 4) {
+        __m128 c[3];
+        for (int a = 0; a < 3; ++a) {
+            const __m128i q = _mm_and_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(sums[a] + i)), mask);
+            c[a] = _mm_add_ps(o[a], _mm_mul_ps(_mm_cvtepi32_ps(q), step4));
+        }
+        const __m128 xy_lo = _mm_unpacklo_ps(c[0], c[1]), xy_hi = _mm_unpackhi_ps(c[0], c[1]);
+        const __m128 yz_lo = _mm_unpacklo_ps(c[1], c[2]), yz_hi = _mm_unpackhi_ps(c[1], c[2]);
+        const __m128 zx_lo = _mm_unpacklo_ps(c[2], c[0]), zx_hi = _mm_unpackhi_ps(c[2], c[0]);
+        _mm_storeu_ps(p + 3 * i, _mm_shuffle_ps(xy_lo, zx_lo, _MM_SHUFFLE(3, 0, 1, 0)));      // x0 y0 z0 x1
+        _mm_storeu_ps(p + 3 * i + 4, _mm_shuffle_ps(yz_lo, xy_hi, _MM_SHUFFLE(1, 0, 3, 2)));  // y1 z1 x2 y2
+        _mm_storeu_ps(p + 3 * i + 8, _mm_shuffle_ps(zx_hi, yz_hi, _MM_SHUFFLE(3, 2, 3, 0)));  // z2 x3 y3 z3
+    }
+#endif
+    for (; i < n; ++i)
+        for (int a = 0; a < 3; ++a) p[3 * i + a] = grid_position(origin[a], step, sums[a][i] & grid_mask);
+}
+
+// RGB from the running sums of quantized Y, Co, Cg (dequantize_color), eight points per step in
+// 16-bit lanes (every intermediate fits: |Co|, |Cg| <= 255, Y <= 255), the clamp to 0..255 by
+// the saturating pack. GCC left the scalar loop unvectorized (byte stores three apart): it was
+// a tenth of the decoder's time.
+void colors_from_sums(const uint32_t* const sums[3], size_t n, int luma_shift, int chroma_shift, uint8_t* rgb) {
+    size_t i = 0;
+#ifdef __SSE2__
+    const __m128i luma_mask = _mm_set1_epi32(0x1ff), chroma_mask = _mm_set1_epi32(0x3ff);
+    const __m128i luma_count = _mm_cvtsi32_si128(luma_shift), chroma_count = _mm_cvtsi32_si128(chroma_shift);
+    const __m128i top_y = _mm_set1_epi16(255), top_c = _mm_set1_epi16(510), zero = _mm_setzero_si128();
+    // min(c << s, top) = min(min(c, (top >> s) + 1) << s, top), without overflowing 16 bits.
+    const __m128i cap_y = _mm_set1_epi16(int16_t((255 >> luma_shift) + 1));
+    const __m128i cap_c = _mm_set1_epi16(int16_t((510 >> chroma_shift) + 1));
+    auto load8 = [&](const uint32_t* at, __m128i component_mask, __m128i cap) {
+        const __m128i lo = _mm_and_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(at)), component_mask);
+        const __m128i hi = _mm_and_si128(_mm_loadu_si128(reinterpret_cast<const __m128i*>(at + 4)), component_mask);
+        return _mm_min_epi16(_mm_packs_epi32(lo, hi), cap);  // < 2^10: no saturation
+    };
+    // The last point is left to the scalar loop: each point's 4-byte store writes one byte past it.
+    for (; i + 9 <= n; i += 8) {
+        const __m128i y = _mm_min_epi16(_mm_sll_epi16(load8(sums[0] + i, luma_mask, cap_y), luma_count), top_y);
+        const __m128i co = _mm_sub_epi16(_mm_min_epi16(_mm_sll_epi16(load8(sums[1] + i, chroma_mask, cap_c), chroma_count), top_c), top_y);
+        const __m128i cg = _mm_sub_epi16(_mm_min_epi16(_mm_sll_epi16(load8(sums[2] + i, chroma_mask, cap_c), chroma_count), top_c), top_y);
+        const __m128i t = _mm_sub_epi16(y, _mm_srai_epi16(cg, 1));
+        const __m128i g = _mm_add_epi16(cg, t);
+        const __m128i b = _mm_sub_epi16(t, _mm_srai_epi16(co, 1));
+        const __m128i r = _mm_add_epi16(b, co);
+        const __m128i r8 = _mm_packus_epi16(r, zero), g8 = _mm_packus_epi16(g, zero), b8 = _mm_packus_epi16(b, zero);
+        const __m128i rg = _mm_unpacklo_epi8(r8, g8), b0 = _mm_unpacklo_epi8(b8, zero);
+        alignas(16) uint32_t packed[8];
+        _mm_store_si128(reinterpret_cast<__m128i*>(packed), _mm_unpacklo_epi16(rg, b0));
+        _mm_store_si128(reinterpret_cast<__m128i*>(packed + 4), _mm_unpackhi_epi16(rg, b0));
+        for (int k = 0; k < 8; ++k) std::memcpy(rgb + 3 * (i + size_t(k)), &packed[k], 4);
+    }
+#endif
+    for (; i < n; ++i)
+        dequantize_color(sums[0][i] & 0x1ff, sums[1][i] & 0x3ff, sums[2][i] & 0x3ff, luma_shift, chroma_shift, &rgb[3 * i]);
+}
+
+// Decodes one stream of n values from [cursor, end) (the node's streams; kRicePadding readable
+// bytes follow end) into sums[i], the running sum (mod 2^32) of the unzigzagged values 0..i.
+// work: n + 16 bytes for the quotients. Advances cursor past the stream.
+const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* work, uint32_t* sums) {
+    const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
+    // Block parameters: checked here, kept as bytes after the quotients.
+    uint8_t* ks = work + n + 16;
+    BitReader parameters{cursor, end};
+    uint32_t k = 0;
+    size_t full_low_bytes = 0;
+    for (size_t b = 0; b < blocks; ++b) {
+        if (b == 0 || parameters.get(1) == 1) {
+            if (b == 0) k = parameters.get(5);
+            else if (parameters.get(1) == 0) k = parameters.get(1) ? k + 1 : k - 1;
+            else k = parameters.get(5);
+        }
+        if (k > kRiceMaxK) return "bad Rice parameter";
+        ks[b] = uint8_t(k);
+        if ((b + 1) * kRiceBlock <= n) full_low_bytes += 16 * size_t(k);
+    }
+    if (parameters.overrun()) return "truncated stream";
+    cursor += parameters.bytes();
+    uint8_t* q = work;
+    if (const char* why = get_unary(cursor, end, n, q)) return why;
+    const size_t rest = n % kRiceBlock;
+    const size_t partial_bytes = (rest * (rest ? ks[blocks - 1] : 0) + 7) / 8;
+    if (full_low_bytes + partial_bytes > size_t(end - cursor)) return "truncated stream";
+    StreamParts s{q, cursor, {cursor + full_low_bytes, cursor + full_low_bytes + partial_bytes},
+                  {cursor + full_low_bytes + partial_bytes, end}};
+    uint32_t running = 0;
+    for (size_t b = 0; b < blocks; ++b) {
+        const size_t first = b * kRiceBlock, last = std::min(n, first + kRiceBlock);
+        const uint32_t kb = ks[b];
+        const bool full = last - first == kRiceBlock;
+        const char* why = nullptr;
+#ifdef __SSE2__
+        if (full) why = get_block_any_k(s, q + first, kb, running, sums + first);
+        else why = get_block_scalar(s, first, last, kb, full, running, sums);
+#else
+        why = get_block_scalar(s, first, last, kb, full, running, sums);
+#endif
+        if (why) return why;
+        if (full) s.low += 16 * size_t(kb);
+    }
+    if (s.exceptions.overrun()) return "truncated exceptions";
+    cursor = s.exceptions.begin + s.exceptions.bytes();
     return nullptr;
 }
 
 }  // namespace
+
+bool use_point_decoder_avx2(bool enable) {
+#if CATPAQ_POINTS_AVX2
+    g_use_avx2 = enable && __builtin_cpu_supports("avx2");
+    return g_use_avx2;
+#else
+    (void)enable;
+    return false;
+#endif
+}
 
 std::string peek_point_node(const uint8_t* data, size_t size, size_t& count, uint8_t& flags) {
     if (size < kHeaderSize + kChecksumSize) return "node too short";
@@ -487,14 +889,19 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     const size_t body = size - kChecksumSize - kHeaderSize;
     if (streams * n > 8 * body) return "point count too large for the node size";
 
-    // A padded copy of the streams, so that lane refills may read 8 bytes anywhere; after it,
-    // room for the colours' quantized components.
+    // A padded copy of the streams, so that the block decoders may load 16 bytes anywhere in
+    // them; after it, the quotients (n + 16 bytes, then a byte per block) and three arrays of
+    // running sums (the attributes decoded together: a position's axes, a colour's components).
     std::vector<uint32_t>& scratch = out.scratch;
-    const size_t padded_words = (body + kRicePadding + 8 + 3) / 4;
-    scratch.resize(padded_words + (has_colors ? 3 * n : 0));
+    const size_t padded_words = (body + kRicePadding + 3) / 4;
+    const size_t work_words = (n + 16 + (n + kRiceBlock - 1) / kRiceBlock + 3) / 4;
+    scratch.resize(padded_words + work_words + 3 * n);
     uint8_t* copy = reinterpret_cast<uint8_t*>(scratch.data());
     std::memcpy(copy, data + kHeaderSize, body);
     std::memset(copy + body, 0, padded_words * 4 - body);
+    uint8_t* work = reinterpret_cast<uint8_t*>(scratch.data() + padded_words);
+    uint32_t* const sums0 = scratch.data() + padded_words + work_words;
+    uint32_t* const sums[3] = {sums0, sums0 + n, sums0 + 2 * n};
     const uint8_t* cursor = copy;
     const uint8_t* end = copy + body;
     auto failed = [](const char* why) { return std::string("point node: ") + why; };
@@ -504,67 +911,32 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     out.position_error = pad;
     out.grid_step = step;
     out.positions.resize(3 * n);
-    for (int a = 0; a < 3; ++a) {
-        float* p = out.positions.data() + a;
-        const float o = origin[a];
-        uint32_t q = 0;
-        const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
-            q += uint32_t(unzigzag(v));
-            p[3 * i] = grid_position(o, step, q & ((1u << kMaxGridBits) - 1));
-        });
-        if (why) return failed(why);
-    }
+    for (int a = 0; a < 3; ++a)
+        if (const char* why = get_stream(cursor, end, n, work, sums[a])) return failed(why);
+    positions_from_sums(sums, n, origin, step, out.positions.data());
     if (has_normals) {
+        for (int c = 0; c < 2; ++c)
+            if (const char* why = get_stream(cursor, end, n, work, sums[c])) return failed(why);
         out.normals.resize(n);
         uint16_t* normals = out.normals.data();
-        uint32_t u = 0, w = 0;
-        const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
-            u += uint32_t(unzigzag(v));
-            normals[i] = uint16_t(u & 0xff);
-        });
-        if (!why) why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
-            w += uint32_t(unzigzag(v));
-            normals[i] = uint16_t(normals[i] | (w & 0xff) << 8);
-        });
-        if (why) return failed(why);
+        const uint32_t *u = sums[0], *v = sums[1];
+        for (size_t i = 0; i < n; ++i) normals[i] = uint16_t((u[i] & 0xff) | (v[i] & 0xff) << 8);
     } else {
         out.normals.clear();
     }
     if (has_colors) {
-        // The three quantized components first, then RGB in one pass the compiler vectorizes.
+        for (int c = 0; c < 3; ++c)
+            if (const char* why = get_stream(cursor, end, n, work, sums[c])) return failed(why);
         out.colors.resize(3 * n);
-        uint32_t* yq = scratch.data() + padded_words;
-        uint32_t* coq = yq + n;
-        uint32_t* cgq = coq + n;
-        uint32_t y = 0, co = 0, cg = 0;
-        const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
-            y += uint32_t(unzigzag(v));
-            yq[i] = y & 0x1ff;
-        });
-        if (!why) why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
-            co += uint32_t(unzigzag(v));
-            coq[i] = co & 0x3ff;
-        });
-        if (!why) why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
-            cg += uint32_t(unzigzag(v));
-            cgq[i] = cg & 0x3ff;
-        });
-        if (why) return failed(why);
-        const int luma_shift = 8 - luma_bits, chroma_shift = 9 - chroma_bits;
-        uint8_t* colors = out.colors.data();
-        for (size_t i = 0; i < n; ++i)
-            dequantize_color(yq[i], coq[i], cgq[i], luma_shift, chroma_shift, &colors[3 * i]);
+        colors_from_sums(sums, n, 8 - luma_bits, 9 - chroma_bits, out.colors.data());
     } else {
         out.colors.clear();
     }
+    if (const char* why = get_stream(cursor, end, n, work, sums[0])) return failed(why);
     out.radii.resize(n);
     float* radii = out.radii.data();
-    uint32_t r = 0;
-    const char* why = get_stream(cursor, end, n, [&](size_t i, uint32_t v) __attribute__((always_inline)) {
-        r += uint32_t(unzigzag(v));
-        radii[i] = radius_value(radius_base, radius_step, pad, r & ((1u << 30) - 1));
-    });
-    if (why) return failed(why);
+    const uint32_t* r = sums[0];
+    for (size_t i = 0; i < n; ++i) radii[i] = radius_value(radius_base, radius_step, pad, r[i] & ((1u << 30) - 1));
     if (cursor != end) return "point node: bytes left after the last stream";
     return "";
 }

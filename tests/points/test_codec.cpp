@@ -13,9 +13,10 @@
 namespace catpaq {
 namespace {
 
-// GoldenBytesOfASmallNode: recorded from the encoder of format version 1.
-constexpr size_t kGoldenSize = 152;
-constexpr uint64_t kGoldenChecksum = 10917260130936205796ull;
+// GoldenBytesOfASmallNode: recorded from the encoder of format version 2 (version 1: 152 bytes,
+// four interleaved Rice lanes per stream).
+constexpr size_t kGoldenSize = 95;
+constexpr uint64_t kGoldenChecksum = 12957350842320211667ull;
 
 struct Node {
     std::vector<double> positions;
@@ -125,6 +126,50 @@ TEST(PointCodec, NodesWithoutNormalsOrColoursAndSinglePointsRoundTrip) {
     EXPECT_LE(distance(&out.positions[0], &node.positions[0]), out.position_error);
 }
 
+TEST(PointCodec, LargeResidualsAndEscapesRoundTrip) {
+    // Tiny radii on a unit patch: a fine grid, so position deltas take Rice parameters past the
+    // decoder's specialized ones (0-7), and outliers among them escape.
+    Node node = make_node(1500, 10);
+    for (float& r : node.radii) r = 1e-6f;
+    for (size_t i = 0; i < 1500; i += 97) node.positions[3 * i + 2] += 0.5;  // outliers
+    std::vector<uint32_t> order;
+    DecodedPoints out;
+    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{}, &order);
+    ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), out), "");
+    ASSERT_EQ(out.count, 1500u);
+    for (size_t i = 0; i < out.count; ++i) {
+        ASSERT_LE(distance(&out.positions[3 * i], &node.positions[3 * order[i]]), out.position_error) << i;
+        for (int c = 0; c < 3; ++c) ASSERT_EQ(out.colors[3 * i + c], node.colors[3 * order[i] + c]);
+    }
+}
+
+TEST(PointCodec, BaselineAndAvx2KernelsDecodeAlike) {
+    // The decoder picks its SIMD kernels at run time: both must give the same points, on small
+    // residuals (specialized Rice parameters), large ones and escapes, at every colour precision.
+    std::vector<std::vector<uint8_t>> nodes;
+    for (uint64_t seed = 20; seed < 26; ++seed) {
+        Node node = make_node(1000 + 300 * seed, seed);
+        if (seed % 2) for (float& r : node.radii) r *= 1e-4f;
+        for (size_t i = 0; i < node.radii.size(); i += 61) node.positions[3 * i + 1] += 0.3;
+        const uint8_t luma = uint8_t(1 + seed % 8), chroma = uint8_t(1 + (seed * 3) % 9);
+        nodes.push_back(encode_point_node(node.view(), PointEncodeSettings{ColorBits{luma, chroma}}));
+        nodes.push_back(encode_point_node(node.view(), PointEncodeSettings{}));
+    }
+    const bool had_avx2 = use_point_decoder_avx2(true);
+    for (const std::vector<uint8_t>& bytes : nodes) {
+        DecodedPoints baseline, fast;
+        use_point_decoder_avx2(false);
+        ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), baseline), "");
+        use_point_decoder_avx2(true);
+        ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), fast), "");
+        EXPECT_EQ(baseline.positions, fast.positions);
+        EXPECT_EQ(baseline.normals, fast.normals);
+        EXPECT_EQ(baseline.colors, fast.colors);
+        EXPECT_EQ(baseline.radii, fast.radii);
+    }
+    use_point_decoder_avx2(had_avx2);
+}
+
 TEST(PointCodec, CoincidentPointsRoundTrip) {
     Node node = make_node(200, 5);
     for (size_t i = 0; i < 200; ++i)
@@ -195,7 +240,9 @@ TEST(PointCodec, CorruptStreamsWithAValidChecksumNeverCrash) {
     DecodedPoints out;
     uint64_t state = 99;
     size_t rejected = 0, trials = 0;
+    const bool had_avx2 = use_point_decoder_avx2(true);
     for (int trial = 0; trial < 3000; ++trial) {
+        use_point_decoder_avx2(trial % 2 == 0);  // both kernels (where the CPU has AVX2)
         std::vector<uint8_t> bad = bytes;
         size_t flips = 1 + test::next_random(state) % 4;
         for (size_t f = 0; f < flips; ++f) bad[8 + test::next_random(state) % (bad.size() - 16)] ^= uint8_t(1 + test::next_random(state) % 255);
@@ -206,6 +253,7 @@ TEST(PointCodec, CorruptStreamsWithAValidChecksumNeverCrash) {
         if (!problem.empty()) ++rejected;
         else EXPECT_EQ(out.positions.size(), 3 * out.count);
     }
+    use_point_decoder_avx2(had_avx2);
     // Many forged nodes break a structural check (stream lengths, counts, header values):
     // about half of these (measured).
     EXPECT_GT(rejected, trials / 3);
@@ -217,7 +265,7 @@ TEST(PointCodec, RandomBytesAreRejected) {
     for (int trial = 0; trial < 2000; ++trial) {
         std::vector<uint8_t> bytes(test::next_random(state) % 300);
         for (uint8_t& b : bytes) b = uint8_t(test::next_random(state));
-        if (bytes.size() >= 4 && trial % 2) std::memcpy(bytes.data(), "CPPN\x01", std::min<size_t>(5, bytes.size()));
+        if (bytes.size() >= 4 && trial % 2) std::memcpy(bytes.data(), "CPPN\x02", std::min<size_t>(5, bytes.size()));
         EXPECT_NE(decode_point_node(bytes.data(), bytes.size(), out), "");
     }
 }

@@ -9,8 +9,9 @@
 // error, so a decoded splat always covers the splat it was made from. Points are ordered along
 // a Morton curve of their grid cells, every attribute is delta coded along that order
 // (positions per axis, octahedral normals modulo 256, colours in YCoCg, radii), and the
-// zigzagged residuals are entropy coded with block-adaptive Rice codes on four interleaved bit
-// lanes, which decode at several hundred million values per second on one core.
+// zigzagged residuals are entropy coded with block-adaptive Rice codes whose unary quotients and
+// binary low bits are stored apart (the low bits in SIMD bit-packing layout), so that they
+// decode with table look-ups and SIMD shifts rather than one bit-string walk per value.
 //
 // Thread safety: all functions are reentrant; decode_point_node only writes `out`.
 #include <cstddef>
@@ -20,7 +21,7 @@
 
 namespace catpaq {
 
-constexpr uint8_t kPointNodeVersion = 1;
+constexpr uint8_t kPointNodeVersion = 2;
 constexpr char kPointNodeMagic[4] = {'C', 'P', 'P', 'N'};
 // Node payload flags: which optional attributes the points carry.
 constexpr uint8_t kPointHasNormals = 1u << 0;
@@ -82,6 +83,11 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
 // wrong (bad magic, unknown version, truncated, checksum mismatch, inconsistent streams), and
 // never reads outside [data, data + size).
 std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& out);
+
+// For tests and benchmarks: whether decode_point_node may use its AVX2 kernels (by default it
+// does where the CPU has AVX2, else the SSE2 ones of baseline x86-64; outputs are identical).
+// Returns whether they are in use after the call. Not thread safe: call before decoding.
+bool use_point_decoder_avx2(bool enable);
 
 // Reads only the fixed header: the point count and flags. Empty string on success.
 std::string peek_point_node(const uint8_t* data, size_t size, size_t& count, uint8_t& flags);
