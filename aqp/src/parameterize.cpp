@@ -313,6 +313,29 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
     if (r.open && ((j != 0 && j != n - 1) || d < 2)) return false;
     const uint32_t c = component_[v];
     if (component_frozen_[c] || component_vertices_[c] <= (component_open_[c] ? 3u : 4u)) return false;
+    // The valence rules first: they are the cheapest to check.
+    // Valences near 6 (4 on the border): a base vertex of valence 3 is a cone of 180 degrees in
+    // the domain, where the surface around it must be squeezed to half its angle.
+    auto valence = [&](uint32_t w) { return int(vtris_[w].size()) + border_[w]; };
+    auto deviation = [&](uint32_t w, int val) {
+        const int target = border_[w] ? 4 : 6;
+        return double((val - target) * (val - target));
+    };
+    const int u_after = valence(u) + int(n) - (r.open ? 3 : 4);
+    if (u_after < (border_[u] ? 2 : 4) && component_vertices_[c] > 12) return false;
+    // Around a base vertex the surface's triangles share a cone of 60 degrees per base triangle:
+    // with more base triangles than surface triangles there (a valence 8 base vertex with 6
+    // surface triangles spans 480 degrees) they are stretched past what the second ring of
+    // surface triangles can follow (folds seen on the bunny and a 200k scan).
+    if (u_after > int(original_degree_[u]) + kValenceOverDegree && component_vertices_[c] > 12) return false;
+    double valence_change = deviation(u, u_after) - deviation(u, valence(u)) - deviation(v, int(n));
+    for (size_t o : {j == 0 ? (r.open ? n : n - 1) : j - 1, j + 1}) {
+        if (o >= n) continue;  // (the open ring's ends have one neighbour on the edge's side)
+        const uint32_t x = r.w[o];
+        const int after = valence(x) - 1;
+        if (after < (border_[x] ? 2 : 4) && component_vertices_[c] > 12) return false;
+        valence_change += deviation(x, after) - deviation(x, valence(x));
+    }
     // Link condition: u and v share exactly the vertices of the triangles on edge uv.
     ++mark_id_;
     for (uint32_t w : r.w) mark_[w] = mark_id_;
@@ -346,28 +369,6 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
     // threefold, and a surface triangle there can end up spanning more than 180 degrees, which
     // no straight image can. Such collapses are refused unless the ring is that bad already.
     if (min_quality < kMinBaseQuality && min_quality < ring_quality(v, r)) return false;
-    // Valences near 6 (4 on the border): a base vertex of valence 3 is a cone of 180 degrees in
-    // the domain, where the surface around it must be squeezed to half its angle.
-    auto valence = [&](uint32_t w) { return int(vtris_[w].size()) + border_[w]; };
-    auto deviation = [&](uint32_t w, int val) {
-        const int target = border_[w] ? 4 : 6;
-        return double((val - target) * (val - target));
-    };
-    const int u_after = valence(u) + int(n) - (border_edge ? 3 : 4);
-    if (u_after < (border_[u] ? 2 : 4) && component_vertices_[c] > 12) return false;
-    // Around a base vertex the surface's triangles share a cone of 60 degrees per base triangle:
-    // with more base triangles than surface triangles there (a valence 8 base vertex with 6
-    // surface triangles spans 480 degrees) they are stretched past what the second ring of
-    // surface triangles can follow (folds seen on the bunny and a 200k scan).
-    if (u_after > int(original_degree_[u]) + kValenceOverDegree && component_vertices_[c] > 12) return false;
-    double valence_change = deviation(u, u_after) - deviation(u, valence(u)) - deviation(v, int(n));
-    for (size_t o : {j == 0 ? (r.open ? n : n - 1) : j - 1, j + 1}) {
-        if (o >= n) continue;  // (the open ring's ends have one neighbour on the edge's side)
-        const uint32_t x = r.w[o];
-        const int after = valence(x) - 1;
-        if (after < (border_[x] ? 2 : 4) && component_vertices_[c] > 12) return false;
-        valence_change += deviation(x, after) - deviation(x, valence(x));
-    }
     // Short edges first (base triangles of even size), weighted by the shape error, the worst
     // new triangle's shape (nearly equilateral base triangles) and the valences.
     Quadric q = quadric_[u];
