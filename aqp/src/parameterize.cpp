@@ -112,7 +112,18 @@ private:
 
     bool ring_of(uint32_t v, Ring& r) const;
     bool flatten(uint32_t v, const Ring& r, std::vector<Vec2>& flat) const;
-    bool collapse_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double& cost);
+    // Whether v may collapse into u = r.w[j], in two halves: the rules that need neither the
+    // flattening nor the positions (border, component size, valences, link condition; they
+    // refuse most candidates, so update() flattens a ring only once one passes them), then the
+    // flattened fan and the shapes, and the cost. collapse_cost runs both.
+    bool collapse_topology_ok(uint32_t v, const Ring& r, size_t j, double& valence_change);
+    bool collapse_geometry_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double valence_change,
+                                double& cost) const;
+    bool collapse_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double& cost) {
+        double valence_change = 0;
+        return collapse_topology_ok(v, r, j, valence_change) &&
+               collapse_geometry_cost(v, r, flat, j, valence_change, cost);
+    }
     void update(uint32_t v);
     void collapse(uint32_t v, uint32_t u);
     double keep_penalty(uint32_t u) const;
@@ -304,8 +315,7 @@ bool DomainSimplifier::flatten(uint32_t v, const Ring& r, std::vector<Vec2>& fla
     return true;
 }
 
-// The cost of collapsing v into u = ring.w[j], or false if the collapse is not allowed.
-bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double& cost) {
+bool DomainSimplifier::collapse_topology_ok(uint32_t v, const Ring& r, size_t j, double& valence_change) {
     const uint32_t u = r.w[j];
     const size_t n = r.w.size(), d = r.t.size();
     // Border vertices move only along the border; an ear (one triangle) has nowhere to put its
@@ -313,7 +323,6 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
     if (r.open && ((j != 0 && j != n - 1) || d < 2)) return false;
     const uint32_t c = component_[v];
     if (component_frozen_[c] || component_vertices_[c] <= (component_open_[c] ? 3u : 4u)) return false;
-    // The valence rules first: they are the cheapest to check.
     // Valences near 6 (4 on the border): a base vertex of valence 3 is a cone of 180 degrees in
     // the domain, where the surface around it must be squeezed to half its angle.
     auto valence = [&](uint32_t w) { return int(vtris_[w].size()) + border_[w]; };
@@ -328,7 +337,7 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
     // surface triangles spans 480 degrees) they are stretched past what the second ring of
     // surface triangles can follow (folds seen on the bunny and a 200k scan).
     if (u_after > int(original_degree_[u]) + kValenceOverDegree && component_vertices_[c] > 12) return false;
-    double valence_change = deviation(u, u_after) - deviation(u, valence(u)) - deviation(v, int(n));
+    valence_change = deviation(u, u_after) - deviation(u, valence(u)) - deviation(v, int(n));
     for (size_t o : {j == 0 ? (r.open ? n : n - 1) : j - 1, j + 1}) {
         if (o >= n) continue;  // (the open ring's ends have one neighbour on the edge's side)
         const uint32_t x = r.w[o];
@@ -347,8 +356,13 @@ bool DomainSimplifier::collapse_cost(uint32_t v, const Ring& r, const std::vecto
                 mark_[w] = mark_id_ - 1;  // count each once
             }
     const bool border_edge = r.open;  // (j is an end of an open ring)
-    if (common != (border_edge ? 1u : 2u)) return false;
+    return common == (border_edge ? 1u : 2u);
+}
 
+bool DomainSimplifier::collapse_geometry_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j,
+                                              double valence_change, double& cost) const {
+    const uint32_t u = r.w[j];
+    const size_t d = r.t.size();
     // The new fan around u must be positively oriented in the flattening and must not fold in space.
     const Vec3d& pu = mesh_.positions[u];
     const Vec3d& pv = mesh_.positions[v];
@@ -402,7 +416,7 @@ double DomainSimplifier::keep_penalty(uint32_t u) const {
 void DomainSimplifier::update(uint32_t v) {
     ++stamp_[v];
     target_[v] = kNone;
-    if (!alive_[v] || !ring_of(v, ring_) || !flatten(v, ring_, flat_)) return;
+    if (!alive_[v] || !ring_of(v, ring_)) return;
     // Candidates by increasing edge length: a collapse costs at least its squared length (the
     // other terms only add or multiply by at least 1), so once that passes the best cost found,
     // no longer edge can win.
@@ -414,10 +428,16 @@ void DomainSimplifier::update(uint32_t v) {
     }
     std::sort(order_.begin(), order_.end());
     double best = INFINITY;
+    bool flattened = false;
     for (const auto& [length2, j] : order_) {
         if (length2 >= best) break;
-        double cost;
-        if (collapse_cost(v, ring_, flat_, j, cost) && cost < best) {
+        double valence_change = 0, cost = 0;
+        if (!collapse_topology_ok(v, ring_, j, valence_change)) continue;
+        if (!flattened) {
+            if (!flatten(v, ring_, flat_)) return;  // no collapse of v is possible
+            flattened = true;
+        }
+        if (collapse_geometry_cost(v, ring_, flat_, j, valence_change, cost) && cost < best) {
             best = cost;
             target_[v] = ring_.w[j];
         }
