@@ -19,7 +19,6 @@
 #include "common_codec/archive.h"
 #include "common_codec/octahedral.h"
 #include "estimate.h"
-#include "kdtree.h"
 #include "splat.h"
 
 namespace catpaq {
@@ -37,6 +36,7 @@ struct HNode {
     int32_t left = -1, right = -1;
     uint64_t key = 1;
     int depth = 0;
+    float lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};  // tight box of the points (set for the halo search)
 };
 
 // A point as the partition moves it: its position (float, relative to the origin: enough to
@@ -83,6 +83,7 @@ private:
     void prepare(PointsBuildReport& report);
     void partition_all();
     void build_search_tree();
+    void halo(const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) const;
     PointsMeta make_meta(const PointsBuildReport& report) const;
     std::vector<size_t> index_order() const;
     void summarize(PointsBuildReport& report) const;
@@ -110,7 +111,8 @@ private:
     bool estimate_normals_ = false, estimate_radii_ = false;
     std::vector<HNode> nodes_;
     std::vector<NodeRecord> records_;
-    KdTree tree_;
+    std::vector<float> xyz_;  // the points as floats, 3 each, for the neighbour searches
+    float cloud_extent_ = 0;
     std::unique_ptr<ArchiveWriter> writer_;
 };
 
@@ -251,8 +253,12 @@ void Builder::apply_permutation(const std::vector<uint32_t>& perm) {
 std::vector<Splat> Builder::leaf_splats(const HNode& node) {
     if (estimate_normals_ || estimate_radii_) {
         EstimateInput in;
-        in.tree = &tree_;
         in.positions = cloud_.positions.data();
+        in.xyz = xyz_.data();
+        in.halo = [this](const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) {
+            halo(lo, hi, begin, end, ids);
+        };
+        in.cloud_extent = cloud_extent_;
         in.neighbours = settings_.neighbours;
         in.radius_neighbour = settings_.radius_neighbour;
         in.orient_up = settings_.orientation == NormalOrientation::Up ||
@@ -414,10 +420,69 @@ void Builder::partition_all() {
     records_.resize(nodes_.size());
 }
 
-// The search tree the leaves' estimates query (only when something is estimated).
+// What the leaves' neighbour searches read (only when something is estimated): the points as
+// floats, and the tight box of every node of the hierarchy, through which a leaf finds the
+// points around it (halo). This replaced a kd-tree over all points, whose queries were half the
+// conversion's time (grid_knn.h).
 void Builder::build_search_tree() {
     if (!estimate_normals_ && !estimate_radii_) return;
-    tree_.build(cloud_.positions.data(), cloud_.size(), true);
+    const size_t n = cloud_.size();
+    xyz_.resize(3 * n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i)
+            for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = float(cloud_.positions[i][a]);
+    });
+    // Leaves from their points (in parallel), inner nodes from their children, which come after
+    // them in the array.
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+            HNode& node = nodes_[i];
+            if (node.left >= 0) continue;
+            for (int a = 0; a < 3; ++a) {
+                node.lo[a] = INFINITY;
+                node.hi[a] = -INFINITY;
+            }
+            for (uint32_t p = node.begin; p < node.end; ++p)
+                for (int a = 0; a < 3; ++a) {
+                    node.lo[a] = std::min(node.lo[a], xyz_[3 * size_t(p) + a]);
+                    node.hi[a] = std::max(node.hi[a], xyz_[3 * size_t(p) + a]);
+                }
+        }
+    });
+    for (size_t i = nodes_.size(); i-- > 0;) {
+        HNode& node = nodes_[i];
+        if (node.left < 0) continue;
+        const HNode &l = nodes_[size_t(node.left)], &r = nodes_[size_t(node.right)];
+        for (int a = 0; a < 3; ++a) {
+            node.lo[a] = std::min(l.lo[a], r.lo[a]);
+            node.hi[a] = std::max(l.hi[a], r.hi[a]);
+        }
+    }
+    const HNode& root = nodes_[0];
+    cloud_extent_ = std::max({root.hi[0] - root.lo[0], root.hi[1] - root.lo[1], root.hi[2] - root.lo[2]});
+}
+
+// Appends the points in [lo, hi] of the leaves other than [begin, end) (estimate.h's HaloFn).
+void Builder::halo(const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) const {
+    uint32_t stack[2 * kPointMaxDepth + 2];
+    size_t depth = 0;
+    stack[depth++] = 0;
+    while (depth > 0) {
+        const HNode& node = nodes_[stack[--depth]];
+        bool apart = false;
+        for (int a = 0; a < 3; ++a) apart |= node.hi[a] < lo[a] || node.lo[a] > hi[a];
+        if (apart || (node.begin >= begin && node.end <= end)) continue;
+        if (node.left >= 0) {
+            stack[depth++] = uint32_t(node.right);
+            stack[depth++] = uint32_t(node.left);
+            continue;
+        }
+        for (uint32_t p = node.begin; p < node.end; ++p) {
+            const float* q = &xyz_[3 * size_t(p)];
+            if (q[0] >= lo[0] && q[0] <= hi[0] && q[1] >= lo[1] && q[1] <= hi[1] && q[2] >= lo[2] && q[2] <= hi[2])
+                ids.push_back(p);
+        }
+    }
 }
 
 // The metadata: node records in index order, (depth, key).

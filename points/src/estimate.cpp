@@ -10,6 +10,7 @@
 // two leaves on either side of a fold may disagree; splats are lit two-sided by the client, so
 // this only matters for back-face culling.
 #include "estimate.h"
+#include "grid_knn.h"
 
 #include <algorithm>
 #include <cmath>
@@ -111,31 +112,96 @@ void orient_leaf(const EstimateInput& in, size_t begin, size_t end, const std::v
     }
 }
 
+// A first halo margin: 1.5 times the k-th neighbour distance on a surface sampled as densely as
+// the leaf (its two largest sides taken as its area). Points whose neighbours reach farther get
+// a wider halo in a second round, so the guess only trades halo size against rounds.
+float first_margin(const float lo[3], const float hi[3], size_t n, size_t k) {
+    float e[3] = {hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]};
+    std::sort(e, e + 3, [](float a, float b) { return a > b; });
+    const double area = e[1] > 0 ? double(e[0]) * e[1] : double(e[0]) * e[0];
+    const double spacing = std::sqrt(area / double(std::max<size_t>(n, 1)));
+    return float(1.5 * std::sqrt(double(k) / M_PI) * spacing);
+}
+
+// Per thread, kept from leaf to leaf: no allocations per leaf once warm.
+struct LeafScratch {
+    std::vector<uint32_t> ids;
+    std::vector<float> xyz;
+    std::vector<uint32_t> pending, next;  // the points still without neighbours
+    std::vector<uint8_t> wanted;           // by leaf position: still without neighbours
+    LocalKnn knn;
+};
+
 }  // namespace
 
 void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* normals, float* radii) {
     // The query finds the point itself first, then its neighbours: k + 1 for the k-th neighbour.
-    const size_t radius_k = std::min<size_t>(std::max<size_t>(in.radius_neighbour, 1), KdTree::kMaxK - 1);
-    const size_t normal_k = std::min<size_t>(std::max<size_t>(in.neighbours, 3), KdTree::kMaxK);
+    const size_t radius_k = std::min<size_t>(std::max<size_t>(in.radius_neighbour, 1), GridKnn::kMaxK - 1);
+    const size_t normal_k = std::min<size_t>(std::max<size_t>(in.neighbours, 3), GridKnn::kMaxK);
     const size_t k = std::max(normals ? normal_k : 0, radii ? radius_k + 1 : 0);
-    if (k == 0) return;
+    if (k == 0 || end <= begin) return;
     const size_t n = end - begin;
     // Orientation follows the nearest few only: they are the most alike.
     const size_t links = std::min<size_t>(k, kOrientationLinks);
     std::vector<uint32_t> local_neighbours(normals ? n * links : 0, UINT32_MAX);
-    uint32_t index[KdTree::kMaxK];
-    float distance2[KdTree::kMaxK];
-    for (size_t i = begin; i < end; ++i) {
-        const float q[3] = {float(in.positions[i][0]), float(in.positions[i][1]), float(in.positions[i][2])};
-        size_t found = in.tree->nearest(q, k, index, distance2);
-        if (radii) radii[i] = coverage_radius(distance2, found, radius_k);
-        if (normals) {
-            const size_t used = std::min(found, normal_k);
-            normals[i] = pca_normal(in.positions, index, used);
-            for (size_t j = 0; j < std::min(used, links); ++j)
-                if (index[j] >= begin && index[j] < end && index[j] != i)
-                    local_neighbours[(i - begin) * links + j] = uint32_t(index[j] - begin);
+    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (size_t i = begin; i < end; ++i)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], in.xyz[3 * i + a]);
+            hi[a] = std::max(hi[a], in.xyz[3 * i + a]);
         }
+    static thread_local LeafScratch scratch;
+    LeafScratch& s = scratch;
+    s.pending.resize(n);
+    for (size_t i = 0; i < n; ++i) s.pending[i] = uint32_t(begin + i);
+    s.wanted.assign(n, 1);
+    float margin = first_margin(lo, hi, n, k);
+    if (!(margin > 0)) margin = std::max(in.cloud_extent * 1e-6f, 1e-30f);
+    while (!s.pending.empty()) {
+        // A margin as wide as the cloud takes in every point: the neighbours found are exact.
+        const bool everything = !(margin < in.cloud_extent);
+        s.ids.resize(n);
+        for (size_t i = 0; i < n; ++i) s.ids[i] = uint32_t(begin + i);
+        float box_lo[3], box_hi[3];
+        for (int a = 0; a < 3; ++a) {
+            box_lo[a] = everything ? -INFINITY : lo[a] - margin;
+            box_hi[a] = everything ? INFINITY : hi[a] + margin;
+        }
+        in.halo(box_lo, box_hi, begin, end, s.ids);
+        s.xyz.resize(3 * s.ids.size());
+        for (size_t i = 0; i < s.ids.size(); ++i)
+            for (int a = 0; a < 3; ++a) s.xyz[3 * i + a] = in.xyz[3 * size_t(s.ids[i]) + a];
+        s.knn.build(s.xyz.data(), s.ids.data(), s.ids.size(), 2.0);
+        s.next.clear();
+        float needed = 0;  // the margin the points left over need
+        auto wanted = [&](uint32_t id) { return id >= begin && id < end && s.wanted[id - begin]; };
+        s.knn.all_nearest(k, wanted, [&](uint32_t i, const float* q, size_t found, const uint32_t* index, const float* distance2) {
+            // A point outside the halo's box is farther from q than the margin plus q's distance
+            // to the leaf box's nearest face: nearer neighbours than that are certain.
+            float face = INFINITY;
+            for (int a = 0; a < 3; ++a) face = std::min({face, q[a] - lo[a], hi[a] - q[a]});
+            if (!everything) {
+                const float reach = found == k ? std::sqrt(distance2[k - 1]) : INFINITY;
+                if (!(reach <= margin + face)) {
+                    s.next.push_back(i);
+                    needed = std::max(needed, reach);
+                    return;
+                }
+            }
+            s.wanted[i - begin] = 0;
+            if (radii) radii[i] = coverage_radius(distance2, found, radius_k);
+            if (normals) {
+                const size_t used = std::min(found, normal_k);
+                normals[i] = pca_normal(in.positions, index, used);
+                for (size_t j = 0; j < std::min(used, links); ++j)
+                    if (index[j] >= begin && index[j] < end && index[j] != i)
+                        local_neighbours[(i - begin) * links + j] = uint32_t(index[j] - begin);
+            }
+        });
+        s.pending.swap(s.next);
+        // The k-th distance found bounds the true one: a margin that wide settles those points;
+        // points with fewer than k candidates double it.
+        margin = std::max(2 * margin, std::nextafter(needed, INFINITY));
     }
     if (normals) orient_leaf(in, begin, end, local_neighbours, links, normals);
 }

@@ -3,15 +3,21 @@
 // neighbours (points/builder.h, step 3).
 #include <cstddef>
 #include <cstdint>
+#include <functional>
+#include <vector>
 
-#include "kdtree.h"
 #include "mesh/mesh.h"
 
 namespace catpaq::points_detail {
 
+// Appends to `ids` the points, other than the leaf's [begin, end), inside the box [lo, hi].
+using HaloFn = std::function<void(const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids)>;
+
 struct EstimateInput {
-    const KdTree* tree = nullptr;      // over all points (float, relative to the origin)
-    const Vec3d* positions = nullptr;  // the same points in double precision, in the tree's ids
+    const Vec3d* positions = nullptr;  // all points (relative to the origin), leaves contiguous
+    const float* xyz = nullptr;        // the same as floats, 3 per point
+    HaloFn halo;                       // the points around a leaf
+    float cloud_extent = 0;         // the cloud's largest side: a halo this wide holds every point
     size_t neighbours = 16;         // k of the normals' PCA
     size_t radius_neighbour = 6;    // a radius reaches this neighbour (PointsBuildSettings)
     bool orient_up = false;         // else outward from the origin (the bounds' centre)
@@ -19,7 +25,8 @@ struct EstimateInput {
 
 // Estimates normals (when `normals` is not null) and radii (when `radii` is not null) of the
 // points [begin, end), which are one leaf of the hierarchy: orientation is made consistent
-// within the leaf. Writes normals[begin, end) and radii[begin, end).
+// within the leaf. Writes normals[begin, end) and radii[begin, end). The neighbours are exact:
+// those of the leaf and a halo of its surroundings, widened for the points that need more.
 void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* normals, float* radii);
 
 }  // namespace catpaq::points_detail

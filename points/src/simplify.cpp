@@ -7,7 +7,7 @@
 #include <cassert>
 #include <cmath>
 
-#include "kdtree.h"
+#include "grid_knn.h"
 #include "splat.h"
 
 namespace catpaq::points_detail {
@@ -15,6 +15,9 @@ namespace {
 
 constexpr size_t kNeighbours = 4;
 constexpr float kOpposedNormalCost = 4.0f;
+// Grid cells per splat of the neighbour search (grid_knn.h): for k = 4 small cells scan fewer
+// points than they cost to visit empty.
+constexpr double kCellsPerSplat = 4.0;
 
 double distance(const double* a, const double* b) {
     double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
@@ -80,8 +83,8 @@ struct Simplifier {
         std::vector<float> xyz(3 * live.size());
         for (size_t i = 0; i < live.size(); ++i)
             for (int a = 0; a < 3; ++a) xyz[3 * i + a] = float(splats[live[i]].p[a]);
-        KdTree tree;
-        tree.build(xyz.data(), live.size(), false);
+        LocalKnn knn;
+        knn.build(xyz.data(), nullptr, live.size(), kCellsPerSplat);
         heap.clear();
         sorted.clear();
         next = 0;
@@ -89,8 +92,10 @@ struct Simplifier {
         // once, from its smaller end.
         const size_t stride = kNeighbours + 1;
         std::vector<uint32_t> lists(live.size() * stride, UINT32_MAX);
-        float d2[kNeighbours + 1];
-        for (size_t i = 0; i < live.size(); ++i) tree.nearest(&xyz[3 * i], stride, &lists[i * stride], d2);
+        knn.all_nearest(stride, [](uint32_t) { return true; },
+                        [&](uint32_t i, const float*, size_t found, const uint32_t* index, const float*) {
+                            std::copy(index, index + found, &lists[size_t(i) * stride]);
+                        });
         auto lists_contain = [&](size_t i, uint32_t j) {
             for (size_t k = 0; k < stride; ++k)
                 if (lists[i * stride + k] == j) return true;
