@@ -43,7 +43,7 @@ float cell_size(const float extent[3], double cells) {
 
 }  // namespace
 
-void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double cells_per_point) {
+void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double points_per_cell) {
     assert(n < (size_t(1) << 32));
     float hi[3];
     for (int a = 0; a < 3; ++a) {
@@ -58,30 +58,38 @@ void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double cell
     if (n == 0)
         for (int a = 0; a < 3; ++a) lo_[a] = hi[a] = 0;
     const float extent[3] = {hi[0] - lo_[0], hi[1] - lo_[1], hi[2] - lo_[2]};
-    h_ = cell_size(extent, std::max(1.0, cells_per_point * double(n)));
-    // Cells per axis are bounded so that the cell array stays near the requested size even
-    // for boxes far from cubes (the thin axes' single cell rounds up).
-    const double max_cells = std::max(64.0, 4 * cells_per_point * double(n));
-    for (;;) {
-        double total = 1;
-        for (int a = 0; a < 3; ++a) {
-            dims_[a] = int(std::min(double(extent[a]) / h_, 4096.0)) + 1;
-            total *= dims_[a];
+    // First as if the points filled their box; points on a surface then crowd into few cells,
+    // and a second try shrinks the cells as a surface's occupancy scales (with the area).
+    h_ = cell_size(extent, std::max(1.0, double(n) / points_per_cell));
+    const double max_cells = std::max(64.0, kMaxCellsPerPoint * double(n));
+    size_t cells = 0;
+    for (int attempt = 0;; ++attempt) {
+        // Cells per axis are bounded so that the cell array stays within max_cells.
+        for (;;) {
+            double total = 1;
+            for (int a = 0; a < 3; ++a) {
+                dims_[a] = int(std::min(double(extent[a]) / h_, 4096.0)) + 1;
+                total *= dims_[a];
+            }
+            if (total <= max_cells) break;
+            h_ *= 1.25f;
         }
-        if (total <= max_cells) break;
-        h_ *= 1.25f;
-    }
-    inv_h_ = 1.0f / h_;
-    const size_t cells = size_t(dims_[0]) * size_t(dims_[1]) * size_t(dims_[2]);
-    cell_start_.assign(cells + 1, 0);
-    cell_of_.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-        int c[3];
-        for (int a = 0; a < 3; ++a)
-            c[a] = std::clamp(int((xyz[3 * i + a] - lo_[a]) * inv_h_), 0, dims_[a] - 1);
-        const uint32_t cell = uint32_t((size_t(c[0]) * size_t(dims_[1]) + size_t(c[1])) * size_t(dims_[2]) + size_t(c[2]));
-        cell_of_[i] = cell;
-        ++cell_start_[cell + 1];
+        inv_h_ = 1.0f / h_;
+        cells = size_t(dims_[0]) * size_t(dims_[1]) * size_t(dims_[2]);
+        cell_start_.assign(cells + 1, 0);
+        cell_of_.resize(n);
+        size_t occupied = 0;
+        for (size_t i = 0; i < n; ++i) {
+            int c[3];
+            for (int a = 0; a < 3; ++a)
+                c[a] = std::clamp(int((xyz[3 * i + a] - lo_[a]) * inv_h_), 0, dims_[a] - 1);
+            const uint32_t cell = uint32_t((size_t(c[0]) * size_t(dims_[1]) + size_t(c[1])) * size_t(dims_[2]) + size_t(c[2]));
+            cell_of_[i] = cell;
+            occupied += cell_start_[cell + 1]++ == 0;
+        }
+        const double crowd = double(n) / double(std::max<size_t>(occupied, 1));
+        if (attempt > 0 || crowd < 1.5 * points_per_cell) break;
+        h_ *= float(std::sqrt(points_per_cell / crowd));
     }
     double squares = 0;
     for (size_t c = 1; c <= cells; ++c) {
@@ -98,6 +106,14 @@ void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double cell
     }
     for (size_t c = cells; c > 0; --c) cell_start_[c] = cell_start_[c - 1];
     cell_start_[0] = 0;
+    px_.resize(n);
+    py_.resize(n);
+    pz_.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        px_[i] = points_[i].p[0];
+        py_[i] = points_[i].p[1];
+        pz_[i] = points_[i].p[2];
+    }
 }
 
 // Offers the points of cells [first_cell, last_cell] (one row along z: contiguous in points_).
@@ -151,10 +167,10 @@ size_t GridKnn::nearest(const float q[3], size_t k, uint32_t* index, float* dist
     return list.found;
 }
 
-void LocalKnn::build(const float* xyz, const uint32_t* ids, size_t n, double cells_per_point) {
+void LocalKnn::build(const float* xyz, const uint32_t* ids, size_t n, double points_per_cell) {
     xyz_ = xyz;
     n_ = n;
-    grid_.build(xyz, ids, n, cells_per_point);
+    grid_.build(xyz, ids, n, points_per_cell);
     use_tree_ = grid_.expected_scan() > kClumped;
     if (!use_tree_) return;
     tree_.build(xyz, n, false);

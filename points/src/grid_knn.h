@@ -27,11 +27,13 @@ public:
     // all_nearest selects up to this many by insertion, more by nth_element (measured on the
     // simplifier's k = 5 and the estimates' k = 16).
     static constexpr size_t kInsertionK = 8;
+    static constexpr double kMaxCellsPerPoint = 64;
 
     // Builds over n points (xyz: 3 floats each); ids[i] is what queries report for point i
-    // (null: i). The cell size gives about cells_per_point * n cells over the points' box
-    // (axes thinner than a cell get one). Keeps its buffers for the next build.
-    void build(const float* xyz, const uint32_t* ids, size_t n, double cells_per_point);
+    // (null: i). The cell size is chosen for about points_per_cell points in an occupied cell
+    // (on surfaces as in volumes), within kMaxCellsPerPoint cells a point (axes thinner than
+    // a cell get one). Keeps its buffers for the next build.
+    void build(const float* xyz, const uint32_t* ids, size_t n, double points_per_cell);
 
     // The min(k, n) nearest points to q (q may be one of them: it is then found first, at
     // distance 0), nearest first; k <= kMaxK. Returns how many were found.
@@ -61,10 +63,10 @@ private:
     std::vector<Point> points_;         // by cell
     std::vector<uint32_t> cell_start_;  // points_ of cell c: [cell_start_[c], cell_start_[c + 1])
     std::vector<uint32_t> cell_of_;     // build scratch: each input point's cell
-    std::vector<float> block_[3];       // all_nearest's scratch: a block's points, by axis
-    std::vector<uint32_t> block_id_;
-    std::vector<float> block_d2_;
-    std::vector<uint64_t> keys_;
+    std::vector<float> px_, py_, pz_;   // points_'s coordinates by axis, for all_nearest's loops
+    std::vector<float> block_d2_;       // all_nearest's scratch: distances to a block's points,
+    std::vector<uint32_t> block_at_;    // their positions in points_,
+    std::vector<uint64_t> keys_;        // and the selection's keys (as big as the largest block yet)
     float lo_[3] = {0, 0, 0};
     float h_ = 1, inv_h_ = 1;
     int dims_[3] = {1, 1, 1};
@@ -85,21 +87,27 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                 bool any = false;
                 for (uint32_t i = first; i < last && !any; ++i) any = is_query(points_[i].id);
                 if (!any) continue;
-                // The block's points, gathered by axis (rows along z are contiguous).
-                for (auto& b : block_) b.clear();
-                block_id_.clear();
+                // The block's points: rows along z are contiguous in the cell order.
+                uint32_t ranges[9][2];
+                size_t rows = 0;
                 const int z0 = std::max(cz - 1, 0), z1 = std::min(cz + 1, dims_[2] - 1);
                 for (int x = std::max(cx - 1, 0); x <= std::min(cx + 1, dims_[0] - 1); ++x)
                     for (int y = std::max(cy - 1, 0); y <= std::min(cy + 1, dims_[1] - 1); ++y) {
                         const size_t row = (size_t(x) * dy + size_t(y)) * dz;
-                        for (uint32_t i = cell_start_[row + size_t(z0)]; i < cell_start_[row + size_t(z1) + 1]; ++i) {
-                            for (int a = 0; a < 3; ++a) block_[a].push_back(points_[i].p[a]);
-                            block_id_.push_back(points_[i].id);
+                        const uint32_t b = cell_start_[row + size_t(z0)], e = cell_start_[row + size_t(z1) + 1];
+                        if (b < e) {
+                            ranges[rows][0] = b;
+                            ranges[rows][1] = e;
+                            ++rows;
                         }
                     }
-                const size_t m = block_id_.size();
-                block_d2_.resize(m);
-                keys_.resize(m);
+                size_t block = 0;
+                for (size_t r = 0; r < rows; ++r) block += ranges[r][1] - ranges[r][0];
+                if (block_d2_.size() < block) {
+                    block_d2_.resize(block);
+                    block_at_.resize(block);
+                    keys_.resize(block);
+                }
                 const int c[3] = {cx, cy, cz};
                 for (uint32_t i = first; i < last; ++i) {
                     const Point& point = points_[i];
@@ -112,11 +120,20 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                     }
                     bound = std::max(bound - slack, 0.0f);
                     const float bound2 = bound == INFINITY ? INFINITY : bound * bound;
-                    const float *bx = block_[0].data(), *by = block_[1].data(), *bz = block_[2].data();
+                    // Distances to the block (SoA: one vectorizable loop per row), with the
+                    // position of each point.
+                    size_t m = 0;
                     float* d2 = block_d2_.data();
-                    for (size_t j = 0; j < m; ++j) {
-                        const float dx = bx[j] - q[0], dyy = by[j] - q[1], dzz = bz[j] - q[2];
-                        d2[j] = dx * dx + dyy * dyy + dzz * dzz;
+                    uint32_t* at_point = block_at_.data();
+                    const float *px = px_.data(), *py = py_.data(), *pz = pz_.data();
+                    for (size_t r = 0; r < rows; ++r) {
+                        const uint32_t b = ranges[r][0], e = ranges[r][1];
+                        for (uint32_t j = b; j < e; ++j) {
+                            const float dx = px[j] - q[0], dyy = py[j] - q[1], dzz = pz[j] - q[2];
+                            d2[m + (j - b)] = dx * dx + dyy * dyy + dzz * dzz;
+                            at_point[m + (j - b)] = j;
+                        }
+                        m += e - b;
                     }
                     const size_t want = std::min(k, points_.size());
                     size_t found = 0;
@@ -137,7 +154,7 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                             index[at] = uint32_t(j);
                             if (found == want) worst = distance2[want - 1];
                         }
-                        for (size_t j = 0; j < found; ++j) index[j] = block_id_[index[j]];
+                        for (size_t j = 0; j < found; ++j) index[j] = points_[at_point[index[j]]].id;
                     } else {
                         // Those certain to be nearer than anything outside the block, as keys
                         // that sort by distance, then by position in the block (a float's bits
@@ -155,7 +172,7 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                             found = want;
                             for (size_t j = 0; j < want; ++j) {
                                 const uint32_t at = uint32_t(keys[j]);
-                                index[j] = block_id_[at];
+                                index[j] = points_[at_point[at]].id;
                                 distance2[j] = d2[at];
                             }
                         }
@@ -176,7 +193,7 @@ class LocalKnn {
 public:
     static constexpr double kClumped = 48;
 
-    void build(const float* xyz, const uint32_t* ids, size_t n, double cells_per_point);
+    void build(const float* xyz, const uint32_t* ids, size_t n, double points_per_cell);
     size_t nearest(const float q[3], size_t k, uint32_t* index, float* distance2) const;
     // As GridKnn::all_nearest (the kd-tree: queries in input order). The build's points must
     // still be there.
