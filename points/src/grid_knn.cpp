@@ -100,10 +100,16 @@ void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double poin
     points_.resize(n);
     // Scatter with the starts as cursors, then shift them back (cell c's start is where c - 1's
     // cursor ended).
+    sorted_cell_.resize(n);
     for (size_t i = 0; i < n; ++i) {
-        Point& p = points_[cell_start_[cell_of_[i]]++];
-        p = {{xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]}, ids ? ids[i] : uint32_t(i)};
+        const uint32_t at = cell_start_[cell_of_[i]]++;
+        points_[at] = {{xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]}, ids ? ids[i] : uint32_t(i)};
+        sorted_cell_[at] = cell_of_[i];
     }
+    // The occupied cells in order, from the sorted points (all_nearest visits only these).
+    occupied_.clear();
+    for (size_t i = 0; i < n; ++i)
+        if (i == 0 || sorted_cell_[i] != sorted_cell_[i - 1]) occupied_.push_back(sorted_cell_[i]);
     for (size_t c = cells; c > 0; --c) cell_start_[c] = cell_start_[c - 1];
     cell_start_[0] = 0;
     px_.resize(n);

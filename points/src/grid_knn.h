@@ -27,7 +27,9 @@ public:
     // all_nearest selects up to this many by insertion, more by nth_element (measured on the
     // simplifier's k = 5 and the estimates' k = 16).
     static constexpr size_t kInsertionK = 8;
-    static constexpr double kMaxCellsPerPoint = 64;
+    // Every cell costs a few passes at build time (zeroing, prefix sums): on the scan, 64 cells
+    // a point made that a fifth of the simplifier's instructions.
+    static constexpr double kMaxCellsPerPoint = 16;
 
     // Builds over n points (xyz: 3 floats each); ids[i] is what queries report for point i
     // (null: i). The cell size is chosen for about points_per_cell points in an occupied cell
@@ -62,7 +64,9 @@ private:
 
     std::vector<Point> points_;         // by cell
     std::vector<uint32_t> cell_start_;  // points_ of cell c: [cell_start_[c], cell_start_[c + 1])
-    std::vector<uint32_t> cell_of_;     // build scratch: each input point's cell
+    std::vector<uint32_t> cell_of_;     // build scratch: each input point's cell,
+    std::vector<uint32_t> sorted_cell_;  // each of points_'s
+    std::vector<uint32_t> occupied_;    // the cells holding points, in order
     std::vector<float> px_, py_, pz_;   // points_'s coordinates by axis, for all_nearest's loops
     std::vector<float> block_d2_;       // all_nearest's scratch: distances to a block's points,
     std::vector<uint32_t> block_at_;    // their positions in points_,
@@ -79,112 +83,127 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
     float distance2[kMaxK];
     const float slack = h_ * 1e-4f;
     const size_t dy = size_t(dims_[1]), dz = size_t(dims_[2]);
-    for (int cx = 0; cx < dims_[0]; ++cx)
-        for (int cy = 0; cy < dims_[1]; ++cy)
-            for (int cz = 0; cz < dims_[2]; ++cz) {
-                const size_t cell = (size_t(cx) * dy + size_t(cy)) * dz + size_t(cz);
-                const uint32_t first = cell_start_[cell], last = cell_start_[cell + 1];
-                bool any = false;
-                for (uint32_t i = first; i < last && !any; ++i) any = is_query(points_[i].id);
-                if (!any) continue;
-                // The block's points: rows along z are contiguous in the cell order.
-                uint32_t ranges[9][2];
-                size_t rows = 0;
-                const int z0 = std::max(cz - 1, 0), z1 = std::min(cz + 1, dims_[2] - 1);
-                for (int x = std::max(cx - 1, 0); x <= std::min(cx + 1, dims_[0] - 1); ++x)
-                    for (int y = std::max(cy - 1, 0); y <= std::min(cy + 1, dims_[1] - 1); ++y) {
-                        const size_t row = (size_t(x) * dy + size_t(y)) * dz;
-                        const uint32_t b = cell_start_[row + size_t(z0)], e = cell_start_[row + size_t(z1) + 1];
-                        if (b < e) {
-                            ranges[rows][0] = b;
-                            ranges[rows][1] = e;
-                            ++rows;
-                        }
-                    }
-                size_t block = 0;
-                for (size_t r = 0; r < rows; ++r) block += ranges[r][1] - ranges[r][0];
-                if (block_d2_.size() < block) {
-                    block_d2_.resize(block);
-                    block_at_.resize(block);
-                    keys_.resize(block);
-                }
-                const int c[3] = {cx, cy, cz};
-                for (uint32_t i = first; i < last; ++i) {
-                    const Point& point = points_[i];
-                    if (!is_query(point.id)) continue;
-                    const float* q = point.p;
-                    float bound = INFINITY;
-                    for (int a = 0; a < 3; ++a) {
-                        if (c[a] - 1 > 0) bound = std::min(bound, q[a] - (lo_[a] + float(c[a] - 1) * h_));
-                        if (c[a] + 1 < dims_[a] - 1) bound = std::min(bound, lo_[a] + float(c[a] + 2) * h_ - q[a]);
-                    }
-                    bound = std::max(bound - slack, 0.0f);
-                    const float bound2 = bound == INFINITY ? INFINITY : bound * bound;
-                    // Distances to the block (SoA: one vectorizable loop per row), with the
-                    // position of each point.
-                    size_t m = 0;
-                    float* d2 = block_d2_.data();
-                    uint32_t* at_point = block_at_.data();
-                    const float *px = px_.data(), *py = py_.data(), *pz = pz_.data();
-                    for (size_t r = 0; r < rows; ++r) {
-                        const uint32_t b = ranges[r][0], e = ranges[r][1];
-                        for (uint32_t j = b; j < e; ++j) {
-                            const float dx = px[j] - q[0], dyy = py[j] - q[1], dzz = pz[j] - q[2];
-                            d2[m + (j - b)] = dx * dx + dyy * dyy + dzz * dzz;
-                            at_point[m + (j - b)] = j;
-                        }
-                        m += e - b;
-                    }
-                    const size_t want = std::min(k, points_.size());
-                    size_t found = 0;
-                    if (want <= kInsertionK) {
-                        // Few wanted: most candidates fail one comparison with the worst kept.
-                        float worst = bound2;
-                        for (size_t j = 0; j < m; ++j) {
-                            const float d = d2[j];
-                            if (!(d <= worst)) continue;
-                            if (found == want && d == worst) continue;  // ties: the earlier in the block
-                            size_t at = found < want ? found++ : want - 1;
-                            while (at > 0 && distance2[at - 1] > d) {
-                                distance2[at] = distance2[at - 1];
-                                index[at] = index[at - 1];
-                                --at;
-                            }
-                            distance2[at] = d;
-                            index[at] = uint32_t(j);
-                            if (found == want) worst = distance2[want - 1];
-                        }
-                        for (size_t j = 0; j < found; ++j) index[j] = points_[at_point[index[j]]].id;
-                    } else {
-                        // Those certain to be nearer than anything outside the block, as keys
-                        // that sort by distance, then by position in the block (a float's bits
-                        // order as the float does, for non-negative floats).
-                        uint64_t* keys = keys_.data();
-                        for (size_t j = 0; j < m; ++j) {
-                            uint32_t bits;
-                            std::memcpy(&bits, &d2[j], 4);
-                            keys[found] = (uint64_t(bits) << 32) | uint64_t(j);
-                            found += d2[j] <= bound2;
-                        }
-                        if (found >= want) {
-                            if (found > want) std::nth_element(keys, keys + (want - 1), keys + found);
-                            std::sort(keys, keys + want);
-                            found = want;
-                            for (size_t j = 0; j < want; ++j) {
-                                const uint32_t at = uint32_t(keys[j]);
-                                index[j] = points_[at_point[at]].id;
-                                distance2[j] = d2[at];
-                            }
-                        }
-                    }
-                    if (found < want) {  // the block does not settle it: search rings
-                        const size_t all = nearest(q, k, index, distance2);
-                        visit(point.id, q, all, index, distance2);
-                        continue;
-                    }
-                    visit(point.id, q, want, index, distance2);
+    // The previous query and the distance to its k-th nearest: by the triangle inequality, the
+    // next query's k nearest are within that plus the distance between the two queries, which
+    // (with neighbouring queries, as in the cell order) prunes most of the block before the
+    // selection.
+    float previous[3] = {0, 0, 0}, previous_reach = -1;
+    for (const uint32_t cell : occupied_) {
+        const int cz = int(cell % dz), cy = int((cell / dz) % dy), cx = int(cell / dz / dy);
+        const uint32_t first = cell_start_[cell], last = cell_start_[cell + 1];
+        bool any = false;
+        for (uint32_t i = first; i < last && !any; ++i) any = is_query(points_[i].id);
+        if (!any) continue;
+        // The block's points: rows along z are contiguous in the cell order.
+        uint32_t ranges[9][2];
+        size_t rows = 0;
+        const int z0 = std::max(cz - 1, 0), z1 = std::min(cz + 1, dims_[2] - 1);
+        for (int x = std::max(cx - 1, 0); x <= std::min(cx + 1, dims_[0] - 1); ++x)
+            for (int y = std::max(cy - 1, 0); y <= std::min(cy + 1, dims_[1] - 1); ++y) {
+                const size_t row = (size_t(x) * dy + size_t(y)) * dz;
+                const uint32_t b = cell_start_[row + size_t(z0)], e = cell_start_[row + size_t(z1) + 1];
+                if (b < e) {
+                    ranges[rows][0] = b;
+                    ranges[rows][1] = e;
+                    ++rows;
                 }
             }
+        size_t block = 0;
+        for (size_t r = 0; r < rows; ++r) block += ranges[r][1] - ranges[r][0];
+        if (block_d2_.size() < block) {
+            block_d2_.resize(block);
+            block_at_.resize(block);
+            keys_.resize(block);
+        }
+        const int c[3] = {cx, cy, cz};
+        for (uint32_t i = first; i < last; ++i) {
+            const Point& point = points_[i];
+            if (!is_query(point.id)) continue;
+            const float* q = point.p;
+            float bound = INFINITY;
+            for (int a = 0; a < 3; ++a) {
+                if (c[a] - 1 > 0) bound = std::min(bound, q[a] - (lo_[a] + float(c[a] - 1) * h_));
+                if (c[a] + 1 < dims_[a] - 1) bound = std::min(bound, lo_[a] + float(c[a] + 2) * h_ - q[a]);
+            }
+            bound = std::max(bound - slack, 0.0f);
+            float bound2 = bound == INFINITY ? INFINITY : bound * bound;
+            if (previous_reach >= 0) {
+                float apart2 = 0;
+                for (int a = 0; a < 3; ++a) apart2 += (q[a] - previous[a]) * (q[a] - previous[a]);
+                const float reach = (previous_reach + std::sqrt(apart2)) * (1 + 1e-4f);
+                bound2 = std::min(bound2, reach * reach);
+            }
+            // Distances to the block (SoA: one vectorizable loop per row), with the
+            // position of each point.
+            size_t m = 0;
+            float* __restrict d2 = block_d2_.data();
+            uint32_t* __restrict at_point = block_at_.data();
+            const float* __restrict px = px_.data();
+            const float* __restrict py = py_.data();
+            const float* __restrict pz = pz_.data();
+            const float qx = q[0], qy = q[1], qz = q[2];
+            for (size_t r = 0; r < rows; ++r) {
+                const size_t b = ranges[r][0], count = ranges[r][1] - b;
+                float* __restrict out = d2 + m;
+                uint32_t* __restrict out_at = at_point + m;
+                const float* __restrict x = px + b;
+                const float* __restrict y = py + b;
+                const float* __restrict z = pz + b;
+                for (size_t j = 0; j < count; ++j) {
+                    const float dx = x[j] - qx, dyy = y[j] - qy, dzz = z[j] - qz;
+                    out[j] = dx * dx + dyy * dyy + dzz * dzz;
+                    out_at[j] = uint32_t(b + j);
+                }
+                m += count;
+            }
+            const size_t want = std::min(k, points_.size());
+            size_t found = 0;
+            if (want <= kInsertionK) {
+                // Few wanted: most candidates fail one comparison with the worst kept.
+                float worst = bound2;
+                for (size_t j = 0; j < m; ++j) {
+                    const float d = d2[j];
+                    if (!(d <= worst)) continue;
+                    if (found == want && d == worst) continue;  // ties: the earlier in the block
+                    size_t at = found < want ? found++ : want - 1;
+                    while (at > 0 && distance2[at - 1] > d) {
+                        distance2[at] = distance2[at - 1];
+                        index[at] = index[at - 1];
+                        --at;
+                    }
+                    distance2[at] = d;
+                    index[at] = uint32_t(j);
+                    if (found == want) worst = distance2[want - 1];
+                }
+                for (size_t j = 0; j < found; ++j) index[j] = points_[at_point[index[j]]].id;
+            } else {
+                // Those certain to be nearer than anything outside the block, as keys
+                // that sort by distance, then by position in the block (a float's bits
+                // order as the float does, for non-negative floats).
+                uint64_t* keys = keys_.data();
+                for (size_t j = 0; j < m; ++j) {
+                    uint32_t bits;
+                    std::memcpy(&bits, &d2[j], 4);
+                    keys[found] = (uint64_t(bits) << 32) | uint64_t(j);
+                    found += d2[j] <= bound2;
+                }
+                if (found >= want) {
+                    if (found > want) std::nth_element(keys, keys + (want - 1), keys + found);
+                    std::sort(keys, keys + want);
+                    found = want;
+                    for (size_t j = 0; j < want; ++j) {
+                        const uint32_t at = uint32_t(keys[j]);
+                        index[j] = points_[at_point[at]].id;
+                        distance2[j] = d2[at];
+                    }
+                }
+            }
+            if (found < want) found = nearest(q, k, index, distance2);  // the block does not settle it: search rings
+            std::copy(q, q + 3, previous);
+            previous_reach = found == k ? std::sqrt(distance2[k - 1]) : -1;
+            visit(point.id, q, found, index, distance2);
+        }
+    }
 }
 
 // A grid (GridKnn), or a kd-tree where the grid would scan clumps (duplicates, a dense cluster
