@@ -68,7 +68,8 @@ private:
     std::vector<uint32_t> sorted_cell_;  // each of points_'s
     std::vector<uint32_t> occupied_;    // the cells holding points, in order
     std::vector<float> px_, py_, pz_;   // points_'s coordinates by axis, for all_nearest's loops
-    std::vector<float> block_d2_;       // all_nearest's scratch: distances to a block's points,
+    std::vector<float> block_[3];       // all_nearest's scratch: a block's points by axis,
+    std::vector<float> block_d2_;       // their distances to a query,
     std::vector<uint32_t> block_at_;    // their positions in points_,
     std::vector<uint64_t> keys_;        // and the selection's keys (as big as the largest block yet)
     float lo_[3] = {0, 0, 0};
@@ -108,12 +109,23 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                     ++rows;
                 }
             }
-        size_t block = 0;
-        for (size_t r = 0; r < rows; ++r) block += ranges[r][1] - ranges[r][0];
-        if (block_d2_.size() < block) {
-            block_d2_.resize(block);
-            block_at_.resize(block);
-            keys_.resize(block);
+        // Gathered once for the cell's queries (by axis, with their positions in points_), so
+        // that each query's distances are one vectorizable loop (per row, rows of a few points
+        // spent more on loop overhead than on distances).
+        size_t m = 0;
+        for (size_t r = 0; r < rows; ++r) m += ranges[r][1] - ranges[r][0];
+        if (block_d2_.size() < m) {
+            block_d2_.resize(m);
+            block_at_.resize(m);
+            keys_.resize(m);
+            for (auto& b : block_) b.resize(m);
+        }
+        for (size_t r = 0, to = 0; r < rows; ++r) {
+            const uint32_t b = ranges[r][0], e = ranges[r][1];
+            std::copy(px_.data() + b, px_.data() + e, block_[0].data() + to);
+            std::copy(py_.data() + b, py_.data() + e, block_[1].data() + to);
+            std::copy(pz_.data() + b, pz_.data() + e, block_[2].data() + to);
+            for (uint32_t j = b; j < e; ++j) block_at_[to++] = j;
         }
         const int c[3] = {cx, cy, cz};
         for (uint32_t i = first; i < last; ++i) {
@@ -133,28 +145,15 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                 const float reach = (previous_reach + std::sqrt(apart2)) * (1 + 1e-4f);
                 bound2 = std::min(bound2, reach * reach);
             }
-            // Distances to the block (SoA: one vectorizable loop per row), with the
-            // position of each point.
-            size_t m = 0;
             float* __restrict d2 = block_d2_.data();
-            uint32_t* __restrict at_point = block_at_.data();
-            const float* __restrict px = px_.data();
-            const float* __restrict py = py_.data();
-            const float* __restrict pz = pz_.data();
+            const uint32_t* at_point = block_at_.data();
+            const float* __restrict x = block_[0].data();
+            const float* __restrict y = block_[1].data();
+            const float* __restrict z = block_[2].data();
             const float qx = q[0], qy = q[1], qz = q[2];
-            for (size_t r = 0; r < rows; ++r) {
-                const size_t b = ranges[r][0], count = ranges[r][1] - b;
-                float* __restrict out = d2 + m;
-                uint32_t* __restrict out_at = at_point + m;
-                const float* __restrict x = px + b;
-                const float* __restrict y = py + b;
-                const float* __restrict z = pz + b;
-                for (size_t j = 0; j < count; ++j) {
-                    const float dx = x[j] - qx, dyy = y[j] - qy, dzz = z[j] - qz;
-                    out[j] = dx * dx + dyy * dyy + dzz * dzz;
-                    out_at[j] = uint32_t(b + j);
-                }
-                m += count;
+            for (size_t j = 0; j < m; ++j) {
+                const float dx = x[j] - qx, dyy = y[j] - qy, dzz = z[j] - qz;
+                d2[j] = dx * dx + dyy * dyy + dzz * dzz;
             }
             const size_t want = std::min(k, points_.size());
             size_t found = 0;
