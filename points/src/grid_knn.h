@@ -106,6 +106,9 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                 if (b < e) {
                     ranges[rows][0] = b;
                     ranges[rows][1] = e;
+                    // The query's own row first: its points are the nearest on average, so the
+                    // selection's worst kept drops early and fewer later candidates get in.
+                    if (x == cx && y == cy) std::swap(ranges[0], ranges[rows]);
                     ++rows;
                 }
             }
@@ -120,13 +123,18 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
             keys_.resize(m);
             for (auto& b : block_) b.resize(m);
         }
-        for (size_t r = 0, to = 0; r < rows; ++r) {
-            const uint32_t b = ranges[r][0], e = ranges[r][1];
-            std::copy(px_.data() + b, px_.data() + e, block_[0].data() + to);
-            std::copy(py_.data() + b, py_.data() + e, block_[1].data() + to);
-            std::copy(pz_.data() + b, pz_.data() + e, block_[2].data() + to);
-            for (uint32_t j = b; j < e; ++j) block_at_[to++] = j;
-        }
+        // (A plain loop: rows hold a few points, for which calls to memmove cost more than
+        // the copy.)
+        float* __restrict bx = block_[0].data();
+        float* __restrict by = block_[1].data();
+        float* __restrict bz = block_[2].data();
+        for (size_t r = 0, to = 0; r < rows; ++r)
+            for (uint32_t j = ranges[r][0]; j < ranges[r][1]; ++j, ++to) {
+                bx[to] = px_[j];
+                by[to] = py_[j];
+                bz[to] = pz_[j];
+                block_at_[to] = j;
+            }
         const int c[3] = {cx, cy, cz};
         for (uint32_t i = first; i < last; ++i) {
             const Point& point = points_[i];
