@@ -87,6 +87,7 @@ void orient_leaf(const EstimateInput& in, size_t begin, size_t end, const std::v
                  size_t k, Vec3f* normals) {
     const size_t n = end - begin;
     std::vector<uint8_t> done(n, 0);
+    std::vector<float> best(n, -1.0f);  // the strongest step queued to each point
     std::vector<uint32_t> piece;
     struct Step {
         float agreement;
@@ -110,7 +111,13 @@ void orient_leaf(const EstimateInput& in, size_t begin, size_t end, const std::v
             for (size_t j = 0; j < k; ++j) {
                 uint32_t other = neighbours[step.to * k + j];
                 if (other == UINT32_MAX || done[other]) continue;
-                queue.push({std::fabs(dot(normal, normals[begin + other])), step.to, other});
+                // A step weaker than one already queued to the same point would pop after it,
+                // when that point is done: it is not queued (the heap was 7% of the conversion's
+                // time; equal ones still are, so ties resolve as before).
+                const float agreement = std::fabs(dot(normal, normals[begin + other]));
+                if (agreement < best[other]) continue;
+                best[other] = agreement;
+                queue.push({agreement, step.to, other});
             }
         }
         double vote = 0;
