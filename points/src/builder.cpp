@@ -85,6 +85,7 @@ private:
     void partition_all();
     void build_search_tree();
     void halo(const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) const;
+    size_t nearest_all(const float q[3], size_t k, uint32_t* index, float* distance2) const;
     PointsMeta make_meta(const PointsBuildReport& report) const;
     std::vector<size_t> index_order() const;
     void summarize(PointsBuildReport& report) const;
@@ -310,6 +311,9 @@ std::vector<Splat> Builder::leaf_splats(const HNode& node) {
         in.xyz = xyz_.data();
         in.halo = [this](const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) {
             halo(lo, hi, begin, end, ids);
+        };
+        in.nearest = [this](const float q[3], size_t k, uint32_t* index, float* distance2) {
+            return nearest_all(q, k, index, distance2);
         };
         in.cloud_extent = cloud_extent_;
         in.neighbours = settings_.neighbours;
@@ -546,6 +550,61 @@ void Builder::halo(const float lo[3], const float hi[3], size_t begin, size_t en
 }
 
 // The metadata: node records in index order, (depth, key).
+// The k nearest points to q among all (estimate.h's NearestFn): best first over the hierarchy's
+// node boxes, scanning the leaves met, until no box is nearer than the k-th found. The leaves
+// are large (node_points), so this is for the few points a leaf's halo leaves unsettled.
+size_t Builder::nearest_all(const float q[3], size_t k, uint32_t* index, float* distance2) const {
+    auto box_distance2 = [q](const HNode& node) {
+        float d2 = 0;
+        for (int a = 0; a < 3; ++a) {
+            const float d = std::max({node.lo[a] - q[a], q[a] - node.hi[a], 0.0f});
+            d2 += d * d;
+        }
+        return d2;
+    };
+    struct Entry {
+        float d2;
+        uint32_t node;
+        bool operator<(const Entry& o) const { return d2 > o.d2 || (d2 == o.d2 && node > o.node); }  // min-heap
+    };
+    std::vector<Entry> heap = {{box_distance2(nodes_[0]), 0}};
+    size_t found = 0;
+    float worst = INFINITY;
+    while (!heap.empty()) {
+        std::pop_heap(heap.begin(), heap.end());
+        const Entry entry = heap.back();
+        heap.pop_back();
+        if (found == k && entry.d2 >= worst) break;
+        const HNode& node = nodes_[entry.node];
+        if (node.left >= 0) {
+            for (int32_t child : {node.left, node.right}) {
+                const float d2 = box_distance2(nodes_[size_t(child)]);
+                if (found < k || d2 < worst) {
+                    heap.push_back({d2, uint32_t(child)});
+                    std::push_heap(heap.begin(), heap.end());
+                }
+            }
+            continue;
+        }
+        for (uint32_t p = node.begin; p < node.end; ++p) {
+            const float* x = &xyz_[3 * size_t(p)];
+            const float dx = x[0] - q[0], dy = x[1] - q[1], dz = x[2] - q[2];
+            const float d2 = dx * dx + dy * dy + dz * dz;
+            if (found == k && !(d2 < worst)) continue;
+            size_t at = found < k ? found++ : k - 1;
+            while (at > 0 && distance2[at - 1] > d2) {
+                distance2[at] = distance2[at - 1];
+                index[at] = index[at - 1];
+                --at;
+            }
+            distance2[at] = d2;
+            index[at] = p;
+            if (found == k) worst = distance2[k - 1];
+        }
+    }
+    return found;
+}
+
 PointsMeta Builder::make_meta(const PointsBuildReport& report) const {
     PointsMeta meta;
     for (int a = 0; a < 3; ++a) {

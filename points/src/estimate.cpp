@@ -153,63 +153,9 @@ struct LeafScratch {
     std::vector<uint32_t> ids;
     std::vector<float> xyz;
     std::vector<uint32_t> pending, next;  // the points still without neighbours
-    std::vector<float> next_reach;         // next's k-th distances found (infinite: fewer than k)
-    std::vector<uint64_t> keys;            // search_alone's
     std::vector<uint8_t> wanted;           // by leaf position: still without neighbours
     LocalKnn knn;
 };
-
-// The k nearest of point i (of the leaf [begin, end)) on its own: the points in a box around it
-// as wide as `reach` (its k-th distance found so far, which bounds the true one; infinite when
-// fewer than k were found: then twice `margin`, doubling), widened to the k-th distance found in
-// the box until it lies within. An outlier, whose neighbours are far, so costs the scan of the
-// few leaves its box meets, rather than a halo as wide around its whole leaf. Returns how many
-// were found (min(k, points in the cloud)), nearest first, ties by the order of the search.
-size_t search_alone(const EstimateInput& in, size_t begin, size_t end, uint32_t i, size_t k, float reach, float margin,
-                    LeafScratch& s, uint32_t* index, float* distance2) {
-    const float* q = &in.xyz[3 * size_t(i)];
-    float r = std::isfinite(reach) ? reach : 2 * margin;
-    for (;;) {
-        const bool everything = !(r < in.cloud_extent);
-        float box_lo[3], box_hi[3];
-        for (int a = 0; a < 3; ++a) {
-            box_lo[a] = everything ? -INFINITY : q[a] - r;
-            box_hi[a] = everything ? INFINITY : q[a] + r;
-        }
-        s.ids.clear();
-        for (size_t j = begin; j < end; ++j) {
-            const float* p = &in.xyz[3 * j];
-            if (p[0] >= box_lo[0] && p[0] <= box_hi[0] && p[1] >= box_lo[1] && p[1] <= box_hi[1] && p[2] >= box_lo[2] &&
-                p[2] <= box_hi[2])
-                s.ids.push_back(uint32_t(j));
-        }
-        in.halo(box_lo, box_hi, begin, end, s.ids);
-        // Keys that sort by distance, then by position in ids (a float's bits order as it does).
-        s.keys.resize(s.ids.size());
-        for (size_t j = 0; j < s.ids.size(); ++j) {
-            const float* p = &in.xyz[3 * size_t(s.ids[j])];
-            const float dx = p[0] - q[0], dy = p[1] - q[1], dz = p[2] - q[2];
-            const float d2 = dx * dx + dy * dy + dz * dz;
-            uint32_t bits;
-            std::memcpy(&bits, &d2, 4);
-            s.keys[j] = (uint64_t(bits) << 32) | j;
-        }
-        const size_t found = std::min(k, s.keys.size());
-        if (found > 0) {
-            std::nth_element(s.keys.begin(), s.keys.begin() + ptrdiff_t(found - 1), s.keys.end());
-            std::sort(s.keys.begin(), s.keys.begin() + ptrdiff_t(found));
-        }
-        for (size_t j = 0; j < found; ++j) {
-            const uint32_t bits = uint32_t(s.keys[j] >> 32);
-            std::memcpy(&distance2[j], &bits, 4);
-            index[j] = s.ids[uint32_t(s.keys[j])];
-        }
-        // Every point within r is in the box: a k-th distance within r is exact.
-        const float kth = found == k ? std::sqrt(distance2[k - 1]) : INFINITY;
-        if (everything || kth <= r) return found;
-        r = std::isfinite(kth) ? std::max(kth, std::nextafter(r, INFINITY)) : 2 * r;
-    }
-}
 
 }  // namespace
 
@@ -248,7 +194,7 @@ void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* nor
     float margin = first_margin(lo, hi, n, k);
     if (!(margin > 0)) margin = std::max(in.cloud_extent * 1e-6f, 1e-30f);
     // Rounds over the whole leaf while many points are left (a first margin guessed too small
-    // doubles); the few left after that search on their own (search_alone).
+    // doubles); the few left after that search the whole cloud.
     for (bool first = true; !s.pending.empty() && (first || s.pending.size() > std::max<size_t>(n / 16, 8)); first = false) {
         // A margin as wide as the cloud takes in every point: the neighbours found are exact.
         const bool everything = !(margin < in.cloud_extent);
@@ -265,7 +211,6 @@ void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* nor
             for (int a = 0; a < 3; ++a) s.xyz[3 * i + a] = in.xyz[3 * size_t(s.ids[i]) + a];
         s.knn.build(s.xyz.data(), s.ids.data(), s.ids.size(), kPointsPerCell);
         s.next.clear();
-        s.next_reach.clear();
         auto wanted = [&](uint32_t id) { return id >= begin && id < end && s.wanted[id - begin]; };
         s.knn.all_nearest(k, wanted, [&](uint32_t i, const float* q, size_t found, const uint32_t* index, const float* distance2) {
             // A point outside the halo's box is farther from q than the margin plus q's distance
@@ -276,7 +221,6 @@ void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* nor
                 const float reach = found == k ? std::sqrt(distance2[k - 1]) : INFINITY;
                 if (!(reach <= margin + face)) {
                     s.next.push_back(i);
-                    s.next_reach.push_back(reach);
                     return;
                 }
             }
@@ -286,13 +230,11 @@ void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* nor
         s.pending.swap(s.next);
         margin *= 2;
     }
+    // The few left search the whole cloud: a halo wide enough for an outlier's far neighbours
+    // around the whole leaf would gather a big part of the cloud for every leaf holding one.
     uint32_t index[GridKnn::kMaxK];
     float distance2[GridKnn::kMaxK];
-    for (size_t p = 0; p < s.pending.size(); ++p) {
-        const uint32_t i = s.pending[p];
-        const size_t found = search_alone(in, begin, end, i, k, s.next_reach[p], margin, s, index, distance2);
-        settle(i, found, index, distance2);
-    }
+    for (const uint32_t i : s.pending) settle(i, in.nearest(&in.xyz[3 * size_t(i)], k, index, distance2), index, distance2);
     if (normals) orient_leaf(in, begin, end, local_neighbours, links, normals);
 }
 

@@ -9,6 +9,7 @@
 #include <array>
 #include <cstdio>
 #include <map>
+#include <tuple>
 #include <unordered_map>
 
 #include "common_codec/octahedral.h"
@@ -371,6 +372,17 @@ TEST(PointNeighbours, LeafEstimatesUseExactNeighboursAcrossLeavesAndForOutliers)
             if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
                 ids.push_back(uint32_t(i));
         }
+    };
+    in.nearest = [&](const float q[3], size_t k, uint32_t* index, float* distance2) {
+        std::vector<std::pair<float, uint32_t>> all(n);
+        for (size_t i = 0; i < n; ++i) {
+            const float dx = sorted[3 * i] - q[0], dy = sorted[3 * i + 1] - q[1], dz = sorted[3 * i + 2] - q[2];
+            all[i] = {dx * dx + dy * dy + dz * dz, uint32_t(i)};
+        }
+        std::sort(all.begin(), all.end());
+        const size_t found = std::min(k, n);
+        for (size_t j = 0; j < found; ++j) std::tie(distance2[j], index[j]) = all[j];
+        return found;
     };
     std::vector<float> radii(n, -1);
     std::vector<Vec3f> normals(n);
