@@ -5,6 +5,7 @@
 #include <atomic>
 #include <cassert>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <mutex>
 
@@ -148,6 +149,37 @@ uint32_t Builder::split_midpoint(Items& items, uint32_t begin, uint32_t end, con
     return at;
 }
 
+// The value of rank n / 2 of the items' coordinates on `axis` (what std::nth_element puts at
+// n / 2 of a copy of them). Large ranges select by a histogram of the top 16 bits of the
+// coordinates' order-preserving keys and a selection within the bucket holding that rank: on
+// 10M points, the copies and nth_elements of the balanced split were a tenth of the CPU time.
+float median_coordinate(const Items& items, uint32_t begin, uint32_t end, int axis) {
+    const size_t n = end - begin, rank = n / 2;
+    std::vector<float> values;
+    if (n < kParallelPoints) {
+        values.resize(n);
+        for (size_t i = 0; i < n; ++i) values[i] = items[begin + i].p[axis];
+        std::nth_element(values.begin(), values.begin() + ptrdiff_t(rank), values.end());
+        return values[rank];
+    }
+    // Floats order as these keys do (negatives reversed below the positives).
+    auto key = [](float v) {
+        uint32_t bits;
+        std::memcpy(&bits, &v, 4);
+        return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
+    };
+    std::vector<uint32_t> counts(size_t(1) << 16, 0);
+    for (uint32_t i = begin; i < end; ++i) ++counts[key(items[i].p[axis]) >> 16];
+    uint32_t bucket = 0;
+    size_t before = 0;
+    while (before + counts[bucket] <= rank) before += counts[bucket++];
+    values.reserve(counts[bucket]);
+    for (uint32_t i = begin; i < end; ++i)
+        if (key(items[i].p[axis]) >> 16 == bucket) values.push_back(items[i].p[axis]);
+    std::nth_element(values.begin(), values.begin() + ptrdiff_t(rank - before), values.end());
+    return values[rank - before];
+}
+
 // Seed 000: among the planes whose children are not thinner (across the plane) than the
 // longest side / max_aspect, the most balanced one; on each axis that is the median clamped to
 // the acceptable range, and the axis whose plane splits the counts most evenly wins.
@@ -165,13 +197,10 @@ uint32_t Builder::split_balanced(Items& items, uint32_t begin, uint32_t end, con
     uint64_t imbalances[3] = {UINT64_MAX, UINT64_MAX, UINT64_MAX};
     auto evaluate = [&](int axis) {
         if (hi[axis] - lo[axis] < 2 * margin) return;
-        std::vector<float> values(n);
-        for (uint32_t i = 0; i < n; ++i) values[i] = items[begin + i].p[axis];
-        std::nth_element(values.begin(), values.begin() + n / 2, values.end());
-        const float median = values[n / 2];
+        const float median = median_coordinate(items, begin, end, axis);
         const float plane = std::clamp(median, lo[axis] + margin, hi[axis] - margin);
         uint64_t below = 0;
-        for (uint32_t i = 0; i < n; ++i) below += values[i] < plane;
+        for (uint32_t i = begin; i < end; ++i) below += items[i].p[axis] < plane;
         uint64_t imbalance = below > n / 2 ? below - n / 2 : n / 2 - below;
         if (plane == median) imbalance = 0;  // the median itself: split by rank below
         planes[axis] = plane;
