@@ -26,7 +26,7 @@
 // over the leaf and the points around it (found through the hierarchy's node boxes, widened
 // per point until the neighbours are exact), a node's over its children's splats.
 //
-// Memory: in core, about 75 bytes per input point at the peak (10M points: 720 MiB, reading
+// Memory: in core, about 72 bytes per input point at the peak (10M points: 684 MiB, reading
 // included: the points in double precision with normals, colours and radii, the partition's
 // items, a float copy for the neighbour searches), plus node_points splats per level of the tree
 // per thread. Bounding it by processing one subtree at a time is not done yet.
