@@ -5,12 +5,14 @@
 #include <atomic>
 #include <cassert>
 #include <cmath>
+#include <cstring>
 #include <memory>
 #include <mutex>
 
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_invoke.h>
+#include <tbb/parallel_reduce.h>
 
 #include "base/error.h"
 #include "base/output_path.h"
@@ -19,7 +21,6 @@
 #include "common_codec/archive.h"
 #include "common_codec/octahedral.h"
 #include "estimate.h"
-#include "kdtree.h"
 #include "splat.h"
 
 namespace catpaq {
@@ -37,6 +38,7 @@ struct HNode {
     int32_t left = -1, right = -1;
     uint64_t key = 1;
     int depth = 0;
+    float lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};  // tight box of the points (set for the halo search)
 };
 
 // A point as the partition moves it: its position (float, relative to the origin: enough to
@@ -83,6 +85,8 @@ private:
     void prepare(PointsBuildReport& report);
     void partition_all();
     void build_search_tree();
+    void halo(const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) const;
+    size_t nearest_all(const float q[3], size_t k, uint32_t* index, float* distance2) const;
     PointsMeta make_meta(const PointsBuildReport& report) const;
     std::vector<size_t> index_order() const;
     void summarize(PointsBuildReport& report) const;
@@ -110,7 +114,8 @@ private:
     bool estimate_normals_ = false, estimate_radii_ = false;
     std::vector<HNode> nodes_;
     std::vector<NodeRecord> records_;
-    KdTree tree_;
+    std::vector<float> xyz_;  // the points as floats, 3 each, for the neighbour searches
+    float cloud_extent_ = 0;
     std::unique_ptr<ArchiveWriter> writer_;
 };
 
@@ -144,6 +149,37 @@ uint32_t Builder::split_midpoint(Items& items, uint32_t begin, uint32_t end, con
     return at;
 }
 
+// The value of rank n / 2 of the items' coordinates on `axis` (what std::nth_element puts at
+// n / 2 of a copy of them). Large ranges select by a histogram of the top 16 bits of the
+// coordinates' order-preserving keys and a selection within the bucket holding that rank: on
+// 10M points, the copies and nth_elements of the balanced split were a tenth of the CPU time.
+float median_coordinate(const Items& items, uint32_t begin, uint32_t end, int axis) {
+    const size_t n = end - begin, rank = n / 2;
+    std::vector<float> values;
+    if (n < kParallelPoints) {
+        values.resize(n);
+        for (size_t i = 0; i < n; ++i) values[i] = items[begin + i].p[axis];
+        std::nth_element(values.begin(), values.begin() + ptrdiff_t(rank), values.end());
+        return values[rank];
+    }
+    // Floats order as these keys do (negatives reversed below the positives).
+    auto key = [](float v) {
+        uint32_t bits;
+        std::memcpy(&bits, &v, 4);
+        return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
+    };
+    std::vector<uint32_t> counts(size_t(1) << 16, 0);
+    for (uint32_t i = begin; i < end; ++i) ++counts[key(items[i].p[axis]) >> 16];
+    uint32_t bucket = 0;
+    size_t before = 0;
+    while (before + counts[bucket] <= rank) before += counts[bucket++];
+    values.reserve(counts[bucket]);
+    for (uint32_t i = begin; i < end; ++i)
+        if (key(items[i].p[axis]) >> 16 == bucket) values.push_back(items[i].p[axis]);
+    std::nth_element(values.begin(), values.begin() + ptrdiff_t(rank - before), values.end());
+    return values[rank - before];
+}
+
 // Seed 000: among the planes whose children are not thinner (across the plane) than the
 // longest side / max_aspect, the most balanced one; on each axis that is the median clamped to
 // the acceptable range, and the axis whose plane splits the counts most evenly wins.
@@ -154,17 +190,31 @@ uint32_t Builder::split_balanced(Items& items, uint32_t begin, uint32_t end, con
     int best_axis = -1;
     float best_plane = 0;
     uint64_t best_imbalance = UINT64_MAX;
-    std::vector<float> values(n);
-    for (int axis = 0; axis < 3; ++axis) {
-        if (hi[axis] - lo[axis] < 2 * margin) continue;
-        for (uint32_t i = 0; i < n; ++i) values[i] = items[begin + i].p[axis];
-        std::nth_element(values.begin(), values.begin() + n / 2, values.end());
-        const float median = values[n / 2];
+    // Each axis's median plane and how unevenly it splits; the three are independent, and on
+    // large nodes (the first levels, which run before the tree fans out over the cores) they are
+    // found in parallel.
+    float planes[3] = {0, 0, 0};
+    uint64_t imbalances[3] = {UINT64_MAX, UINT64_MAX, UINT64_MAX};
+    auto evaluate = [&](int axis) {
+        if (hi[axis] - lo[axis] < 2 * margin) return;
+        const float median = median_coordinate(items, begin, end, axis);
         const float plane = std::clamp(median, lo[axis] + margin, hi[axis] - margin);
         uint64_t below = 0;
-        for (uint32_t i = 0; i < n; ++i) below += values[i] < plane;
+        for (uint32_t i = begin; i < end; ++i) below += items[i].p[axis] < plane;
         uint64_t imbalance = below > n / 2 ? below - n / 2 : n / 2 - below;
         if (plane == median) imbalance = 0;  // the median itself: split by rank below
+        planes[axis] = plane;
+        imbalances[axis] = imbalance;
+    };
+    if (n > kParallelPoints) {
+        tbb::parallel_for(0, 3, evaluate);
+    } else {
+        for (int axis = 0; axis < 3; ++axis) evaluate(axis);
+    }
+    for (int axis = 0; axis < 3; ++axis) {
+        if (imbalances[axis] == UINT64_MAX) continue;
+        const float plane = planes[axis];
+        const uint64_t imbalance = imbalances[axis];
         if (imbalance < best_imbalance ||
             (imbalance == best_imbalance && hi[axis] - lo[axis] > hi[best_axis] - lo[best_axis])) {
             best_axis = axis;
@@ -181,13 +231,48 @@ uint32_t Builder::split_balanced(Items& items, uint32_t begin, uint32_t end, con
     return at;
 }
 
-uint32_t Builder::choose_split(Items& items, uint32_t begin, uint32_t end, int depth) const {
-    float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-    for (uint32_t i = begin; i < end; ++i)
-        for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], items[i].p[a]);
-            hi[a] = std::max(hi[a], items[i].p[a]);
+// The tight box of items[begin, end) (in parallel for large ranges).
+void item_bounds(const Items& items, uint32_t begin, uint32_t end, float lo[3], float hi[3]) {
+    struct Box {
+        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        void add(const Box& o) {
+            for (int a = 0; a < 3; ++a) {
+                lo[a] = std::min(lo[a], o.lo[a]);
+                hi[a] = std::max(hi[a], o.hi[a]);
+            }
         }
+    };
+    auto range_box = [&items](size_t first, size_t last) {
+        Box box;
+        for (size_t i = first; i < last; ++i)
+            for (int a = 0; a < 3; ++a) {
+                box.lo[a] = std::min(box.lo[a], items[i].p[a]);
+                box.hi[a] = std::max(box.hi[a], items[i].p[a]);
+            }
+        return box;
+    };
+    Box box;
+    if (end - begin > kParallelPoints) {
+        box = tbb::parallel_reduce(
+            tbb::blocked_range<size_t>(begin, end, 1 << 15), Box(),
+            [&](const tbb::blocked_range<size_t>& r, Box b) {
+                b.add(range_box(r.begin(), r.end()));
+                return b;
+            },
+            [](Box a, const Box& b) {
+                a.add(b);
+                return a;
+            });
+    } else {
+        box = range_box(begin, end);
+    }
+    std::copy(box.lo, box.lo + 3, lo);
+    std::copy(box.hi, box.hi + 3, hi);
+}
+
+uint32_t Builder::choose_split(Items& items, uint32_t begin, uint32_t end, int depth) const {
+    float lo[3], hi[3];
+    item_bounds(items, begin, end, lo, hi);
     // Deep trees come from points that coincide or nearly do: split them by rank.
     if (depth >= kMidpointMaxDepth) return split_median(items, begin, end, 0);
     if (settings_.split == PointSplitRule::Balanced) return split_balanced(items, begin, end, lo, hi);
@@ -251,8 +336,15 @@ void Builder::apply_permutation(const std::vector<uint32_t>& perm) {
 std::vector<Splat> Builder::leaf_splats(const HNode& node) {
     if (estimate_normals_ || estimate_radii_) {
         EstimateInput in;
-        in.tree = &tree_;
         in.positions = cloud_.positions.data();
+        in.xyz = xyz_.data();
+        in.halo = [this](const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) {
+            halo(lo, hi, begin, end, ids);
+        };
+        in.nearest = [this](const float q[3], size_t k, uint32_t* index, float* distance2) {
+            return nearest_all(q, k, index, distance2);
+        };
+        in.cloud_extent = cloud_extent_;
         in.neighbours = settings_.neighbours;
         in.radius_neighbour = settings_.radius_neighbour;
         in.orient_up = settings_.orientation == NormalOrientation::Up ||
@@ -320,6 +412,7 @@ std::vector<Splat> Builder::finish_node(size_t index, std::vector<Splat> splats,
         record.box_min[a] = children_box_min ? children_box_min[a] : INFINITY;
         record.box_max[a] = children_box_max ? children_box_max[a] : -INFINITY;
     }
+    float splat_min[3] = {INFINITY, INFINITY, INFINITY}, splat_max[3] = {-INFINITY, -INFINITY, -INFINITY};
     for (size_t i = 0; i < n; ++i) {
         const Splat& in = splats[order[i]];
         Splat& s = out[i];
@@ -336,9 +429,15 @@ std::vector<Splat> Builder::finish_node(size_t index, std::vector<Splat> splats,
         error = std::max(error, double(s.cover));
         radius_sum += s.radius;
         for (int a = 0; a < 3; ++a) {
-            record.box_min[a] = std::min(record.box_min[a], std::nextafter(decoded.positions[3 * i + a] - s.radius, -INFINITY));
-            record.box_max[a] = std::max(record.box_max[a], std::nextafter(decoded.positions[3 * i + a] + s.radius, INFINITY));
+            splat_min[a] = std::min(splat_min[a], decoded.positions[3 * i + a] - s.radius);
+            splat_max[a] = std::max(splat_max[a], decoded.positions[3 * i + a] + s.radius);
         }
+    }
+    // Rounded outwards once per node: nextafter is monotone, so this is the box of the rounded
+    // splat boxes (per splat, its calls were 2% of the conversion's instructions).
+    for (int a = 0; a < 3; ++a) {
+        record.box_min[a] = std::min(record.box_min[a], std::nextafter(splat_min[a], -INFINITY));
+        record.box_max[a] = std::max(record.box_max[a], std::nextafter(splat_max[a], INFINITY));
     }
     record.error = round_up(error);
     record.count = uint32_t(n);
@@ -414,13 +513,127 @@ void Builder::partition_all() {
     records_.resize(nodes_.size());
 }
 
-// The search tree the leaves' estimates query (only when something is estimated).
+// What the leaves' neighbour searches read (only when something is estimated): the points as
+// floats, and the tight box of every node of the hierarchy, through which a leaf finds the
+// points around it (halo). This replaced a kd-tree over all points, whose queries were half the
+// conversion's time (grid_knn.h).
 void Builder::build_search_tree() {
     if (!estimate_normals_ && !estimate_radii_) return;
-    tree_.build(cloud_.positions.data(), cloud_.size(), true);
+    const size_t n = cloud_.size();
+    xyz_.resize(3 * n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i)
+            for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = float(cloud_.positions[i][a]);
+    });
+    // Leaves from their points (in parallel), inner nodes from their children, which come after
+    // them in the array.
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+            HNode& node = nodes_[i];
+            if (node.left >= 0) continue;
+            for (int a = 0; a < 3; ++a) {
+                node.lo[a] = INFINITY;
+                node.hi[a] = -INFINITY;
+            }
+            for (uint32_t p = node.begin; p < node.end; ++p)
+                for (int a = 0; a < 3; ++a) {
+                    node.lo[a] = std::min(node.lo[a], xyz_[3 * size_t(p) + a]);
+                    node.hi[a] = std::max(node.hi[a], xyz_[3 * size_t(p) + a]);
+                }
+        }
+    });
+    for (size_t i = nodes_.size(); i-- > 0;) {
+        HNode& node = nodes_[i];
+        if (node.left < 0) continue;
+        const HNode &l = nodes_[size_t(node.left)], &r = nodes_[size_t(node.right)];
+        for (int a = 0; a < 3; ++a) {
+            node.lo[a] = std::min(l.lo[a], r.lo[a]);
+            node.hi[a] = std::max(l.hi[a], r.hi[a]);
+        }
+    }
+    const HNode& root = nodes_[0];
+    cloud_extent_ = std::max({root.hi[0] - root.lo[0], root.hi[1] - root.lo[1], root.hi[2] - root.lo[2]});
+}
+
+// Appends the points in [lo, hi] of the leaves other than [begin, end) (estimate.h's HaloFn).
+void Builder::halo(const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) const {
+    uint32_t stack[2 * kPointMaxDepth + 2];
+    size_t depth = 0;
+    stack[depth++] = 0;
+    while (depth > 0) {
+        const HNode& node = nodes_[stack[--depth]];
+        bool apart = false;
+        for (int a = 0; a < 3; ++a) apart |= node.hi[a] < lo[a] || node.lo[a] > hi[a];
+        if (apart || (node.begin >= begin && node.end <= end)) continue;
+        if (node.left >= 0) {
+            stack[depth++] = uint32_t(node.right);
+            stack[depth++] = uint32_t(node.left);
+            continue;
+        }
+        for (uint32_t p = node.begin; p < node.end; ++p) {
+            const float* q = &xyz_[3 * size_t(p)];
+            if (q[0] >= lo[0] && q[0] <= hi[0] && q[1] >= lo[1] && q[1] <= hi[1] && q[2] >= lo[2] && q[2] <= hi[2])
+                ids.push_back(p);
+        }
+    }
 }
 
 // The metadata: node records in index order, (depth, key).
+// The k nearest points to q among all (estimate.h's NearestFn): best first over the hierarchy's
+// node boxes, scanning the leaves met, until no box is nearer than the k-th found. The leaves
+// are large (node_points), so this is for the few points a leaf's halo leaves unsettled.
+size_t Builder::nearest_all(const float q[3], size_t k, uint32_t* index, float* distance2) const {
+    auto box_distance2 = [q](const HNode& node) {
+        float d2 = 0;
+        for (int a = 0; a < 3; ++a) {
+            const float d = std::max({node.lo[a] - q[a], q[a] - node.hi[a], 0.0f});
+            d2 += d * d;
+        }
+        return d2;
+    };
+    struct Entry {
+        float d2;
+        uint32_t node;
+        bool operator<(const Entry& o) const { return d2 > o.d2 || (d2 == o.d2 && node > o.node); }  // min-heap
+    };
+    std::vector<Entry> heap = {{box_distance2(nodes_[0]), 0}};
+    size_t found = 0;
+    float worst = INFINITY;
+    while (!heap.empty()) {
+        std::pop_heap(heap.begin(), heap.end());
+        const Entry entry = heap.back();
+        heap.pop_back();
+        if (found == k && entry.d2 >= worst) break;
+        const HNode& node = nodes_[entry.node];
+        if (node.left >= 0) {
+            for (int32_t child : {node.left, node.right}) {
+                const float d2 = box_distance2(nodes_[size_t(child)]);
+                if (found < k || d2 < worst) {
+                    heap.push_back({d2, uint32_t(child)});
+                    std::push_heap(heap.begin(), heap.end());
+                }
+            }
+            continue;
+        }
+        for (uint32_t p = node.begin; p < node.end; ++p) {
+            const float* x = &xyz_[3 * size_t(p)];
+            const float dx = x[0] - q[0], dy = x[1] - q[1], dz = x[2] - q[2];
+            const float d2 = dx * dx + dy * dy + dz * dz;
+            if (found == k && !(d2 < worst)) continue;
+            size_t at = found < k ? found++ : k - 1;
+            while (at > 0 && distance2[at - 1] > d2) {
+                distance2[at] = distance2[at - 1];
+                index[at] = index[at - 1];
+                --at;
+            }
+            distance2[at] = d2;
+            index[at] = p;
+            if (found == k) worst = distance2[k - 1];
+        }
+    }
+    return found;
+}
+
 PointsMeta Builder::make_meta(const PointsBuildReport& report) const {
     PointsMeta meta;
     for (int a = 0; a < 3; ++a) {

@@ -3,15 +3,26 @@
 // neighbours (points/builder.h, step 3).
 #include <cstddef>
 #include <cstdint>
+#include <functional>
+#include <vector>
 
-#include "kdtree.h"
 #include "mesh/mesh.h"
 
 namespace catpaq::points_detail {
 
+// Appends to `ids` the points, other than the leaf's [begin, end), inside the box [lo, hi].
+using HaloFn = std::function<void(const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids)>;
+
+// The min(k, all) points nearest to q among all the cloud's, nearest first, exact; returns how
+// many. For the few points a leaf's halo leaves unsettled (outliers, whose neighbours are far).
+using NearestFn = std::function<size_t(const float q[3], size_t k, uint32_t* index, float* distance2)>;
+
 struct EstimateInput {
-    const KdTree* tree = nullptr;      // over all points (float, relative to the origin)
-    const Vec3d* positions = nullptr;  // the same points in double precision, in the tree's ids
+    const Vec3d* positions = nullptr;  // all points (relative to the origin), leaves contiguous
+    const float* xyz = nullptr;        // the same as floats, 3 per point
+    HaloFn halo;                       // the points around a leaf
+    NearestFn nearest;                 // a search over the whole cloud
+    float cloud_extent = 0;         // the cloud's largest side: a halo this wide holds every point
     size_t neighbours = 16;         // k of the normals' PCA
     size_t radius_neighbour = 6;    // a radius reaches this neighbour (PointsBuildSettings)
     bool orient_up = false;         // else outward from the origin (the bounds' centre)
@@ -19,7 +30,9 @@ struct EstimateInput {
 
 // Estimates normals (when `normals` is not null) and radii (when `radii` is not null) of the
 // points [begin, end), which are one leaf of the hierarchy: orientation is made consistent
-// within the leaf. Writes normals[begin, end) and radii[begin, end).
+// within the leaf. Writes normals[begin, end) and radii[begin, end). The neighbours are exact:
+// those of the leaf and a halo of its surroundings, widened for the points that need more; the
+// last few search the whole cloud (in.nearest).
 void estimate_leaf(const EstimateInput& in, size_t begin, size_t end, Vec3f* normals, float* radii);
 
 }  // namespace catpaq::points_detail

@@ -1,6 +1,7 @@
 #pragma once
 // Private to the points module: a static kd-tree over float points for k-nearest-neighbour
-// queries (normal and radius estimation, the simplifier's proximity graph). Median splits on
+// queries. The converter's searches use grids (grid_knn.h); this tree serves where points
+// clump, which a grid handles badly (LocalKnn), and any caller of a one-off query. Median splits on
 // the longest axis of each node's tight box, leaves of at most kLeafSize points; node slots are
 // computed from the subtree sizes, so the two halves build in parallel into disjoint slots.
 // The tree keeps the points themselves, with their ids, in tree order (16 bytes a point): a

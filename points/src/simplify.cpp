@@ -5,9 +5,11 @@
 // splats are found through a union-find (an edge to a merged splat leads to its survivor).
 #include <algorithm>
 #include <cassert>
+#include <array>
 #include <cmath>
+#include <cstring>
 
-#include "kdtree.h"
+#include "grid_knn.h"
 #include "splat.h"
 
 namespace catpaq::points_detail {
@@ -15,6 +17,9 @@ namespace {
 
 constexpr size_t kNeighbours = 4;
 constexpr float kOpposedNormalCost = 4.0f;
+// Splats per occupied cell of the neighbour search's grid (grid_knn.h), for k = 4 (1.5 to 4
+// measured within noise of each other).
+constexpr double kSplatsPerCell = 2;
 
 double distance(const double* a, const double* b) {
     double dx = a[0] - b[0], dy = a[1] - b[1], dz = a[2] - b[2];
@@ -44,6 +49,53 @@ struct Edge {
     }
 };
 
+// Sorts edges cheapest first, ties by a then b: the order of std::sort with Edge::operator<
+// reversed, by an LSD radix sort on (cost's bits, a) (costs are positive floats, whose bits
+// order as they do), then runs of equal (cost, a) by b. Written out because the comparison
+// sort was the simplifier's largest part after the neighbour search (6% of the conversion's
+// instructions, more of its time: its branches mispredict).
+void sort_edges(std::vector<Edge>& edges, std::vector<Edge>& scratch) {
+    const size_t n = edges.size();
+    auto key = [](const Edge& e) {
+        uint32_t bits;
+        std::memcpy(&bits, &e.cost, 4);
+        return (uint64_t(bits) << 32) | e.a;
+    };
+    auto by_key = [&](const Edge& x, const Edge& y) {
+        const uint64_t kx = key(x), ky = key(y);
+        return kx != ky ? kx < ky : x.b < y.b;
+    };
+    if (n < 256) {
+        std::sort(edges.begin(), edges.end(), by_key);
+        return;
+    }
+    std::vector<std::array<uint32_t, 256>> counts(8);
+    for (auto& c : counts) c.fill(0);
+    for (const Edge& e : edges) {
+        const uint64_t k = key(e);
+        for (int pass = 0; pass < 8; ++pass) ++counts[size_t(pass)][(k >> (8 * pass)) & 255];
+    }
+    scratch.resize(n);
+    for (int pass = 0; pass < 8; ++pass) {
+        std::array<uint32_t, 256>& c = counts[size_t(pass)];
+        if (c[(key(edges[0]) >> (8 * pass)) & 255] == n) continue;  // one byte value: already in order
+        uint32_t sum = 0;
+        for (uint32_t& v : c) {
+            const uint32_t count = v;
+            v = sum;
+            sum += count;
+        }
+        for (const Edge& e : edges) scratch[c[(key(e) >> (8 * pass)) & 255]++] = e;
+        edges.swap(scratch);
+    }
+    for (size_t i = 0; i + 1 < n;) {
+        size_t j = i + 1;
+        while (j < n && key(edges[j]) == key(edges[i])) ++j;
+        if (j - i > 1) std::sort(edges.begin() + ptrdiff_t(i), edges.begin() + ptrdiff_t(j), by_key);
+        i = j;
+    }
+}
+
 // The graph's edges come sorted once (cheapest first, a plain sort); only edges re-priced after
 // a merge go through the heap. Each step takes the cheaper of the two fronts, so the merges are
 // those of one heap holding everything, with far fewer heap operations.
@@ -53,6 +105,7 @@ struct Simplifier {
     std::vector<Edge> sorted;  // cheapest first; sorted[next] is the next one not taken
     size_t next = 0;
     std::vector<Edge> heap;    // re-priced edges
+    std::vector<Edge> scratch;  // sort_edges's
     size_t alive;
 
     explicit Simplifier(std::vector<Splat>& s) : splats(s), parent(s.size()), generation(s.size(), 0), alive(s.size()) {
@@ -80,8 +133,8 @@ struct Simplifier {
         std::vector<float> xyz(3 * live.size());
         for (size_t i = 0; i < live.size(); ++i)
             for (int a = 0; a < 3; ++a) xyz[3 * i + a] = float(splats[live[i]].p[a]);
-        KdTree tree;
-        tree.build(xyz.data(), live.size(), false);
+        LocalKnn knn;
+        knn.build(xyz.data(), nullptr, live.size(), kSplatsPerCell);
         heap.clear();
         sorted.clear();
         next = 0;
@@ -89,8 +142,10 @@ struct Simplifier {
         // once, from its smaller end.
         const size_t stride = kNeighbours + 1;
         std::vector<uint32_t> lists(live.size() * stride, UINT32_MAX);
-        float d2[kNeighbours + 1];
-        for (size_t i = 0; i < live.size(); ++i) tree.nearest(&xyz[3 * i], stride, &lists[i * stride], d2);
+        knn.all_nearest(stride, [](uint32_t) { return true; },
+                        [&](uint32_t i, const float*, size_t found, const uint32_t* index, const float*) {
+                            std::copy(index, index + found, &lists[size_t(i) * stride]);
+                        });
         auto lists_contain = [&](size_t i, uint32_t j) {
             for (size_t k = 0; k < stride; ++k)
                 if (lists[i * stride + k] == j) return true;
@@ -103,7 +158,7 @@ struct Simplifier {
                 uint32_t a = std::min(live[i], live[j]), b = std::max(live[i], live[j]);
                 sorted.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
             }
-        std::sort(sorted.begin(), sorted.end(), [](const Edge& x, const Edge& y) { return y < x; });
+        sort_edges(sorted, scratch);
     }
 
     // The cheapest edge of either front, or false when both are empty.

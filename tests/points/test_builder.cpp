@@ -9,12 +9,16 @@
 #include <array>
 #include <cstdio>
 #include <map>
+#include <tuple>
 #include <unordered_map>
 
 #include "common_codec/octahedral.h"
 #include "points/builder.h"
 #include "points/dataset.h"
 #include "support.h"
+// The converter's neighbour search is private to the points module; its exactness is tested here.
+#include "../../points/src/estimate.h"
+#include "../../points/src/grid_knn.h"
 
 namespace catpaq {
 namespace {
@@ -269,6 +273,135 @@ TEST(PointBuilder, PointsOnAPlaneAndOnALineWork) {
     std::string plane_path = test::scratch("plane.cpq"), line_path = test::scratch("line.cpq");
     EXPECT_EQ(check_dataset(plane_path, plane), build_points(plane, plane_path, small_nodes()).leaves);
     EXPECT_EQ(check_dataset(line_path, line), build_points(line, line_path, small_nodes()).leaves);
+}
+
+// The k smallest squared distances from point q of xyz to all of them, by brute force (the same
+// float arithmetic as the searches, so equal values compare equal).
+std::vector<float> brute_nearest(const std::vector<float>& xyz, size_t q, size_t k) {
+    std::vector<float> d2(xyz.size() / 3);
+    for (size_t i = 0; i < d2.size(); ++i) {
+        const float dx = xyz[3 * i] - xyz[3 * q], dy = xyz[3 * i + 1] - xyz[3 * q + 1], dz = xyz[3 * i + 2] - xyz[3 * q + 2];
+        d2[i] = dx * dx + dy * dy + dz * dz;
+    }
+    std::sort(d2.begin(), d2.end());
+    d2.resize(std::min(k, d2.size()));
+    return d2;
+}
+
+// A plane's samples with a clump of duplicates and a few far outliers: what the grid handles
+// worst (cells far from uniform) and what the leaf halo reaches last.
+std::vector<float> awkward_cloud(size_t n, uint64_t seed) {
+    std::vector<float> xyz;
+    uint64_t state = seed;
+    for (size_t i = 0; i < n; ++i) {
+        xyz.push_back(float(test::random_unit(state)));
+        xyz.push_back(float(test::random_unit(state)));
+        xyz.push_back(float(0.01 * test::random_unit(state)));
+    }
+    for (int i = 0; i < 100; ++i) xyz.insert(xyz.end(), {0.5f, 0.5f, 0.005f});
+    for (int i = 0; i < 5; ++i)
+        for (int a = 0; a < 3; ++a) xyz.push_back(float(40 * test::random_unit(state) - 20));
+    return xyz;
+}
+
+TEST(PointNeighbours, TheGridFindsWhatBruteForceFinds) {
+    using points_detail::GridKnn;
+    using points_detail::LocalKnn;
+    const std::vector<float> xyz = awkward_cloud(3000, 9);
+    const size_t n = xyz.size() / 3;
+    for (double per_cell : {0.5, 2.0, 4.0, 16.0})
+        for (size_t k : {1, 5, 16, 40}) {
+            GridKnn grid;
+            grid.build(xyz.data(), nullptr, n, per_cell);
+            uint32_t index[GridKnn::kMaxK];
+            float d2[GridKnn::kMaxK];
+            for (size_t q = 0; q < n; q += 13) {
+                const size_t found = grid.nearest(&xyz[3 * q], k, index, d2);
+                EXPECT_EQ(std::vector<float>(d2, d2 + found), brute_nearest(xyz, q, k)) << "point " << q << " k " << k;
+            }
+            size_t visited = 0;
+            grid.all_nearest(k, [](uint32_t id) { return id % 5 == 0; },
+                             [&](uint32_t id, const float*, size_t found, const uint32_t* ids, const float* distance2) {
+                                 ++visited;
+                                 EXPECT_EQ(std::vector<float>(distance2, distance2 + found), brute_nearest(xyz, id, k)) << "point " << id;
+                                 for (size_t j = 0; j < found; ++j) {
+                                     const float dx = xyz[3 * ids[j]] - xyz[3 * id], dy = xyz[3 * ids[j] + 1] - xyz[3 * id + 1],
+                                                 dz = xyz[3 * ids[j] + 2] - xyz[3 * id + 2];
+                                     EXPECT_EQ(dx * dx + dy * dy + dz * dz, distance2[j]);
+                                 }
+                             });
+            EXPECT_EQ(visited, (n + 4) / 5);
+        }
+    // The clump makes LocalKnn take its kd-tree; ids are mapped back.
+    std::vector<uint32_t> ids(n);
+    for (size_t i = 0; i < n; ++i) ids[i] = uint32_t(1000 + i);
+    LocalKnn local;
+    local.build(xyz.data(), ids.data(), n, 40.0);
+    size_t visited = 0;
+    local.all_nearest(16, [](uint32_t) { return true; },
+                      [&](uint32_t id, const float*, size_t found, const uint32_t*, const float* distance2) {
+                          ++visited;
+                          EXPECT_EQ(std::vector<float>(distance2, distance2 + found), brute_nearest(xyz, id - 1000, 16));
+                      });
+    EXPECT_EQ(visited, n);
+}
+
+TEST(PointNeighbours, LeafEstimatesUseExactNeighboursAcrossLeavesAndForOutliers) {
+    // Leaves of 256 points in x order; a leaf's halo is found by scanning the others. Radii are
+    // the distance to the 6th neighbour, which brute force gives exactly.
+    std::vector<float> xyz = awkward_cloud(4000, 11);
+    const size_t n = xyz.size() / 3;
+    std::vector<uint32_t> order(n);
+    for (size_t i = 0; i < n; ++i) order[i] = uint32_t(i);
+    std::sort(order.begin(), order.end(), [&](uint32_t a, uint32_t b) { return xyz[3 * a] < xyz[3 * b]; });
+    std::vector<float> sorted(3 * n);
+    std::vector<Vec3d> positions(n);
+    for (size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) {
+            sorted[3 * i + a] = xyz[3 * order[i] + a];
+            positions[i][a] = sorted[3 * i + a];
+        }
+    points_detail::EstimateInput in;
+    in.positions = positions.data();
+    in.xyz = sorted.data();
+    in.cloud_extent = 40;
+    in.halo = [&](const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) {
+        for (size_t i = 0; i < n; ++i) {
+            if (i >= begin && i < end) continue;
+            const float* p = &sorted[3 * i];
+            if (p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1] && p[2] >= lo[2] && p[2] <= hi[2])
+                ids.push_back(uint32_t(i));
+        }
+    };
+    in.nearest = [&](const float q[3], size_t k, uint32_t* index, float* distance2) {
+        std::vector<std::pair<float, uint32_t>> all(n);
+        for (size_t i = 0; i < n; ++i) {
+            const float dx = sorted[3 * i] - q[0], dy = sorted[3 * i + 1] - q[1], dz = sorted[3 * i + 2] - q[2];
+            all[i] = {dx * dx + dy * dy + dz * dz, uint32_t(i)};
+        }
+        std::sort(all.begin(), all.end());
+        const size_t found = std::min(k, n);
+        for (size_t j = 0; j < found; ++j) std::tie(distance2[j], index[j]) = all[j];
+        return found;
+    };
+    std::vector<float> radii(n, -1);
+    std::vector<Vec3f> normals(n);
+    for (size_t begin = 0; begin < n; begin += 256)
+        points_detail::estimate_leaf(in, begin, std::min(n, begin + 256), normals.data(), radii.data());
+    for (size_t i = 0; i < n; ++i) {
+        EXPECT_EQ(radii[i], std::sqrt(brute_nearest(sorted, i, 7).back())) << "point " << i;
+        const float length = std::sqrt(normals[i][0] * normals[i][0] + normals[i][1] * normals[i][1] + normals[i][2] * normals[i][2]);
+        EXPECT_NEAR(length, 1.0f, 1e-5f);
+    }
+}
+
+TEST(PointBuilder, OutliersFarFromTheSurfaceWork) {
+    PointCloud cloud;
+    const std::vector<float> xyz = awkward_cloud(5000, 13);
+    for (size_t i = 0; i < xyz.size(); i += 3) cloud.positions.push_back({xyz[i], xyz[i + 1], xyz[i + 2]});
+    std::string path = test::scratch("outliers.cpq");
+    PointsBuildReport report = build_points(cloud, path, small_nodes());
+    EXPECT_EQ(check_dataset(path, cloud), report.leaves);
 }
 
 TEST(PointBuilder, OnePointWorksWithARadiusAndIsRefusedWithout) {

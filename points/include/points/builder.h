@@ -22,10 +22,14 @@
 // centre, tracked through every merge and quantization (leaves: the quantization error), and at
 // least its children's bounds (monotone). Splat radii cover the children's splats.
 //
-// Memory: in core, about 75 bytes per input point at the peak (10M points: 720 MiB, reading
+// Neighbours (step 3 and 4) come from small uniform grids (points/src/grid_knn.h): a leaf's
+// over the leaf and the points around it (found through the hierarchy's node boxes, widened
+// per point until the neighbours are exact), a node's over its children's splats.
+//
+// Memory: in core, about 72 bytes per input point at the peak (10M points: 684 MiB, reading
 // included: the points in double precision with normals, colours and radii, the partition's
-// items, a float copy and the search tree), plus node_points splats per level of the tree per
-// thread. Bounding it by processing one subtree at a time is not done yet.
+// items, a float copy for the neighbour searches), plus node_points splats per level of the tree
+// per thread. Bounding it by processing one subtree at a time is not done yet.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -86,6 +90,7 @@ struct PointsBuildReport {
     // Largest position error of a node divided by that node's smallest splat radius (the codec
     // keeps it at most settings.error_fraction).
     double worst_error_to_radius = 0;
+    // seconds_search_tree: what the neighbour searches need beforehand (the float copy, node boxes).
     double seconds = 0, seconds_partition = 0, seconds_search_tree = 0, seconds_nodes = 0, seconds_write = 0;
     uint64_t peak_rss = 0;
     std::vector<PointsLevelStats> levels;  // by depth, root first

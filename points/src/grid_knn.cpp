@@ -1,0 +1,194 @@
+#include "grid_knn.h"
+
+#include <algorithm>
+#include <cassert>
+#include <cmath>
+
+namespace catpaq::points_detail {
+
+// The k best found so far, nearest first, in the caller's arrays.
+struct KnnList {
+    size_t k, found = 0;
+    float worst = INFINITY;  // distance2 of the k-th found (infinite until k are found)
+    uint32_t* index;
+    float* distance2;
+
+    void offer(uint32_t id, float d2) {
+        size_t at = found < k ? found++ : k - 1;
+        while (at > 0 && distance2[at - 1] > d2) {
+            distance2[at] = distance2[at - 1];
+            index[at] = index[at - 1];
+            --at;
+        }
+        distance2[at] = d2;
+        index[at] = id;
+        if (found == k) worst = distance2[k - 1];
+    }
+};
+
+namespace {
+
+// The cell size for which a box of these extents holds about `cells` cells, an axis thinner
+// than a cell counting as one (points on a plane or a line get a 2D or 1D grid).
+float cell_size(const float extent[3], double cells) {
+    float e[3] = {extent[0], extent[1], extent[2]};
+    std::sort(e, e + 3, [](float a, float b) { return a > b; });
+    double h = std::cbrt(double(e[0]) * e[1] * e[2] / cells);
+    if (!(double(e[2]) >= h)) {
+        h = std::sqrt(double(e[0]) * e[1] / cells);
+        if (!(double(e[1]) >= h)) h = double(e[0]) / cells;
+    }
+    return h > 0 && std::isfinite(h) ? float(h) : 1.0f;
+}
+
+}  // namespace
+
+void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double points_per_cell) {
+    assert(n < (size_t(1) << 32));
+    float hi[3];
+    for (int a = 0; a < 3; ++a) {
+        lo_[a] = INFINITY;
+        hi[a] = -INFINITY;
+    }
+    for (size_t i = 0; i < n; ++i)
+        for (int a = 0; a < 3; ++a) {
+            lo_[a] = std::min(lo_[a], xyz[3 * i + a]);
+            hi[a] = std::max(hi[a], xyz[3 * i + a]);
+        }
+    if (n == 0)
+        for (int a = 0; a < 3; ++a) lo_[a] = hi[a] = 0;
+    const float extent[3] = {hi[0] - lo_[0], hi[1] - lo_[1], hi[2] - lo_[2]};
+    // First as if the points filled their box; points on a surface then crowd into few cells,
+    // and a second try shrinks the cells as a surface's occupancy scales (with the area).
+    h_ = cell_size(extent, std::max(1.0, double(n) / points_per_cell));
+    const double max_cells = std::max(64.0, kMaxCellsPerPoint * double(n));
+    size_t cells = 0;
+    for (int attempt = 0;; ++attempt) {
+        // Cells per axis are bounded so that the cell array stays within max_cells.
+        for (;;) {
+            double total = 1;
+            for (int a = 0; a < 3; ++a) {
+                dims_[a] = int(std::min(double(extent[a]) / h_, 4096.0)) + 1;
+                total *= dims_[a];
+            }
+            if (total <= max_cells) break;
+            h_ *= 1.25f;
+        }
+        inv_h_ = 1.0f / h_;
+        cells = size_t(dims_[0]) * size_t(dims_[1]) * size_t(dims_[2]);
+        cell_start_.assign(cells + 1, 0);
+        cell_of_.resize(n);
+        size_t occupied = 0;
+        for (size_t i = 0; i < n; ++i) {
+            int c[3];
+            for (int a = 0; a < 3; ++a)
+                c[a] = std::clamp(int((xyz[3 * i + a] - lo_[a]) * inv_h_), 0, dims_[a] - 1);
+            const uint32_t cell = uint32_t((size_t(c[0]) * size_t(dims_[1]) + size_t(c[1])) * size_t(dims_[2]) + size_t(c[2]));
+            cell_of_[i] = cell;
+            occupied += cell_start_[cell + 1]++ == 0;
+        }
+        const double crowd = double(n) / double(std::max<size_t>(occupied, 1));
+        if (attempt > 0 || crowd < 1.5 * points_per_cell) break;
+        h_ *= float(std::sqrt(points_per_cell / crowd));
+    }
+    double squares = 0;
+    for (size_t c = 1; c <= cells; ++c) {
+        squares += double(cell_start_[c]) * double(cell_start_[c]);
+        cell_start_[c] += cell_start_[c - 1];
+    }
+    expected_scan_ = n ? squares / double(n) : 0;
+    points_.resize(n);
+    // Scatter with the starts as cursors, then shift them back (cell c's start is where c - 1's
+    // cursor ended).
+    sorted_cell_.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        const uint32_t at = cell_start_[cell_of_[i]]++;
+        points_[at] = {{xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]}, ids ? ids[i] : uint32_t(i)};
+        sorted_cell_[at] = cell_of_[i];
+    }
+    // The occupied cells in order, from the sorted points (all_nearest visits only these).
+    occupied_.clear();
+    for (size_t i = 0; i < n; ++i)
+        if (i == 0 || sorted_cell_[i] != sorted_cell_[i - 1]) occupied_.push_back(sorted_cell_[i]);
+    for (size_t c = cells; c > 0; --c) cell_start_[c] = cell_start_[c - 1];
+    cell_start_[0] = 0;
+    px_.resize(n);
+    py_.resize(n);
+    pz_.resize(n);
+    for (size_t i = 0; i < n; ++i) {
+        px_[i] = points_[i].p[0];
+        py_[i] = points_[i].p[1];
+        pz_[i] = points_[i].p[2];
+    }
+}
+
+// Offers the points of cells [first_cell, last_cell] (one row along z: contiguous in points_).
+inline void GridKnn::scan(uint32_t first_cell, uint32_t last_cell, const float q[3], KnnList& list) const {
+    const Point* p = points_.data() + cell_start_[first_cell];
+    const Point* end = points_.data() + cell_start_[last_cell + 1];
+    for (; p < end; ++p) {
+        const float dx = p->p[0] - q[0], dy = p->p[1] - q[1], dz = p->p[2] - q[2];
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        if (d2 < list.worst) list.offer(p->id, d2);
+    }
+}
+
+size_t GridKnn::nearest(const float q[3], size_t k, uint32_t* index, float* distance2) const {
+    assert(k >= 1 && k <= kMaxK);
+    if (points_.empty()) return 0;
+    KnnList list{k, 0, INFINITY, index, distance2};
+    int c[3];
+    for (int a = 0; a < 3; ++a) c[a] = std::clamp(int((q[a] - lo_[a]) * inv_h_), 0, dims_[a] - 1);
+    const size_t dy = size_t(dims_[1]), dz = size_t(dims_[2]);
+    // Rounding may put a point a hair outside the cell its coordinates say: the distance bound
+    // of the unvisited cells is lowered by that much.
+    const float slack = h_ * 1e-4f;
+    for (int r = 0;; ++r) {
+        const int x0 = std::max(c[0] - r, 0), x1 = std::min(c[0] + r, dims_[0] - 1);
+        const int y0 = std::max(c[1] - r, 0), y1 = std::min(c[1] + r, dims_[1] - 1);
+        const int z0 = std::max(c[2] - r, 0), z1 = std::min(c[2] + r, dims_[2] - 1);
+        for (int x = x0; x <= x1; ++x) {
+            const bool x_face = x == c[0] - r || x == c[0] + r;
+            for (int y = y0; y <= y1; ++y) {
+                const uint32_t row = uint32_t((size_t(x) * dy + size_t(y)) * dz);
+                if (x_face || y == c[1] - r || y == c[1] + r) {
+                    scan(row + uint32_t(z0), row + uint32_t(z1), q, list);
+                } else {  // inside the ring's x and y range: only its two z faces are new
+                    if (c[2] - r >= 0) scan(row + uint32_t(c[2] - r), row + uint32_t(c[2] - r), q, list);
+                    if (r > 0 && c[2] + r < dims_[2]) scan(row + uint32_t(c[2] + r), row + uint32_t(c[2] + r), q, list);
+                }
+            }
+        }
+        // The nearest an unvisited point can be: the nearest face of the visited block that
+        // is not a face of the grid.
+        float bound = INFINITY;
+        for (int a = 0; a < 3; ++a) {
+            if (c[a] - r > 0) bound = std::min(bound, q[a] - (lo_[a] + float(c[a] - r) * h_));
+            if (c[a] + r < dims_[a] - 1) bound = std::min(bound, lo_[a] + float(c[a] + r + 1) * h_ - q[a]);
+        }
+        if (bound == INFINITY) break;  // the whole grid is visited
+        bound = std::max(bound - slack, 0.0f);
+        if (list.found == k && list.worst <= bound * bound) break;
+    }
+    return list.found;
+}
+
+void LocalKnn::build(const float* xyz, const uint32_t* ids, size_t n, double points_per_cell) {
+    xyz_ = xyz;
+    n_ = n;
+    grid_.build(xyz, ids, n, points_per_cell);
+    use_tree_ = grid_.expected_scan() > kClumped;
+    if (!use_tree_) return;
+    tree_.build(xyz, n, false);
+    ids_.assign(ids ? ids : nullptr, ids ? ids + n : nullptr);
+}
+
+size_t LocalKnn::nearest(const float q[3], size_t k, uint32_t* index, float* distance2) const {
+    if (!use_tree_) return grid_.nearest(q, k, index, distance2);
+    const size_t found = tree_.nearest(q, k, index, distance2);
+    if (!ids_.empty())
+        for (size_t i = 0; i < found; ++i) index[i] = ids_[index[i]];
+    return found;
+}
+
+}  // namespace catpaq::points_detail
