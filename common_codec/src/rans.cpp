@@ -528,6 +528,16 @@ bool Decoder::init(const uint8_t* data, size_t size) {
     return true;
 }
 
+Decoder Decoder::get_slowly(Decoder d, const TableView& t, int which, uint32_t& sym) {
+    sym = d.get_slow(t, which);
+    return d;
+}
+
+Decoder Decoder::refilled_slowly(Decoder d, uint32_t need) {
+    d.refill_slow(need);
+    return d;
+}
+
 uint32_t Decoder::get_slow(const TableView& t, int which) {
     uint32_t& state = which == 0 ? x0 : which == 1 ? x1 : which == 2 ? x2 : x3;
     uint32_t x = state;

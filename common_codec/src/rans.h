@@ -146,6 +146,17 @@ private:
     int bit_fill_ = 0;
 };
 
+// low_bits(n) = 2^n - 1 for n <= 32, by a table: one load instead of building the mask with a
+// variable shift (which on x86 also ties up the count register) in every raw bits read.
+struct LowBitsTable {
+    uint32_t mask[kMaxRawBits + 1];
+    constexpr LowBitsTable() : mask{} {
+        for (int n = 0; n <= kMaxRawBits; ++n) mask[n] = n == 32 ? ~0u : (1u << n) - 1;
+    }
+};
+inline constexpr LowBitsTable kLowBits{};
+CATPAQ_RANS_INLINE uint32_t low_bits(uint32_t n) { return kLowBits.mask[n]; }
+
 // Read-only view of a DecodeTable for the hot loops (plain values the compiler keeps in registers).
 struct TableView {
     const uint32_t* lut;
@@ -183,11 +194,12 @@ struct Decoder {
         uint32_t e = t.lut[x & t.mask];
         x = (e & 0x1fffu) * (x >> t.shift) + ((e >> 13) & 0xfffu);
         // k = 0, 1 or 2 bytes are needed (every step leaves x >= kStateLower >> 12): read two
-        // (in bounds by the precondition) and keep the first k.
-        const uint32_t k = uint32_t(x < kStateLower) + uint32_t(x < (kStateLower >> 8));
+        // (in bounds by the precondition) and keep the first k, as one shift of the 48-bit
+        // (x, two bytes) by 8 (2 - k) (fewer instructions than shifting x and the bytes apart).
+        const uint32_t keep = uint32_t(x >= kStateLower) + uint32_t(x >= (kStateLower >> 8));  // 2 - k
         const uint32_t two = (uint32_t(p[0]) << 8) | p[1];
-        x = (x << (8 * k)) | (two >> (16 - 8 * k));
-        p += k;
+        x = uint32_t(((uint64_t(x) << 16) | two) >> (8 * keep));
+        p += 2 - keep;
         lane<L>() = x;
         return e >> 25;
     }
@@ -196,7 +208,9 @@ struct Decoder {
     CATPAQ_RANS_INLINE uint32_t get(const TableView& t) {
         if (rans_bytes_left() >= kMaxBytesPerSymbol) [[likely]]
             return sym<L>(t);
-        return get_slow(t, L);
+        uint32_t s;
+        *this = get_slowly(*this, t, L, s);
+        return s;
     }
     uint32_t get(const TableView& t) { return get<0>(t); }
 
@@ -208,7 +222,7 @@ struct Decoder {
     }
     // Raw bits; requires need_bits(>= nbits) since the last refill accounting.
     CATPAQ_RANS_INLINE uint32_t take_bits(uint32_t nbits) {
-        uint32_t v = uint32_t(bit_buf & ((uint64_t(1) << nbits) - 1));
+        uint32_t v = uint32_t(bit_buf) & low_bits(nbits);
         bit_buf >>= nbits;
         bit_count -= nbits;
         return v;
@@ -238,7 +252,14 @@ struct Decoder {
     bool failed = true;
 
 private:
+    // The slow paths work on a copy passed by value and return the result by value: a hot
+    // loop's decoder (a local copy, see above) then never has its address taken, and the compiler
+    // keeps its fields in registers. As member functions called on it, they made it live on the
+    // stack, with a store and a reload on every symbol's dependency chain.
+    static Decoder get_slowly(Decoder d, const TableView& t, int lane, uint32_t& sym);
+    static Decoder refilled_slowly(Decoder d, uint32_t need);
     uint32_t get_slow(const TableView& t, int lane);
+    void refill_slow(uint32_t need);
     CATPAQ_RANS_INLINE void refill(uint32_t need) {
         if (bit_end - bit_p >= 8) [[likely]] {
             uint64_t w;
@@ -248,10 +269,9 @@ private:
             bit_p += (63 - bit_count) >> 3;
             bit_count |= 56;
         } else {
-            refill_slow(need);
+            *this = refilled_slowly(*this, need);
         }
     }
-    void refill_slow(uint32_t need);
 };
 
 }  // namespace catpaq::rans
