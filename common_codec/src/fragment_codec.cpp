@@ -325,7 +325,6 @@ using Coord = std::array<int32_t, 4>;
 // the prediction with the same operations in the same order, so it agrees on both sides whether
 // or not the doubles below are exact (they are for the 24-bit layout's grid).
 using NormalSum = std::array<int64_t, 4>;
-
 // Area-weighted normals in (a, b, c) space: sum of the cross products of each vertex's triangles.
 void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSum* acc) {
     for (size_t t = 0; t < triangles; ++t) {
@@ -1331,9 +1330,8 @@ struct Workspace {
     std::vector<Coord> coords;
     std::vector<int8_t> nu, nv;
     std::vector<NormalSum> acc;
-    std::vector<uint32_t> npred;  // geometric normal predictions (decode_normals)
     std::vector<int32_t> residuals;  // of the attribute being decoded (decode_residuals)
-    std::vector<std::array<uint8_t, 4>> rgb;
+    std::vector<uint32_t> rgb;
     std::array<rans::DecodeTable, kStreamCount> tables;
 };
 constexpr uint32_t kWorkspaceKeepVertices = 1u << 16;
@@ -1457,8 +1455,11 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
         };
         E(size).prev = 0;
         for (uint32_t* const stop = tri + 3 * size_t(block); tri != stop;) {
+            // One consumed edge skipped without a branch (the common case), longer runs by one.
             uint32_t i = head;
-            while (E(i).prev == kDead) i += kEdgeBytes;
+            i += kEdgeBytes & (0u - uint32_t(E(i).prev == kDead));
+            while (E(i).prev == kDead) [[unlikely]]
+                i += kEdgeBytes;
             if (i == size) [[unlikely]] {
                 // The queue is exhausted: a new component, three vertices, each NEW or SPLIT.
                 uint32_t c[3];
@@ -1512,8 +1513,8 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
                 E(select_if<kRight>(s, f, f1)) = DecEdge{v, ei.v1, ei.v0, select_if<kNew>(s, f, left_anchor), right_anchor};
                 E(left_anchor).next = f;
                 E(right_anchor).prev = last;
+                // Edge i itself is not marked: it is behind head, and no link points to it now.
                 E(select_if<kLeft>(s, n, select_if<kRight>(s, p, i))).prev = kDead;
-                E(i).prev = kDead;
                 size = last + kEdgeBytes;
                 E(size).prev = 0;
                 tri[0] = ei.v1, tri[1] = ei.v0, tri[2] = v;
@@ -1639,13 +1640,40 @@ bool decode_positions(rans::Decoder& io, Workspace& ws, const VertexLayout& layo
     return bad == 0;
 }
 
+// u into bits 24..31 of word0, v into bits 0..7 of word1 (signed bytes).
+CATPAQ_RANS_INLINE void set_normal(PackedVertex& out, int u, int v) {
+    out.word0 |= uint32_t(uint8_t(u)) << 24;
+    out.word1 |= uint8_t(v);
+}
+
+// Geometric normals from the sums and the residuals (u, v per vertex). The predictions depend on
+// no decoded value (but for the rare fallback to the previous normal), so this loop pipelines
+// freely now that the residuals are decoded apart.
+void decode_geometric_normals(const NormalSum* acc, const std::array<int8_t, 9>& matrix, uint32_t V, const int32_t* res,
+                              PackedVertex* vert) {
+#if defined(__SSE2__)
+    const NormalMatrix m(matrix);
+#endif
+    int prev_u = 0, prev_v = 0;
+    for (uint32_t v = 0; v < V; ++v) {
+        int pu, pv;
+#if defined(__SSE2__)
+        if (!geometric_prediction_sse2(acc[v], m, pu, pv)) [[unlikely]] {
+            pu = prev_u;
+            pv = prev_v;
+        }
+#else
+        geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
+#endif
+        prev_u = int8_t(uint8_t(pu + res[2 * size_t(v)]));
+        prev_v = int8_t(uint8_t(pv + res[2 * size_t(v) + 1]));
+        set_normal(vert[v], prev_u, prev_v);
+    }
+}
+
 // Normals: ORs u into word0 and v into word1 (signed bytes; index V is the virtual zero vertex).
 void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std::array<int8_t, 9>& matrix, uint32_t V,
                     uint32_t T, const Pred* pred, const uint32_t* indices, PackedVertex* vert) {
-    grow(ws.nu, size_t(V) + 1);
-    grow(ws.nv, size_t(V) + 1);
-    int8_t *nu = ws.nu.data(), *nv = ws.nv.data();
-    nu[V] = nv[V] = 0;
     const rans::TableView tables[2] = {rans::TableView(ws.tables[kStreamNormU]), rans::TableView(ws.tables[kStreamNormV])};
     grow(ws.residuals, 2 * size_t(V));
     int32_t* res = ws.residuals.data();
@@ -1653,46 +1681,20 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
     if (normal_mode == kNormalGeometric) {
         ws.acc.assign(V, NormalSum{0, 0, 0, 0});
         accumulate_normals(indices, T, ws.coords.data(), ws.acc.data());
-        // The predictions first, in a pass of their own: they depend on no decoded value (but
-        // for the rare fallback to the previous normal, marked kFallback), so the pass pipelines
-        // freely instead of sharing the loop below with the rANS dependency chains.
-        grow(ws.npred, V);
-        uint32_t* np = ws.npred.data();
-        constexpr uint32_t kFallback = 1u << 16;
-        const NormalSum* acc = ws.acc.data();
-#if defined(__SSE2__)
-        const NormalMatrix m(matrix);
-        for (uint32_t v = 0; v < V; ++v) {
-            int pu, pv;
-            np[v] = geometric_prediction_sse2(acc[v], m, pu, pv) ? uint32_t(uint8_t(pu)) | uint32_t(uint8_t(pv)) << 8
-                                                                 : kFallback;
-        }
-#else
-        for (uint32_t v = 0; v < V; ++v) {
-            int pu, pv;
-            geometric_prediction(acc[v], matrix, 1000, 1000, pu, pv);
-            np[v] = pu == 1000 ? kFallback : uint32_t(uint8_t(pu)) | uint32_t(uint8_t(pv)) << 8;
-        }
-#endif
-        int prev_u = 0, prev_v = 0;
-        for (uint32_t v = 0; v < V; ++v) {
-            const int ru = res[2 * size_t(v)], rv = res[2 * size_t(v) + 1];
-            const uint32_t q = np[v];
-            int pu = int8_t(uint8_t(q)), pv = int8_t(uint8_t(q >> 8));
-            if (q & kFallback) [[unlikely]] {
-                pu = prev_u;
-                pv = prev_v;
-            }
-            prev_u = int8_t(uint8_t(pu + ru));
-            prev_v = int8_t(uint8_t(pv + rv));
-            nu[v] = int8_t(prev_u), nv[v] = int8_t(prev_v);
-        }
-    } else if (normal_mode == kNormalAverage) {
+        decode_geometric_normals(ws.acc.data(), matrix, V, res, vert);
+        return;
+    }
+    grow(ws.nu, size_t(V) + 1);
+    grow(ws.nv, size_t(V) + 1);
+    int8_t *nu = ws.nu.data(), *nv = ws.nv.data();
+    nu[V] = nv[V] = 0;
+    if (normal_mode == kNormalAverage) {
         for (uint32_t v = 0; v < V; ++v) {
             const Pred q = pred[v];
             const int ru = res[2 * size_t(v)], rv = res[2 * size_t(v) + 1];
             nu[v] = int8_t(uint8_t(((nu[q.a] + nu[q.b]) >> 1) + ru));
             nv[v] = int8_t(uint8_t(((nv[q.a] + nv[q.b]) >> 1) + rv));
+            set_normal(vert[v], nu[v], nv[v]);
         }
     } else {
         for (uint32_t v = 0; v < V; ++v) {
@@ -1700,11 +1702,8 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
             const int ru = res[2 * size_t(v)], rv = res[2 * size_t(v) + 1];
             nu[v] = int8_t(uint8_t(std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127) + ru));
             nv[v] = int8_t(uint8_t(std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127) + rv));
+            set_normal(vert[v], nu[v], nv[v]);
         }
-    }
-    for (uint32_t v = 0; v < V; ++v) {
-        vert[v].word0 |= uint32_t(uint8_t(nu[v])) << 24;
-        vert[v].word1 |= uint8_t(nv[v]);
     }
 }
 
@@ -1712,9 +1711,11 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
 template <bool kParallelogram>
 void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, bool decorrelate, uint32_t V,
                         const Pred* pred, PackedVertex* vert) {
+    // Channel values packed R | G << 8 | B << 16: one 4-byte store per vertex, which the next
+    // vertices' 4-byte loads of it are forwarded from.
     grow(ws.rgb, size_t(V) + 1);
-    std::array<uint8_t, 4>* rgb = ws.rgb.data();
-    rgb[V] = {0, 0, 0, 0};
+    uint32_t* rgb = ws.rgb.data();
+    rgb[V] = 0;
     // G first (lane 0), then R (lane 1) and B (lane 2).
     const rans::TableView tables[3] = {rans::TableView(ws.tables[kStreamColG]), rans::TableView(ws.tables[kStreamColR]),
                                        rans::TableView(ws.tables[kStreamColB])};
@@ -1735,11 +1736,12 @@ void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, b
         const int32_t rg = rv[0];
         const int32_t rr = rv[1] + (rg & dmask);
         const int32_t rb = rv[2] + (rg & dmask);
-        const std::array<uint8_t, 4> A = rgb[q.a], B = rgb[q.b], C = rgb[q.c];
-        const uint32_t r = uint32_t(predict(A[0], B[0], C[0]) + rr) & uint32_t(top);
-        const uint32_t g = uint32_t(predict(A[1], B[1], C[1]) + rg) & uint32_t(top);
-        const uint32_t bl = uint32_t(predict(A[2], B[2], C[2]) + rb) & uint32_t(top);
-        rgb[v] = {uint8_t(r), uint8_t(g), uint8_t(bl), 0};
+        const uint32_t A = rgb[q.a], B = rgb[q.b], C = rgb[q.c];
+        auto channel = [](uint32_t w, int k) { return int((w >> (8 * k)) & 0xffu); };
+        const uint32_t r = uint32_t(predict(channel(A, 0), channel(B, 0), channel(C, 0)) + rr) & uint32_t(top);
+        const uint32_t g = uint32_t(predict(channel(A, 1), channel(B, 1), channel(C, 1)) + rg) & uint32_t(top);
+        const uint32_t bl = uint32_t(predict(channel(A, 2), channel(B, 2), channel(C, 2)) + rb) & uint32_t(top);
+        rgb[v] = r | g << 8 | bl << 16;
         vert[v].word1 |= r << shift | g << (shift + bits) | bl << (shift + 2 * bits);
     }
 }
