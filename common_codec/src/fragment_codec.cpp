@@ -1501,7 +1501,13 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
                 const uint32_t p = ei.prev, n = ei.next;
                 const uint32_t vl = E(n).v1, nn = E(n).next, vr = E(p).v0, pp = E(p).prev;
                 v = select_if<kNew>(s, seen, select_if<kLeft>(s, vl, vr));
-                pred[select_if<kNew>(s, seen, V)] = Pred{ei.v0, ei.v1, ei.opp};  // slot V: scratch
+                // (v0, v1) of the prediction and (v1, v0) of the triangle as 8-byte stores from
+                // one 8-byte load (the loop is bound by its stores as much as by anything).
+                uint64_t v01;
+                std::memcpy(&v01, &E(i).v0, 8);
+                Pred* const q = pred + select_if<kNew>(s, seen, V);  // slot V: scratch
+                std::memcpy(&q->a, &v01, 8);
+                q->c = ei.opp;
                 seen += s == kNew;
                 if ((seen > V) | (v == ei.v0) | (v == ei.v1)) [[unlikely]]
                     return FragmentStatus::Corrupt;
@@ -1517,7 +1523,9 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
                 E(select_if<kLeft>(s, n, select_if<kRight>(s, p, i))).prev = kDead;
                 size = last + kEdgeBytes;
                 E(size).prev = 0;
-                tri[0] = ei.v1, tri[1] = ei.v0, tri[2] = v;
+                const uint64_t v10 = (v01 >> 32) | (v01 << 32);
+                std::memcpy(tri, &v10, 8);
+                tri[2] = v;
                 tri += 3;
                 continue;
             }

@@ -5,9 +5,9 @@
 // symbol names its lane (the codec assigns lanes statically, e.g. one per coordinate, so a
 // decoder loop has up to four independent dependency chains without any state rotation). The
 // shared byte stream is consumed in decode order. States live in [kStateLower, 2^31);
-// renormalisation is byte-wise, at most two bytes per symbol, branch-free. Raw bits (the low
-// bits of large residuals, explicit indices, table fields) go to a separate little-endian bit
-// stream read through a 64-bit buffer. The encoder collects everything first and encodes the
+// renormalisation is byte-wise, at most two bytes per symbol (the second behind a rarely taken
+// branch, see renormalise). Raw bits (the low bits of large residuals, explicit indices, table
+// fields) go to a separate little-endian bit stream read through a 64-bit buffer. The encoder collects everything first and encodes the
 // symbols backwards once the tables are known; it starts every state at kStateLower, so the
 // decoder checks that all states return to exactly kStateLower after the last symbol, with
 // every byte consumed and the bit stream's padding zero: a strong end-of-stream check.
@@ -231,9 +231,23 @@ struct Decoder {
     CATPAQ_RANS_INLINE uint32_t get(const TableView& t) {
         if (rans_bytes_left() >= kMaxBytesPerSymbol) [[likely]]
             return sym<L>(t);
-        uint32_t s;
-        *this = get_slowly(*this, t, L, s);
-        return s;
+        // Near the end, byte by byte with checks, inline: the last symbols of a stream often
+        // need no byte at all (probable symbols cost a fraction of a bit), and a call per
+        // symbol there took about 1% of the decoder's time.
+        uint32_t x = lane<L>();
+        const uint32_t slot = x & t.mask;
+        const uint32_t e = t.lut[slot];
+        x = (e & 0xffffu) * (x >> t.shift) + (e >> 16);
+        while (x < kStateLower) {  // at most twice: x >= kStateLower >> 12 before
+            if (p == end) {
+                failed = true;
+                x |= kStateLower;  // keep the state in range; the stream is already invalid
+                break;
+            }
+            x = (x << 8) | *p++;
+        }
+        lane<L>() = x;
+        return t.syms[slot];
     }
     uint32_t get(const TableView& t) { return get<0>(t); }
 
@@ -275,13 +289,12 @@ struct Decoder {
     bool failed = true;
 
 private:
-    // The slow paths work on a copy passed by value and return the result by value: a hot
-    // loop's decoder (a local copy, see above) then never has its address taken, and the compiler
-    // keeps its fields in registers. As member functions called on it, they made it live on the
-    // stack, with a store and a reload on every symbol's dependency chain.
-    static Decoder get_slowly(Decoder d, const TableView& t, int lane, uint32_t& sym);
+    // refill's slow path works on a copy passed and returned by value: a hot loop's decoder (a
+    // local copy, see above) then never has its address taken, and the compiler keeps its fields
+    // in registers. As a member function called on it, it made the decoder live on the stack,
+    // with a store and a reload on every symbol's dependency chain (so does get's slow path,
+    // written inline for the same reason).
     static Decoder refilled_slowly(Decoder d, uint32_t need);
-    uint32_t get_slow(const TableView& t, int lane);
     uint32_t get_meta(const uint8_t* syms, const FreqTable& f);
     void refill_slow(uint32_t need);
     CATPAQ_RANS_INLINE void refill(uint32_t need) {
