@@ -326,19 +326,22 @@ using Coord = std::array<int32_t, 4>;
 // or not the doubles below are exact (they are for the 24-bit layout's grid).
 using NormalSum = std::array<int64_t, 4>;
 // Area-weighted normals in (a, b, c) space: sum of the cross products of each vertex's triangles.
-void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSum* acc) {
-    for (size_t t = 0; t < triangles; ++t) {
-        uint32_t i = indices[3 * t], j = indices[3 * t + 1], k = indices[3 * t + 2];
-        const Coord si = s[i], sj = s[j], sk = s[k];
-        int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
-        int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
-        int64_t nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
-        for (uint32_t v : {i, j, k}) {
-            acc[v][0] += nx;
-            acc[v][1] += ny;
-            acc[v][2] += nz;
-        }
+// One triangle's cross product added to its three corners' sums.
+CATPAQ_RANS_INLINE void accumulate_triangle(const uint32_t* tri, const Coord* s, NormalSum* acc) {
+    uint32_t i = tri[0], j = tri[1], k = tri[2];
+    const Coord si = s[i], sj = s[j], sk = s[k];
+    int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
+    int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
+    int64_t nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+    for (uint32_t v : {i, j, k}) {
+        acc[v][0] += nx;
+        acc[v][1] += ny;
+        acc[v][2] += nz;
     }
+}
+
+void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSum* acc) {
+    for (size_t t = 0; t < triangles; ++t) accumulate_triangle(indices + 3 * t, s, acc);
 }
 
 #if defined(__SSE2__)
@@ -1654,16 +1657,53 @@ CATPAQ_RANS_INLINE void set_normal(PackedVertex& out, int u, int v) {
     out.word1 |= uint8_t(v);
 }
 
-// Geometric normals from the sums and the residuals (u, v per vertex). The predictions depend on
-// no decoded value (but for the rare fallback to the previous normal), so this loop pipelines
-// freely now that the residuals are decoded apart.
-void decode_geometric_normals(const NormalSum* acc, const std::array<int8_t, 9>& matrix, uint32_t V, const int32_t* res,
-                              PackedVertex* vert) {
+// accumulate_normals with the normals' rANS symbols (u on lane 0, v on lane 1, one vertex's pair
+// per triangle) decoded in the same loop into syms: the accumulation waits on the read-modify-
+// writes of neighbouring triangles' shared corners, the symbols on their states, and each fills
+// the other's idle slots (about 2% of the decoding time on a scan's CATP dataset, where the
+// geometric predictor is the rule). Their raw bits are read later, in order, by
+// decode_geometric_normals.
+void accumulate_normals_decoding(const uint32_t* indices, uint32_t T, const Coord* s, NormalSum* acc,
+                                 rans::Decoder& io, const rans::TableView* tables, uint32_t V, uint8_t* syms) {
+    rans::Decoder dec = io;
+    const rans::TableView tu = tables[0], tv = tables[1];
+    // Vertices whose two symbols can be decoded unchecked (2 bytes at most per symbol).
+    const uint32_t fast = uint32_t(std::min<size_t>(V, dec.rans_bytes_left() / (2 * rans::Decoder::kMaxBytesPerSymbol)));
+    uint32_t v = 0;
+    for (uint32_t t = 0; t < T; ++t) {
+        accumulate_triangle(indices + 3 * size_t(t), s, acc);
+        if (v < fast) {
+            syms[2 * size_t(v)] = uint8_t(dec.sym<0>(tu));
+            syms[2 * size_t(v) + 1] = uint8_t(dec.sym<1>(tv));
+            ++v;
+        }
+    }
+    for (; v < V; ++v) {
+        syms[2 * size_t(v)] = uint8_t(dec.get<0>(tu));
+        syms[2 * size_t(v) + 1] = uint8_t(dec.get<1>(tv));
+    }
+    io = dec;
+}
+
+// A residual from its bucket symbol and the raw bits that follow (need_bits(kMaxExtraBits) first).
+CATPAQ_RANS_INLINE int32_t bucket_residual(rans::Decoder& d, uint32_t s) {
+    return unzigzag(kBucketDecode.base[s] | d.take_bits(kBucketDecode.nbits[s]));
+}
+
+// Geometric normals from the sums, the bucket symbols (u, v per vertex) and their raw bits. The
+// predictions depend on no decoded value (but for the rare fallback to the previous normal), so
+// this loop pipelines freely.
+void decode_geometric_normals(rans::Decoder& io, const NormalSum* acc, const std::array<int8_t, 9>& matrix,
+                              uint32_t V, const uint8_t* syms, PackedVertex* vert) {
+    rans::Decoder dec = io;
 #if defined(__SSE2__)
     const NormalMatrix m(matrix);
 #endif
     int prev_u = 0, prev_v = 0;
     for (uint32_t v = 0; v < V; ++v) {
+        dec.need_bits(2 * kMaxExtraBits);
+        const int32_t ru = bucket_residual(dec, syms[2 * size_t(v)]);
+        const int32_t rv = bucket_residual(dec, syms[2 * size_t(v) + 1]);
         int pu, pv;
 #if defined(__SSE2__)
         if (!geometric_prediction_sse2(acc[v], m, pu, pv)) [[unlikely]] {
@@ -1673,25 +1713,27 @@ void decode_geometric_normals(const NormalSum* acc, const std::array<int8_t, 9>&
 #else
         geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
 #endif
-        prev_u = int8_t(uint8_t(pu + res[2 * size_t(v)]));
-        prev_v = int8_t(uint8_t(pv + res[2 * size_t(v) + 1]));
+        prev_u = int8_t(uint8_t(pu + ru));
+        prev_v = int8_t(uint8_t(pv + rv));
         set_normal(vert[v], prev_u, prev_v);
     }
+    io = dec;
 }
 
 // Normals: ORs u into word0 and v into word1 (signed bytes; index V is the virtual zero vertex).
 void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std::array<int8_t, 9>& matrix, uint32_t V,
                     uint32_t T, const Pred* pred, const uint32_t* indices, PackedVertex* vert) {
     const rans::TableView tables[2] = {rans::TableView(ws.tables[kStreamNormU]), rans::TableView(ws.tables[kStreamNormV])};
+    if (normal_mode == kNormalGeometric) {
+        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
+        grow(ws.symbols, 2 * size_t(V));
+        accumulate_normals_decoding(indices, T, ws.coords.data(), ws.acc.data(), io, tables, V, ws.symbols.data());
+        decode_geometric_normals(io, ws.acc.data(), matrix, V, ws.symbols.data(), vert);
+        return;
+    }
     grow(ws.residuals, 2 * size_t(V));
     int32_t* res = ws.residuals.data();
     decode_residuals<2>(io, tables, V, res);
-    if (normal_mode == kNormalGeometric) {
-        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
-        accumulate_normals(indices, T, ws.coords.data(), ws.acc.data());
-        decode_geometric_normals(ws.acc.data(), matrix, V, res, vert);
-        return;
-    }
     grow(ws.nu, size_t(V) + 1);
     grow(ws.nv, size_t(V) + 1);
     int8_t *nu = ws.nu.data(), *nv = ws.nv.data();
