@@ -164,9 +164,10 @@ CATPAQ_RANS_INLINE Bucket bucket_of(uint32_t z) {
     const uint32_t n = kBucketTable.nbits[z];
     return {kBucketTable.sym[z], n, z & ((1u << n) - 1)};
 }
-// Per bucket symbol: (base << 8) | number of extra bits.
+// Per bucket symbol: (base << 8) | number of extra bits; and the same unpacked (the decoder's
+// form: loads instead of unpacking instructions).
 struct BucketDecode {
-    std::array<uint32_t, rans::kMaxAlphabet> packed{};
+    std::array<uint32_t, rans::kMaxAlphabet> packed{}, base{}, nbits{};
     constexpr BucketDecode() {
         for (uint32_t s = 0; s < uint32_t(rans::kMaxAlphabet); ++s) {
             if (s < 8) {
@@ -175,6 +176,8 @@ struct BucketDecode {
                 uint32_t k = 3 + (s - 8) / 2, hi = (s - 8) & 1;
                 packed[s] = (((1u << k) | (hi << (k - 1))) << 8) | (k - 1);
             }
+            base[s] = packed[s] >> 8;
+            nbits[s] = packed[s] & 0xff;
         }
     }
 };
@@ -322,22 +325,65 @@ using Coord = std::array<int32_t, 4>;
 // the prediction with the same operations in the same order, so it agrees on both sides whether
 // or not the doubles below are exact (they are for the 24-bit layout's grid).
 using NormalSum = std::array<int64_t, 4>;
-
 // Area-weighted normals in (a, b, c) space: sum of the cross products of each vertex's triangles.
-void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSum* acc) {
-    for (size_t t = 0; t < triangles; ++t) {
-        uint32_t i = indices[3 * t], j = indices[3 * t + 1], k = indices[3 * t + 2];
-        const Coord si = s[i], sj = s[j], sk = s[k];
-        int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
-        int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
-        int64_t nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
-        for (uint32_t v : {i, j, k}) {
-            acc[v][0] += nx;
-            acc[v][1] += ny;
-            acc[v][2] += nz;
-        }
+// One triangle's cross product added to its three corners' sums.
+CATPAQ_RANS_INLINE void accumulate_triangle(const uint32_t* tri, const Coord* s, NormalSum* acc) {
+    uint32_t i = tri[0], j = tri[1], k = tri[2];
+    const Coord si = s[i], sj = s[j], sk = s[k];
+    int32_t e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
+    int32_t e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
+    int64_t nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+    for (uint32_t v : {i, j, k}) {
+        acc[v][0] += nx;
+        acc[v][1] += ny;
+        acc[v][2] += nz;
     }
 }
+
+void accumulate_normals(const uint32_t* indices, size_t triangles, const Coord* s, NormalSum* acc) {
+    for (size_t t = 0; t < triangles; ++t) accumulate_triangle(indices + 3 * t, s, acc);
+}
+
+#if defined(__SSE2__)
+// The matrix M as packed doubles: columns of the (x, y) rows, and the z row.
+struct NormalMatrix {
+    __m128d c0, c1, c2;  // (m0, m3), (m1, m4), (m2, m5)
+    double z0, z1, z2;   // m6, m7, m8
+    explicit NormalMatrix(const std::array<int8_t, 9>& m)
+        : c0(_mm_setr_pd(m[0], m[3])), c1(_mm_setr_pd(m[1], m[4])), c2(_mm_setr_pd(m[2], m[5])), z0(m[6]), z1(m[7]),
+          z2(m[8]) {}
+};
+
+// geometric_prediction's arithmetic with u and v in the two halves of one SSE2 register: the same
+// IEEE operations in the same order on each half (so the same bits as the scalar form below,
+// which stays the reference for other targets), without the scalar form's moves of doubles
+// through integer registers for the selects. Measured: the geometric normal pass was a fifth of
+// the decoder's profile, most of it here.
+CATPAQ_RANS_INLINE bool geometric_prediction_sse2(const NormalSum& n, const NormalMatrix& m, int& pu, int& pv) {
+    const double n0 = double(n[0]), n1 = double(n[1]), n2 = double(n[2]);
+    const __m128d N0 = _mm_set1_pd(n0), N1 = _mm_set1_pd(n1), N2 = _mm_set1_pd(n2);
+    // (x, y) = ((m0 n0 + m1 n1) + m2 n2, (m3 n0 + m4 n1) + m5 n2), as the scalar form.
+    const __m128d xy = _mm_add_pd(_mm_add_pd(_mm_mul_pd(m.c0, N0), _mm_mul_pd(m.c1, N1)), _mm_mul_pd(m.c2, N2));
+    const double z = m.z0 * n0 + m.z1 * n1 + m.z2 * n2;
+    const __m128d sign = _mm_set1_pd(-0.0);
+    const __m128d axy = _mm_andnot_pd(sign, xy);  // (|x|, |y|)
+    const double l1 = (_mm_cvtsd_f64(axy) + _mm_cvtsd_f64(_mm_unpackhi_pd(axy, axy))) + std::fabs(z);
+    if (!(l1 > 0.0)) [[unlikely]]
+        return false;
+    const __m128d uv = _mm_mul_pd(xy, _mm_set1_pd(127.0 / l1));
+    // Folded: (sign(u) (127 - |v|), sign(v) (127 - |u|)), the sign of zero taken as positive;
+    // multiplying by -1 is flipping the sign bit.
+    const __m128d auv = _mm_andnot_pd(sign, uv);
+    const __m128d rest = _mm_sub_pd(_mm_set1_pd(127.0), _mm_shuffle_pd(auv, auv, 1));
+    const __m128d fold = _mm_xor_pd(rest, _mm_and_pd(_mm_cmplt_pd(uv, _mm_setzero_pd()), sign));
+    const __m128d r = z < 0.0 ? fold : uv;
+    // Round half up: |u|, |v| <= 127, so u + 128.5 > 0 and truncation is floor.
+    const __m128i t = _mm_cvttpd_epi32(_mm_add_pd(r, _mm_set1_pd(128.5)));
+    pu = std::clamp(_mm_cvtsi128_si32(t) - 128, -127, 127);
+    pv = std::clamp(_mm_cvtsi128_si32(_mm_shuffle_epi32(t, 1)) - 128, -127, 127);
+    return true;
+}
+#endif
 
 // Predicted normal of a vertex under the geometric predictor; `prev_u/v` is the fallback.
 CATPAQ_RANS_INLINE void geometric_prediction(const NormalSum& n, const std::array<int8_t, 9>& m, int prev_u,
@@ -1243,19 +1289,56 @@ FragmentStatus decode_stored(const uint8_t* p, size_t size, uint32_t V, uint32_t
     return FragmentStatus::Ok;
 }
 
+// Triangles decoded between two checks of the front's capacity.
+constexpr uint32_t kFrontBlock = 4096;
+
+// The decoder's front edge: FrontEdge with prev and next as byte offsets into the edge array
+// (index * kEdgeBytes), so that following a link costs no address arithmetic.
+struct DecEdge {
+    uint32_t v0, v1, opp, prev, next;  // prev == kDead: consumed
+};
+constexpr uint32_t kEdgeBytes = sizeof(DecEdge);
+static_assert(kEdgeBytes == 20 && uint64_t(3) * kFragmentMaxTriangles * kEdgeBytes < kDead);
+
+// The fields of an edge, loaded one by one: the compiler merged them into one 16-byte load,
+// which the processor cannot forward from the previous steps' 4-byte stores to the same edge
+// (the edge popped next is usually one whose link a step before just rewrote), a stall that took
+// about a fifth of the traversal's time. Relaxed atomic loads are plain loads the compiler does
+// not merge.
+CATPAQ_RANS_INLINE DecEdge load_edge(const DecEdge& e) {
+    return {__atomic_load_n(&e.v0, __ATOMIC_RELAXED), __atomic_load_n(&e.v1, __ATOMIC_RELAXED),
+            __atomic_load_n(&e.opp, __ATOMIC_RELAXED), __atomic_load_n(&e.prev, __ATOMIC_RELAXED),
+            __atomic_load_n(&e.next, __ATOMIC_RELAXED)};
+}
+
+// s == K ? a : b as one compare and one conditional move. The traversal selects a dozen values
+// by its unpredictable symbol; GCC compiled the same selections written as ternaries or masks
+// to branches or to and/xor sequences of three to four instructions each.
+template <uint32_t K>
+CATPAQ_RANS_INLINE uint32_t select_if(uint32_t s, uint32_t a, uint32_t b) {
+#if defined(__x86_64__) && defined(__GNUC__)
+    asm("cmpl %[k], %[s]\n\tcmove %[a], %[b]" : [b] "+r"(b) : [s] "r"(s), [k] "i"(K), [a] "r"(a) : "cc");
+    return b;
+#else
+    return s == K ? a : b;
+#endif
+}
+
 // Scratch memory of the decoder, kept per thread between calls (fragments are small and
 // decoded by the thousand); fragments above kWorkspaceKeepVertices use a temporary one.
 struct Workspace {
-    Front front;
+    std::vector<DecEdge> edges;  // the front (decode_connectivity)
     std::vector<Pred> pred;
     std::vector<uint8_t> symbols;
     std::vector<Coord> coords;
     std::vector<int8_t> nu, nv;
     std::vector<NormalSum> acc;
-    std::vector<std::array<uint8_t, 4>> rgb;
+    std::vector<int32_t> residuals;  // of the attribute being decoded (decode_residuals)
+    std::vector<uint32_t> rgb;
     std::array<rans::DecodeTable, kStreamCount> tables;
 };
 constexpr uint32_t kWorkspaceKeepVertices = 1u << 16;
+
 
 template <class T>
 void grow(std::vector<T>& v, size_t n) {
@@ -1274,8 +1357,7 @@ CATPAQ_RANS_INLINE uint32_t dsym(rans::Decoder& d, const rans::TableView& t) {
 template <bool kFast, int L>
 CATPAQ_RANS_INLINE int32_t dresidual(rans::Decoder& d, const rans::TableView& t) {
     uint32_t s = dsym<kFast, L>(d, t);
-    const uint32_t b = kBucketDecode.packed[s];
-    return unzigzag((b >> 8) | d.take_bits(b & 0xff));
+    return unzigzag(kBucketDecode.base[s] | d.take_bits(kBucketDecode.nbits[s]));
 }
 constexpr uint32_t kMaxExtraBits = 13;  // bucket symbols < 32
 
@@ -1299,6 +1381,28 @@ CATPAQ_RANS_INLINE void for_each_item(rans::Decoder& dec, uint32_t n, uint32_t s
             ++v;
         }
     }
+}
+
+// Decodes n items of K residuals, residual j of item v on lane j with table t[j], into
+// r[K v + j]. The attribute passes decode their residuals first with this and predict after:
+// sharing one loop with the predictions, the compiler kept the rANS states, the byte pointer and
+// the bit buffer on the stack (a store and reload on every symbol's dependency chain); alone,
+// they stay in registers.
+// (Without SLP vectorisation: GCC kept two of the lane states packed in an SSE register,
+// unpacking and repacking them on every item.)
+template <int K>
+__attribute__((optimize("no-tree-slp-vectorize"))) void decode_residuals(rans::Decoder& io, const rans::TableView* t,
+                                                                         uint32_t n, int32_t* r) {
+    static_assert(K >= 1 && K <= 3);
+    rans::Decoder dec = io;
+    const rans::TableView t0 = t[0], t1 = t[K > 1 ? 1 : 0], t2 = t[K > 2 ? 2 : 0];
+    for_each_item(dec, n, K, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+        int32_t* out = r + size_t(K) * v;
+        out[0] = dresidual<kFast, 0>(dec, t0);
+        if constexpr (K > 1) out[1] = dresidual<kFast, 1>(dec, t1);
+        if constexpr (K > 2) out[2] = dresidual<kFast, 2>(dec, t2);
+    });
+    io = dec;
 }
 
 // Each decoding pass copies the decoder into a local (kept in registers) and copies it back.
@@ -1335,95 +1439,137 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
     sym[nsym] = 0xff;  // sentinel: running out of symbols reads an invalid one
     rans::Decoder dec = io;
     Pred* pred = ws.pred.data();
-    Front& front = ws.front;
-    front.reset(std::min<size_t>(size_t(R) * 2 + 16, size_t(1) << 20));
-    uint32_t seen = 0;
+    // The front's state lives in locals (as members of the workspace's Front the compiler
+    // stored and reloaded them at every step), edges are linked by byte offsets (DecEdge), the
+    // capacity is checked once per block of triangles (a step adds at most 3 edges), and the slot
+    // past the last edge is kept live (prev != kDead) so that skipping consumed edges needs no
+    // bound check. The edits are Front's.
+    std::vector<DecEdge>& store = ws.edges;
+    uint32_t size = 0, head = 0, seen = 0;  // size and head: byte offsets
     const uint8_t* next = sym;
-    for (uint32_t done = 0; done < R;) {
-        front.reserve3();
-        uint32_t i;
-        if (!front.pop(i)) {
-            // A new component: three vertices, each NEW or SPLIT.
-            uint32_t c[3];
-            for (int k = 0; k < 3; ++k) {
-                uint32_t s = *next++;
-                if (s == kNew) {
-                    if (seen == V) return FragmentStatus::Corrupt;
-                    uint32_t q = seen == 0 ? V : seen - 1;
-                    pred[seen] = Pred{q, q, q};
-                    c[k] = seen++;
-                } else if (s == kSplit) {
-                    if (seen == 0) return FragmentStatus::Corrupt;
-                    c[k] = dec.get_bits(uint32_t(bit_width_u32(seen - 1)));
-                    if (c[k] >= seen) return FragmentStatus::Corrupt;
-                } else {
-                    return FragmentStatus::Corrupt;
+    uint32_t* const tri_end = tri + 3 * size_t(R);
+    while (tri != tri_end) {
+        const uint32_t block = std::min(uint32_t((tri_end - tri) / 3), kFrontBlock);
+        const size_t need = size / kEdgeBytes + 3 * size_t(block) + 2;
+        if (store.size() < need) store.resize(std::max(need, 2 * store.size()));
+        uint8_t* const base = reinterpret_cast<uint8_t*>(store.data());
+        auto E = [base](uint32_t off) __attribute__((always_inline)) -> DecEdge& {
+            return *reinterpret_cast<DecEdge*>(base + off);
+        };
+        E(size).prev = 0;
+        for (uint32_t* const stop = tri + 3 * size_t(block); tri != stop;) {
+            // One consumed edge skipped without a branch (the common case), longer runs by one.
+            uint32_t i = head;
+            i += kEdgeBytes & (0u - uint32_t(E(i).prev == kDead));
+            while (E(i).prev == kDead) [[unlikely]]
+                i += kEdgeBytes;
+            if (i == size) [[unlikely]] {
+                // The queue is exhausted: a new component, three vertices, each NEW or SPLIT.
+                uint32_t c[3];
+                for (int k = 0; k < 3; ++k) {
+                    uint32_t s = *next++;
+                    if (s == kNew) {
+                        if (seen == V) return FragmentStatus::Corrupt;
+                        uint32_t q = seen == 0 ? V : seen - 1;
+                        pred[seen] = Pred{q, q, q};
+                        c[k] = seen++;
+                    } else if (s == kSplit) {
+                        if (seen == 0) return FragmentStatus::Corrupt;
+                        c[k] = dec.get_bits(uint32_t(bit_width_u32(seen - 1)));
+                        if (c[k] >= seen) return FragmentStatus::Corrupt;
+                    } else {
+                        return FragmentStatus::Corrupt;
+                    }
                 }
+                if (c[0] == c[1] || c[1] == c[2] || c[2] == c[0]) return FragmentStatus::Corrupt;
+                const uint32_t i1 = i + kEdgeBytes, i2 = i1 + kEdgeBytes;
+                E(i) = {c[0], c[1], c[2], i2, i1};
+                E(i1) = {c[1], c[2], c[0], i, i2};
+                E(i2) = {c[2], c[0], c[1], i1, i};
+                size = i2 + kEdgeBytes;
+                E(size).prev = 0;
+                head = i;
+                tri[0] = c[0], tri[1] = c[1], tri[2] = c[2];
+                tri += 3;
+                continue;
             }
-            if (c[0] == c[1] || c[1] == c[2] || c[2] == c[0]) return FragmentStatus::Corrupt;
-            front.start(c[0], c[1], c[2]);
-            tri[0] = c[0], tri[1] = c[1], tri[2] = c[2];
-            tri += 3;
-            ++done;
-            continue;
-        }
-        const FrontEdge ei = front.e[i];
-        const uint32_t s = *next++;
-        uint32_t v;
-        if (s <= kRight) [[likely]] {
-            // NEW, LEFT and RIGHT without branches (they are the bulk and unpredictable); the
-            // same edits as Front::add_vertex / left / right.
-            // Selections use masks: the compiler would otherwise branch on them.
-            FrontEdge* e = front.e;
-            const uint32_t is_new = s == kNew, is_left = s == kLeft, is_right = s == kRight;
-            const uint32_t m_new = 0u - is_new, m_left = 0u - is_left, m_right = 0u - is_right;
-            const uint32_t p = ei.prev, n = ei.next;
-            const uint32_t vl = e[n].v1, vr = e[p].v0, pp = e[p].prev, nn = e[n].next;
-            v = (seen & m_new) | (vl & m_left) | (vr & m_right);
-            pred[(seen & m_new) | (V & ~m_new)] = Pred{ei.v0, ei.v1, ei.opp};  // slot V: scratch
-            seen += is_new;
-            if ((seen > V) | (v == ei.v0) | (v == ei.v1)) [[unlikely]]
-                return FragmentStatus::Corrupt;
-            const uint32_t left_anchor = (pp & m_right) | (p & ~m_right);
-            const uint32_t right_anchor = (nn & m_left) | (n & ~m_left);
-            const uint32_t f = front.size, last = f + is_new;
-            // First new edge: (v0 -> v), or (v -> v1) for RIGHT; second (NEW only): (v -> v1).
-            e[f].v0 = (v & m_right) | (ei.v0 & ~m_right);
-            e[f].v1 = (ei.v1 & m_right) | (v & ~m_right);
-            e[f].opp = (ei.v0 & m_right) | (ei.v1 & ~m_right);
-            e[f].prev = left_anchor;
-            e[f].next = ((f + 1) & m_new) | (right_anchor & ~m_new);
-            e[f + 1] = FrontEdge{v, ei.v1, ei.v0, f, right_anchor};  // room reserved by reserve3
-            e[left_anchor].next = f;
-            e[right_anchor].prev = last;
-            e[(n & m_left) | (p & m_right) | (i & m_new)].prev = kDead;
-            e[i].prev = kDead;
-            front.size = last + 1;
+            head = i + kEdgeBytes;
+            const DecEdge ei = load_edge(E(i));
+            const uint32_t s = *next++;
+            uint32_t v;
+            if (s <= kRight) [[likely]] {
+                // NEW, LEFT and RIGHT without branches (they are the bulk and unpredictable), by
+                // conditional moves: the first new edge A = (v0 -> v) at f, the second
+                // B = (v -> v1) at f + 1 (NEW; a spare slot for LEFT) or at f over A (RIGHT).
+                const uint32_t p = ei.prev, n = ei.next;
+                const uint32_t vl = E(n).v1, nn = E(n).next, vr = E(p).v0, pp = E(p).prev;
+                v = select_if<kNew>(s, seen, select_if<kLeft>(s, vl, vr));
+                // (v0, v1) of the prediction and (v1, v0) of the triangle as 8-byte stores from
+                // one 8-byte load (the loop is bound by its stores as much as by anything).
+                uint64_t v01;
+                std::memcpy(&v01, &E(i).v0, 8);
+                Pred* const q = pred + select_if<kNew>(s, seen, V);  // slot V: scratch
+                std::memcpy(&q->a, &v01, 8);
+                q->c = ei.opp;
+                seen += s == kNew;
+                if ((seen > V) | (v == ei.v0) | (v == ei.v1)) [[unlikely]]
+                    return FragmentStatus::Corrupt;
+                const uint32_t left_anchor = select_if<kRight>(s, pp, p);
+                const uint32_t right_anchor = select_if<kLeft>(s, nn, n);
+                const uint32_t f = size, f1 = size + kEdgeBytes;
+                const uint32_t last = select_if<kNew>(s, f1, f);
+                E(f) = DecEdge{ei.v0, v, ei.v1, p, select_if<kNew>(s, f1, right_anchor)};
+                E(select_if<kRight>(s, f, f1)) = DecEdge{v, ei.v1, ei.v0, select_if<kNew>(s, f, left_anchor), right_anchor};
+                E(left_anchor).next = f;
+                E(right_anchor).prev = last;
+                // Edge i itself is not marked: it is behind head, and no link points to it now.
+                E(select_if<kLeft>(s, n, select_if<kRight>(s, p, i))).prev = kDead;
+                size = last + kEdgeBytes;
+                E(size).prev = 0;
+                const uint64_t v10 = (v01 >> 32) | (v01 << 32);
+                std::memcpy(tri, &v10, 8);
+                tri[2] = v;
+                tri += 3;
+                continue;
+            }
+            switch (s) {
+                case kBoundary:  // the edge stays in its loop (a neighbour's LEFT or RIGHT may use it)
+                    continue;
+                case kEnd: {
+                    v = E(ei.next).v1;
+                    if (v == ei.v0 || v == ei.v1 || E(ei.prev).v0 != v) return FragmentStatus::Corrupt;
+                    // prev, i and next are removed (Front::end).
+                    const uint32_t p = ei.prev, n = ei.next, pp = E(p).prev, nn = E(n).next;
+                    E(i).prev = kDead;
+                    E(p).prev = kDead;
+                    E(n).prev = kDead;
+                    if (pp != n) {
+                        E(pp).next = nn;
+                        E(nn).prev = pp;
+                    }
+                    break;
+                }
+                case kSplit: {
+                    if (seen == 0) return FragmentStatus::Corrupt;
+                    v = dec.get_bits(uint32_t(bit_width_u32(seen - 1)));
+                    if (v >= seen || v == ei.v0 || v == ei.v1) return FragmentStatus::Corrupt;
+                    // Edge i is replaced by (v0 -> v), (v -> v1) (Front::add_vertex).
+                    const uint32_t a = size, b = a + kEdgeBytes;
+                    E(a) = {ei.v0, v, ei.v1, ei.prev, b};
+                    E(b) = {v, ei.v1, ei.v0, a, ei.next};
+                    E(ei.prev).next = a;
+                    E(ei.next).prev = b;
+                    E(i).prev = kDead;
+                    size = b + kEdgeBytes;
+                    E(size).prev = 0;
+                    break;
+                }
+                default:
+                    return FragmentStatus::Corrupt;
+            }
             tri[0] = ei.v1, tri[1] = ei.v0, tri[2] = v;
             tri += 3;
-            ++done;
-            continue;
         }
-        switch (s) {
-            case kBoundary:
-                continue;
-            case kEnd:
-                v = front.e[ei.next].v1;
-                if (v == ei.v0 || v == ei.v1 || front.e[ei.prev].v0 != v) return FragmentStatus::Corrupt;
-                front.end(i, ei);
-                break;
-            case kSplit:
-                if (seen == 0) return FragmentStatus::Corrupt;
-                v = dec.get_bits(uint32_t(bit_width_u32(seen - 1)));
-                if (v >= seen || v == ei.v0 || v == ei.v1) return FragmentStatus::Corrupt;
-                front.add_vertex(i, ei, v);
-                break;
-            default:
-                return FragmentStatus::Corrupt;
-        }
-        tri[0] = ei.v1, tri[1] = ei.v0, tri[2] = v;
-        tri += 3;
-        ++done;
     }
     if (next != sym + nsym) return FragmentStatus::Corrupt;  // symbols left over
     seen_out = seen;
@@ -1450,7 +1596,10 @@ bool decode_positions(rans::Decoder& io, Workspace& ws, const VertexLayout& layo
     Coord* s = ws.coords.data();
     s[V] = {0, 0, 0, 0};
     uint32_t bad = 0;  // accumulated range violations, checked once
-    const rans::TableView t0(ws.tables[kStreamPos0]), t1(ws.tables[kStreamPos1]), t2(ws.tables[kStreamPos2]);
+    const rans::TableView tables[3] = {rans::TableView(ws.tables[kStreamPos0]), rans::TableView(ws.tables[kStreamPos1]),
+                                       rans::TableView(ws.tables[kStreamPos2])};
+    grow(ws.residuals, 3 * size_t(V));
+    int32_t* res = ws.residuals.data();
     if (pos_mode == kPosRaw) {
         const uint32_t high_bits = uint32_t(layout.color_shift() - 24);
         for (uint32_t v = 0; v < V; ++v) {
@@ -1458,11 +1607,13 @@ bool decode_positions(rans::Decoder& io, Workspace& ws, const VertexLayout& layo
             vert[v].word1 = dec.get_bits(high_bits) << 8;
         }
     } else if (pos_mode == kPosCumulative) {
-        for_each_item(dec, V, 3, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+        decode_residuals<3>(dec, tables, V, res);
+        for (uint32_t v = 0; v < V; ++v) {
             const Pred q = pred[v];
             const Coord A = s[q.a], B = s[q.b], C = s[q.c];
-            int32_t a = std::clamp(A[0] + B[0] - C[0], 0, kGrid) + dresidual<kFast, 0>(dec, t0);
-            int32_t rb = dresidual<kFast, 1>(dec, t1), rc = dresidual<kFast, 2>(dec, t2);
+            const int32_t* r = res + 3 * size_t(v);
+            int32_t a = std::clamp(A[0] + B[0] - C[0], 0, kGrid) + r[0];
+            const int32_t rb = r[1], rc = r[2];
             bad |= uint32_t(a) > uint32_t(kGrid);
             a = std::clamp(a, 0, kGrid);
             int32_t b = std::clamp(A[1] + B[1] - C[1], 0, a) + rb;
@@ -1473,14 +1624,16 @@ bool decode_positions(rans::Decoder& io, Workspace& ws, const VertexLayout& layo
             c = std::clamp(c, 0, b);
             s[v] = {a, b, c, 0};
             set_position(vert[v], a - b, b - c, c);
-        });
+        }
     } else {
         // Weight space: (w1, w2, w3) kept in s during the pass, converted after.
-        for_each_item(dec, V, 3, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+        decode_residuals<3>(dec, tables, V, res);
+        for (uint32_t v = 0; v < V; ++v) {
             const Pred q = pred[v];
             const Coord A = s[q.a], B = s[q.b], C = s[q.c];
-            int32_t w1 = std::clamp(A[0] + B[0] - C[0], 0, kGrid) + dresidual<kFast, 0>(dec, t0);
-            int32_t r2 = dresidual<kFast, 1>(dec, t1), r3 = dresidual<kFast, 2>(dec, t2);
+            const int32_t* r = res + 3 * size_t(v);
+            int32_t w1 = std::clamp(A[0] + B[0] - C[0], 0, kGrid) + r[0];
+            const int32_t r2 = r[1], r3 = r[2];
             bad |= uint32_t(w1) > uint32_t(kGrid);
             w1 = std::clamp(w1, 0, kGrid);
             int32_t w2 = std::clamp(A[1] + B[1] - C[1], 0, kGrid - w1) + r2;
@@ -1491,54 +1644,116 @@ bool decode_positions(rans::Decoder& io, Workspace& ws, const VertexLayout& layo
             w3 = std::clamp(w3, 0, kGrid - w1 - w2);
             s[v] = {w1, w2, w3, 0};
             set_position(vert[v], w1, w2, w3);
-        });
+        }
         for (uint32_t v = 0; v < V; ++v) s[v] = {s[v][0] + s[v][1] + s[v][2], s[v][1] + s[v][2], s[v][2], 0};
     }
     io = dec;
     return bad == 0;
 }
 
+// u into bits 24..31 of word0, v into bits 0..7 of word1 (signed bytes).
+CATPAQ_RANS_INLINE void set_normal(PackedVertex& out, int u, int v) {
+    out.word0 |= uint32_t(uint8_t(u)) << 24;
+    out.word1 |= uint8_t(v);
+}
+
+// accumulate_normals with the normals' rANS symbols (u on lane 0, v on lane 1, one vertex's pair
+// per triangle) decoded in the same loop into syms: the accumulation waits on the read-modify-
+// writes of neighbouring triangles' shared corners, the symbols on their states, and each fills
+// the other's idle slots (about 2% of the decoding time on a scan's CATP dataset, where the
+// geometric predictor is the rule). Their raw bits are read later, in order, by
+// decode_geometric_normals.
+void accumulate_normals_decoding(const uint32_t* indices, uint32_t T, const Coord* s, NormalSum* acc,
+                                 rans::Decoder& io, const rans::TableView* tables, uint32_t V, uint8_t* syms) {
+    rans::Decoder dec = io;
+    const rans::TableView tu = tables[0], tv = tables[1];
+    // Vertices whose two symbols can be decoded unchecked (2 bytes at most per symbol).
+    const uint32_t fast = uint32_t(std::min<size_t>(V, dec.rans_bytes_left() / (2 * rans::Decoder::kMaxBytesPerSymbol)));
+    uint32_t v = 0;
+    for (uint32_t t = 0; t < T; ++t) {
+        accumulate_triangle(indices + 3 * size_t(t), s, acc);
+        if (v < fast) {
+            syms[2 * size_t(v)] = uint8_t(dec.sym<0>(tu));
+            syms[2 * size_t(v) + 1] = uint8_t(dec.sym<1>(tv));
+            ++v;
+        }
+    }
+    for (; v < V; ++v) {
+        syms[2 * size_t(v)] = uint8_t(dec.get<0>(tu));
+        syms[2 * size_t(v) + 1] = uint8_t(dec.get<1>(tv));
+    }
+    io = dec;
+}
+
+// A residual from its bucket symbol and the raw bits that follow (need_bits(kMaxExtraBits) first).
+CATPAQ_RANS_INLINE int32_t bucket_residual(rans::Decoder& d, uint32_t s) {
+    return unzigzag(kBucketDecode.base[s] | d.take_bits(kBucketDecode.nbits[s]));
+}
+
+// Geometric normals from the sums, the bucket symbols (u, v per vertex) and their raw bits. The
+// predictions depend on no decoded value (but for the rare fallback to the previous normal), so
+// this loop pipelines freely.
+void decode_geometric_normals(rans::Decoder& io, const NormalSum* acc, const std::array<int8_t, 9>& matrix,
+                              uint32_t V, const uint8_t* syms, PackedVertex* vert) {
+    rans::Decoder dec = io;
+#if defined(__SSE2__)
+    const NormalMatrix m(matrix);
+#endif
+    int prev_u = 0, prev_v = 0;
+    for (uint32_t v = 0; v < V; ++v) {
+        dec.need_bits(2 * kMaxExtraBits);
+        const int32_t ru = bucket_residual(dec, syms[2 * size_t(v)]);
+        const int32_t rv = bucket_residual(dec, syms[2 * size_t(v) + 1]);
+        int pu, pv;
+#if defined(__SSE2__)
+        if (!geometric_prediction_sse2(acc[v], m, pu, pv)) [[unlikely]] {
+            pu = prev_u;
+            pv = prev_v;
+        }
+#else
+        geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
+#endif
+        prev_u = int8_t(uint8_t(pu + ru));
+        prev_v = int8_t(uint8_t(pv + rv));
+        set_normal(vert[v], prev_u, prev_v);
+    }
+    io = dec;
+}
+
 // Normals: ORs u into word0 and v into word1 (signed bytes; index V is the virtual zero vertex).
 void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std::array<int8_t, 9>& matrix, uint32_t V,
                     uint32_t T, const Pred* pred, const uint32_t* indices, PackedVertex* vert) {
+    const rans::TableView tables[2] = {rans::TableView(ws.tables[kStreamNormU]), rans::TableView(ws.tables[kStreamNormV])};
+    if (normal_mode == kNormalGeometric) {
+        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
+        grow(ws.symbols, 2 * size_t(V));
+        accumulate_normals_decoding(indices, T, ws.coords.data(), ws.acc.data(), io, tables, V, ws.symbols.data());
+        decode_geometric_normals(io, ws.acc.data(), matrix, V, ws.symbols.data(), vert);
+        return;
+    }
+    grow(ws.residuals, 2 * size_t(V));
+    int32_t* res = ws.residuals.data();
+    decode_residuals<2>(io, tables, V, res);
     grow(ws.nu, size_t(V) + 1);
     grow(ws.nv, size_t(V) + 1);
     int8_t *nu = ws.nu.data(), *nv = ws.nv.data();
     nu[V] = nv[V] = 0;
-    rans::Decoder dec = io;
-    const rans::TableView tu(ws.tables[kStreamNormU]), tv(ws.tables[kStreamNormV]);
-    if (normal_mode == kNormalGeometric) {
-        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
-        accumulate_normals(indices, T, ws.coords.data(), ws.acc.data());
-        const NormalSum* acc = ws.acc.data();
-        int prev_u = 0, prev_v = 0;
-        for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
-            int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
-            int pu, pv;
-            geometric_prediction(acc[v], matrix, prev_u, prev_v, pu, pv);
-            prev_u = int8_t(uint8_t(pu + ru));
-            prev_v = int8_t(uint8_t(pv + rv));
-            nu[v] = int8_t(prev_u), nv[v] = int8_t(prev_v);
-        });
-    } else if (normal_mode == kNormalAverage) {
-        for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+    if (normal_mode == kNormalAverage) {
+        for (uint32_t v = 0; v < V; ++v) {
             const Pred q = pred[v];
-            int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
+            const int ru = res[2 * size_t(v)], rv = res[2 * size_t(v) + 1];
             nu[v] = int8_t(uint8_t(((nu[q.a] + nu[q.b]) >> 1) + ru));
             nv[v] = int8_t(uint8_t(((nv[q.a] + nv[q.b]) >> 1) + rv));
-        });
+            set_normal(vert[v], nu[v], nv[v]);
+        }
     } else {
-        for_each_item(dec, V, 2, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+        for (uint32_t v = 0; v < V; ++v) {
             const Pred q = pred[v];
-            int ru = dresidual<kFast, 0>(dec, tu), rv = dresidual<kFast, 1>(dec, tv);
+            const int ru = res[2 * size_t(v)], rv = res[2 * size_t(v) + 1];
             nu[v] = int8_t(uint8_t(std::clamp(nu[q.a] + nu[q.b] - nu[q.c], -127, 127) + ru));
             nv[v] = int8_t(uint8_t(std::clamp(nv[q.a] + nv[q.b] - nv[q.c], -127, 127) + rv));
-        });
-    }
-    io = dec;
-    for (uint32_t v = 0; v < V; ++v) {
-        vert[v].word0 |= uint32_t(uint8_t(nu[v])) << 24;
-        vert[v].word1 |= uint8_t(nv[v]);
+            set_normal(vert[v], nu[v], nv[v]);
+        }
     }
 }
 
@@ -1546,11 +1761,17 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std
 template <bool kParallelogram>
 void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, bool decorrelate, uint32_t V,
                         const Pred* pred, PackedVertex* vert) {
+    // Channel values packed R | G << 8 | B << 16: one 4-byte store per vertex, which the next
+    // vertices' 4-byte loads of it are forwarded from.
     grow(ws.rgb, size_t(V) + 1);
-    std::array<uint8_t, 4>* rgb = ws.rgb.data();
-    rgb[V] = {0, 0, 0, 0};
-    rans::Decoder dec = io;
-    const rans::TableView tr(ws.tables[kStreamColR]), tg(ws.tables[kStreamColG]), tb(ws.tables[kStreamColB]);
+    uint32_t* rgb = ws.rgb.data();
+    rgb[V] = 0;
+    // G first (lane 0), then R (lane 1) and B (lane 2).
+    const rans::TableView tables[3] = {rans::TableView(ws.tables[kStreamColG]), rans::TableView(ws.tables[kStreamColR]),
+                                       rans::TableView(ws.tables[kStreamColB])};
+    grow(ws.residuals, 3 * size_t(V));
+    int32_t* res = ws.residuals.data();
+    decode_residuals<3>(io, tables, V, res);
     const int32_t dmask = decorrelate ? -1 : 0;
     const int top = f.top, shift = f.shift, bits = f.bits;
     auto predict = [top](int a, int b, int c) {
@@ -1559,19 +1780,20 @@ void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, b
         else
             return (a + b + 1) >> 1;
     };
-    for_each_item(dec, V, 3, [&]<bool kFast>(uint32_t v) __attribute__((always_inline)) {
+    for (uint32_t v = 0; v < V; ++v) {
         const Pred q = pred[v];
-        int32_t rg = dresidual<kFast, 0>(dec, tg);
-        int32_t rr = dresidual<kFast, 1>(dec, tr) + (rg & dmask);
-        int32_t rb = dresidual<kFast, 2>(dec, tb) + (rg & dmask);
-        const std::array<uint8_t, 4> A = rgb[q.a], B = rgb[q.b], C = rgb[q.c];
-        const uint32_t r = uint32_t(predict(A[0], B[0], C[0]) + rr) & uint32_t(top);
-        const uint32_t g = uint32_t(predict(A[1], B[1], C[1]) + rg) & uint32_t(top);
-        const uint32_t bl = uint32_t(predict(A[2], B[2], C[2]) + rb) & uint32_t(top);
-        rgb[v] = {uint8_t(r), uint8_t(g), uint8_t(bl), 0};
+        const int32_t* rv = res + 3 * size_t(v);
+        const int32_t rg = rv[0];
+        const int32_t rr = rv[1] + (rg & dmask);
+        const int32_t rb = rv[2] + (rg & dmask);
+        const uint32_t A = rgb[q.a], B = rgb[q.b], C = rgb[q.c];
+        auto channel = [](uint32_t w, int k) { return int((w >> (8 * k)) & 0xffu); };
+        const uint32_t r = uint32_t(predict(channel(A, 0), channel(B, 0), channel(C, 0)) + rr) & uint32_t(top);
+        const uint32_t g = uint32_t(predict(channel(A, 1), channel(B, 1), channel(C, 1)) + rg) & uint32_t(top);
+        const uint32_t bl = uint32_t(predict(channel(A, 2), channel(B, 2), channel(C, 2)) + rb) & uint32_t(top);
+        rgb[v] = r | g << 8 | bl << 16;
         vert[v].word1 |= r << shift | g << (shift + bits) | bl << (shift + 2 * bits);
-    });
-    io = dec;
+    }
 }
 
 void decode_colors(rans::Decoder& io, Workspace& ws, const VertexLayout& layout, bool parallelogram, bool decorrelate,
@@ -1585,6 +1807,7 @@ void decode_colors(rans::Decoder& io, Workspace& ws, const VertexLayout& layout,
 
 FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint32_t T, FragmentMesh& out,
                                  Workspace& ws) {
+
     const bool colors = out.layout.has_color();
     if (size < 1) return FragmentStatus::Corrupt;
     const uint8_t modes = *p++;

@@ -5,9 +5,9 @@
 // symbol names its lane (the codec assigns lanes statically, e.g. one per coordinate, so a
 // decoder loop has up to four independent dependency chains without any state rotation). The
 // shared byte stream is consumed in decode order. States live in [kStateLower, 2^31);
-// renormalisation is byte-wise, at most two bytes per symbol, branch-free. Raw bits (the low
-// bits of large residuals, explicit indices, table fields) go to a separate little-endian bit
-// stream read through a 64-bit buffer. The encoder collects everything first and encodes the
+// renormalisation is byte-wise, at most two bytes per symbol (the second behind a rarely taken
+// branch, see renormalise). Raw bits (the low bits of large residuals, explicit indices, table
+// fields) go to a separate little-endian bit stream read through a 64-bit buffer. The encoder collects everything first and encodes the
 // symbols backwards once the tables are known; it starts every state at kStateLower, so the
 // decoder checks that all states return to exactly kStateLower after the last symbol, with
 // every byte consumed and the bit stream's padding zero: a strong end-of-stream check.
@@ -66,11 +66,13 @@ double data_cost_bits(const uint32_t* counts, const FreqTable& freqs);
 // Estimated cost in bits of a table description.
 double table_cost_bits(const TableDesc& desc);
 
-// Decoding table: slot -> packed (freq: bits 0..12, slot - start: bits 13..24, symbol: bits 25..31).
+// Decoding table: slot -> freq | (slot - start) << 16, and slot -> symbol apart. (Two loads per
+// symbol, from the same slot, instead of one packed word that took six instructions to unpack.)
 struct DecodeTable {
     int scale_bits = 0;
     uint32_t mask = 0;
     std::vector<uint32_t> lut;
+    std::vector<uint8_t> syms;
     void build(const FreqTable& f);
 };
 
@@ -146,12 +148,25 @@ private:
     int bit_fill_ = 0;
 };
 
+// low_bits(n) = 2^n - 1 for n <= 32, by a table: one load instead of building the mask with a
+// variable shift (which on x86 also ties up the count register) in every raw bits read.
+struct LowBitsTable {
+    uint32_t mask[kMaxRawBits + 1];
+    constexpr LowBitsTable() : mask{} {
+        for (int n = 0; n <= kMaxRawBits; ++n) mask[n] = n == 32 ? ~0u : (1u << n) - 1;
+    }
+};
+inline constexpr LowBitsTable kLowBits{};
+CATPAQ_RANS_INLINE uint32_t low_bits(uint32_t n) { return kLowBits.mask[n]; }
+
 // Read-only view of a DecodeTable for the hot loops (plain values the compiler keeps in registers).
 struct TableView {
     const uint32_t* lut;
+    const uint8_t* syms;
     uint32_t mask;
     uint32_t shift;
-    explicit TableView(const DecodeTable& t) : lut(t.lut.data()), mask(t.mask), shift(uint32_t(t.scale_bits)) {}
+    explicit TableView(const DecodeTable& t)
+        : lut(t.lut.data()), syms(t.syms.data()), mask(t.mask), shift(uint32_t(t.scale_bits)) {}
 };
 
 // The decoder is a plain value: hot loops copy it into a local (so that every field lives in a
@@ -180,23 +195,59 @@ struct Decoder {
     template <int L>
     CATPAQ_RANS_INLINE uint32_t sym(const TableView& t) {
         uint32_t x = lane<L>();
-        uint32_t e = t.lut[x & t.mask];
-        x = (e & 0x1fffu) * (x >> t.shift) + ((e >> 13) & 0xfffu);
-        // k = 0, 1 or 2 bytes are needed (every step leaves x >= kStateLower >> 12): read two
-        // (in bounds by the precondition) and keep the first k.
-        const uint32_t k = uint32_t(x < kStateLower) + uint32_t(x < (kStateLower >> 8));
-        const uint32_t two = (uint32_t(p[0]) << 8) | p[1];
-        x = (x << (8 * k)) | (two >> (16 - 8 * k));
-        p += k;
+        const uint32_t slot = x & t.mask;
+        const uint32_t e = t.lut[slot];
+        x = (e & 0xffffu) * (x >> t.shift) + (e >> 16);
+        renormalise(x);
         lane<L>() = x;
-        return e >> 25;
+        return t.syms[slot];
     }
+    // Brings a decoded state back to [kStateLower, 2^31): k = 0, 1 or 2 bytes (every step
+    // leaves x >= kStateLower >> 12; requires rans_bytes_left() >= 2). The first byte by a
+    // compare, a conditional move and an add of the carry; the second by a branch, taken only
+    // after symbols of frequency below 2^(scale - 8) (rare by definition). Measured: fewer
+    // instructions than the branch-free form reading two bytes and shifting by 8 k, which took
+    // about a third of every symbol's instructions.
+    CATPAQ_RANS_INLINE void renormalise(uint32_t& x) {
+        const uint32_t with_byte = (x << 8) | p[0];
+#if defined(__x86_64__) && defined(__GNUC__)
+        asm("cmpl %[lower], %[x]\n\t"
+            "cmovb %[with_byte], %[x]\n\t"
+            "adc $0, %[p]"
+            : [x] "+r"(x), [p] "+r"(p)
+            : [with_byte] "r"(with_byte), [lower] "i"(kStateLower)
+            : "cc");
+#else
+        const bool need = x < kStateLower;
+        x = need ? with_byte : x;
+        p += need;
+#endif
+        if (x < kStateLower) [[unlikely]]
+            x = (x << 8) | *p++;
+    }
+
     // Symbol on lane L, any position.
     template <int L>
     CATPAQ_RANS_INLINE uint32_t get(const TableView& t) {
         if (rans_bytes_left() >= kMaxBytesPerSymbol) [[likely]]
             return sym<L>(t);
-        return get_slow(t, L);
+        // Near the end, byte by byte with checks, inline: the last symbols of a stream often
+        // need no byte at all (probable symbols cost a fraction of a bit), and a call per
+        // symbol there took about 1% of the decoder's time.
+        uint32_t x = lane<L>();
+        const uint32_t slot = x & t.mask;
+        const uint32_t e = t.lut[slot];
+        x = (e & 0xffffu) * (x >> t.shift) + (e >> 16);
+        while (x < kStateLower) {  // at most twice: x >= kStateLower >> 12 before
+            if (p == end) {
+                failed = true;
+                x |= kStateLower;  // keep the state in range; the stream is already invalid
+                break;
+            }
+            x = (x << 8) | *p++;
+        }
+        lane<L>() = x;
+        return t.syms[slot];
     }
     uint32_t get(const TableView& t) { return get<0>(t); }
 
@@ -208,7 +259,7 @@ struct Decoder {
     }
     // Raw bits; requires need_bits(>= nbits) since the last refill accounting.
     CATPAQ_RANS_INLINE uint32_t take_bits(uint32_t nbits) {
-        uint32_t v = uint32_t(bit_buf & ((uint64_t(1) << nbits) - 1));
+        uint32_t v = uint32_t(bit_buf) & low_bits(nbits);
         bit_buf >>= nbits;
         bit_count -= nbits;
         return v;
@@ -238,7 +289,14 @@ struct Decoder {
     bool failed = true;
 
 private:
-    uint32_t get_slow(const TableView& t, int lane);
+    // refill's slow path works on a copy passed and returned by value: a hot loop's decoder (a
+    // local copy, see above) then never has its address taken, and the compiler keeps its fields
+    // in registers. As a member function called on it, it made the decoder live on the stack,
+    // with a store and a reload on every symbol's dependency chain (so does get's slow path,
+    // written inline for the same reason).
+    static Decoder refilled_slowly(Decoder d, uint32_t need);
+    uint32_t get_meta(const uint8_t* syms, const FreqTable& f);
+    void refill_slow(uint32_t need);
     CATPAQ_RANS_INLINE void refill(uint32_t need) {
         if (bit_end - bit_p >= 8) [[likely]] {
             uint64_t w;
@@ -248,10 +306,9 @@ private:
             bit_p += (63 - bit_count) >> 3;
             bit_count |= 56;
         } else {
-            refill_slow(need);
+            *this = refilled_slowly(*this, need);
         }
     }
-    void refill_slow(uint32_t need);
 };
 
 }  // namespace catpaq::rans
