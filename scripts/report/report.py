@@ -797,7 +797,8 @@ def write_report(raw, work, docs):
         ["run time", "%s s" % mach.get("total_seconds", "?")]]))
     w("")
     w("**Reproduce:** `scripts/build.sh` then `scripts/report/run.sh` (full: scan-like meshes of 1M "
-      "and 2M triangles, build bench up to 10M triangles, builds under a 1 GiB memory budget, several minutes) "
+      "and 2M triangles, build bench up to 10M triangles, builds under a 1 GiB memory budget, point clouds up to "
+      "100M points, about 20 minutes) "
       "or `scripts/report/run.sh --short` (300k-triangle scan, build bench at 100k; about 2-3 minutes on "
       "2 cores; `scripts/test.sh` runs it with `--out` a temporary directory). `--out DIR` writes "
       "`DIR/RESULTS.md` and `DIR/results/` instead of `docs/`; `KEEP_RAW=1` keeps the tools' raw "
