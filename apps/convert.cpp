@@ -37,7 +37,8 @@ static const char* kConvertUsage =
     "  --memory SIZE            memory budget, e.g. 512M or 4G (catp: default half the physical\n"
     "                           memory, PLY input is streamed and scratch data beyond the budget goes\n"
     "                           to anonymous files next to the output; aqp: works in core and\n"
-    "                           refuses at once when its estimate exceeds the budget)\n"
+    "                           refuses at once when its estimate exceeds the budget; points: the\n"
+    "                           same, about 72 bytes a point, after reading the input)\n"
     "catp:\n"
     "  --vertex-layout L        auto (default: position48 without colours; with colours rgb24 when\n"
     "                           its grid reaches the precision, else rgb18), rgb24 (8-bit colour,\n"
@@ -88,7 +89,7 @@ struct FormatOption {
     const char* formats;
 };
 static const FormatOption kFormatOptions[] = {
-    {"precision", "catp aqp"},      {"memory", "catp aqp"},       {"vertex-layout", "catp"},
+    {"precision", "catp aqp"},      {"memory", "catp aqp points"},       {"vertex-layout", "catp"},
     {"leaf-triangles", "catp"},   {"leaf-level", "catp"},
     {"patch-level", "aqp"},         {"domain-triangles", "aqp"},  {"node-points", "points"},
     {"split", "points"},            {"error-fraction", "points"}, {"normals", "points"},

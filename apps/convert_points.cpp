@@ -45,6 +45,7 @@ void print_json(const PointsBuildReport& r, const ConvertJob& job, size_t surfac
         {"worst_error_to_radius", r.worst_error_to_radius},
         {"seconds", r.seconds},
         {"peak_rss", r.peak_rss},
+        {"memory_estimate", r.memory_estimate},
         {"dropped_input", r.dropped_input},
         {"levels", levels}};
     std::printf("%s\n", out.dump().c_str());
@@ -100,6 +101,7 @@ int convert_points(Options& options, const ConvertJob& job) {
         usage_error("--normals: '%s' is not one of auto, outward, up", normals.c_str());
     const size_t surface_samples = size_t(options.integer("surface-samples", 0, 1, int64_t(1) << 32));
     s.threads = unsigned(options.integer("threads", 0, 0, 1024));
+    s.memory_budget = options.bytes("memory", 0);
     // The up axis: --up, else the input's convention (LAS: z), else y as for catp and aqp.
     UpAxis up = UpAxis::Unknown;
     if (options.has("up") && !parse_up_axis(options.get("up", ""), up))

@@ -749,6 +749,11 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
         fail("position error fraction %g is out of range (0, 1]", settings.error_fraction);
     if (settings.radius_neighbour < 1 || settings.radius_neighbour > 63)
         fail("radius neighbour %zu is out of range (1 .. 63)", settings.radius_neighbour);
+    const uint64_t estimate = points_memory_estimate(cloud.size());
+    if (settings.memory_budget && estimate > settings.memory_budget)
+        fail("%zu points need about %llu MiB in core, more than the memory budget of %llu MiB (the point converter "
+             "works in core; a larger --memory, or fewer points)",
+             cloud.size(), (unsigned long long)(estimate >> 20), (unsigned long long)(settings.memory_budget >> 20));
     std::unique_ptr<tbb::global_control> threads;
     if (settings.threads)
         threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings.threads);
@@ -757,6 +762,7 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
         progress = std::make_unique<Progress>("convert", "preparing", 0, "");
     Builder builder(cloud, settings, z_up, progress.get());
     PointsBuildReport report = builder.run(output_path);
+    report.memory_estimate = estimate;
     if (progress) progress->finish();
     return report;
 }

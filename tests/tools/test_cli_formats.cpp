@@ -9,6 +9,7 @@
 #include "common_codec/archive.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
+#include "points/builder.h"
 #include "points/sampling.h"
 
 using namespace catpaq;
@@ -123,13 +124,28 @@ TEST(CliFormats, OptionsOfAnotherFormatAreRefusedByName) {
                    "--vertex-layout applies to --format catp, not aqp");
     expect_failure("convert " + in.string() + " -o " + out.string() + " --node-points 100",
                    "--node-points applies to --format points, not catp");
-    expect_failure("convert " + in.string() + " -o " + out.string() + " --format points --memory 1G",
-                   "--memory applies to --format catp and aqp, not points");
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --format points --precision 0.1e",
+                   "--precision applies to --format catp and aqp, not points");
     expect_failure("convert " + in.string() + " -o " + out.string() + " --format quads",
                    "unknown --format 'quads' (available: catp, aqp, points)");
     expect_failure("convert " + in.string() + " -o " + out.string() + " --format points --split halves",
                    "--split: 'halves' is not one of balanced, midpoint");
     expect_nothing_written(out);
+}
+
+// The point converter works in core: a cloud whose estimate exceeds --memory is refused with
+// the estimate and the budget, and nothing is written; under a budget that holds it converts.
+TEST(CliFormats, PointsRefuseACloudBeyondTheMemoryBudget) {
+    fs::path in = scratch() / "budget.ply", out = scratch() / "budget.cpq";
+    write_ply(in.string(), make_sphere(60000, 3));  // 30,002 vertices: about 10 MiB estimated
+    expect_failure("convert " + in.string() + " -o " + out.string() + " --format points --memory 9M",
+                   "30002 points need about 10 MiB in core, more than the memory budget of 9 MiB");
+    expect_nothing_written(out);
+    ToolRun ok = run("convert " + in.string() + " -o " + out.string() + " --format points --memory 64M --json --quiet", true);
+    ASSERT_EQ(ok.status, 0) << ok.output;
+    const nlohmann::json j = nlohmann::json::parse(ok.output);
+    EXPECT_EQ(j.at("memory_estimate").get<uint64_t>(), points_memory_estimate(30002));
+    EXPECT_LE(j.at("peak_rss").get<uint64_t>(), uint64_t(64) << 20);
 }
 
 // What AQP cannot map is refused with a message and leaves nothing behind: a mesh without
