@@ -166,25 +166,38 @@ std::vector<uint32_t> node_values(const PatchGrid& g, const PatchGrid* coarser, 
     return v;
 }
 
-// Version 3: one byte plane per 8-bit channel and two (high, low) per 16-bit one, n x n each,
-// stacked in an 8-bit grey image. Planes keep alike bytes together: a position's high byte is
-// nearly always 0 in a delta level, and deflate sees long runs of it instead of every sixth byte.
-PngImage byte_planes(const std::vector<uint32_t>& v, int side, int channels) {
+// The samples a version-3 plane holds, in grid order: all of them at level 0; at a finer level
+// only those the coarser level does not have (not both coordinates even): the others' deltas are
+// 0 by construction (levels nest), so a decoder knows them without storing them.
+std::vector<uint32_t> stored_samples(int side, bool delta) {
+    std::vector<uint32_t> out;
+    for (int j = 0; j < side; ++j)
+        for (int i = 0; i < side; ++i)
+            if (!delta || i % 2 || j % 2) out.push_back(uint32_t(j * side + i));
+    return out;
+}
+
+// Version 3: one byte plane per 8-bit channel and two (high, low) per 16-bit one, one plane per
+// row of an 8-bit grey image. Planes keep alike bytes together: a position's high byte is
+// nearly always 0 in a delta level, and deflate sees long runs of it instead of every sixth
+// byte. A whole plane per row (not n rows of n) because libpng's cost is per row: with 17-byte
+// rows, decoding took longer than the RGB16 layout's.
+PngImage byte_planes(const std::vector<uint32_t>& v, int side, int channels, const std::vector<uint32_t>& stored) {
     const size_t n = size_t(side) * side;
     PngImage im;
-    im.width = side;
+    im.width = int(stored.size());
     im.channels = 1;
     im.bit_depth = 8;
     im.height = 0;
     for (int c = 0; c < channels; ++c) {
         const uint32_t* values = &v[size_t(c) * n];
         if (channel_bits(c) == 16) {
-            for (size_t s = 0; s < n; ++s) im.values.push_back(uint16_t(values[s] >> 8));
-            for (size_t s = 0; s < n; ++s) im.values.push_back(uint16_t(values[s] & 0xff));
-            im.height += 2 * side;
+            for (uint32_t s : stored) im.values.push_back(uint16_t(values[s] >> 8));
+            for (uint32_t s : stored) im.values.push_back(uint16_t(values[s] & 0xff));
+            im.height += 2;
         } else {
-            im.values.insert(im.values.end(), values, values + n);
-            im.height += side;
+            for (uint32_t s : stored) im.values.push_back(uint16_t(values[s]));
+            im.height += 1;
         }
     }
     return im;
@@ -215,19 +228,22 @@ PngImage rgb16_pixels(const std::vector<uint32_t>& v, int side, int channels) {
 
 // The inverse of byte_planes / rgb16_pixels on a decoded image of the expected shape; an empty
 // string, or what is wrong (bits outside the channels).
-std::string unpack_values(const PngImage& im, int side, int channels, bool planes, std::vector<uint32_t>& v) {
+// (planes: `stored` as byte_planes had it; the samples left out stay 0).
+std::string unpack_values(const PngImage& im, int side, int channels, bool planes, const std::vector<uint32_t>& stored,
+                          std::vector<uint32_t>& v) {
     const size_t n = size_t(side) * side;
     v.assign(size_t(channels) * n, 0);
     if (planes) {
+        const size_t m = stored.size();
         const uint16_t* byte = im.values.data();
         for (int c = 0; c < channels; ++c) {
             uint32_t* values = &v[size_t(c) * n];
             if (channel_bits(c) == 16) {
-                for (size_t s = 0; s < n; ++s) values[s] = uint32_t(byte[s]) << 8 | byte[n + s];
-                byte += 2 * n;
+                for (size_t k = 0; k < m; ++k) values[stored[k]] = uint32_t(byte[k]) << 8 | byte[m + k];
+                byte += 2 * m;
             } else {
-                for (size_t s = 0; s < n; ++s) values[s] = byte[s];
-                byte += n;
+                for (size_t k = 0; k < m; ++k) values[stored[k]] = byte[k];
+                byte += m;
             }
         }
         return "";
@@ -246,6 +262,33 @@ std::string unpack_values(const PngImage& im, int side, int channels, bool plane
     return "";
 }
 
+// Channel c of every sample of `g`, row-major.
+void channel_plane(const PatchGrid& g, int c, std::vector<int>& out) {
+    out.resize(g.position.size());
+    for (size_t s = 0; s < out.size(); ++s) out[s] = channel_value(g, s, c);
+}
+
+// Turns a level's zigzag-coded deltas (side x side, row-major, in place) into values: adds
+// predict_from_coarser's prediction from `coarse` (the channel at the level below, side / 2 + 1
+// per row) modulo mask + 1. Even rows lie on a coarse row (even columns: the coarse sample, odd:
+// the mean of its two neighbours on the row); odd rows between two (even columns: the mean of
+// the samples above and below, odd: of the drawn diagonal's ends).
+void add_prediction(const int* coarse, int side, uint32_t mask, uint32_t* values) {
+    const int cs = side / 2 + 1;
+    for (int j = 0; j < side; ++j) {
+        const int* lo = coarse + size_t(j / 2) * cs;
+        const int* hi = j % 2 ? lo + cs : lo;  // the coarse row above, for odd rows
+        uint32_t* row = values + size_t(j) * side;
+        for (int i = 0; i < side; ++i) {
+            const int ci = i / 2;
+            int prediction;
+            if (j % 2 == 0) prediction = i % 2 == 0 ? lo[ci] : (lo[ci] + lo[ci + 1]) >> 1;
+            else prediction = i % 2 == 0 ? (lo[ci] + hi[ci]) >> 1 : (lo[ci] + hi[ci + 1]) >> 1;
+            row[i] = uint32_t(prediction + unzigzag(row[i])) & mask;
+        }
+    }
+}
+
 }  // namespace
 
 std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coarser, NodeLayout layout, int compression) {
@@ -256,10 +299,18 @@ std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coar
     assert(!coarser || coarser->size == g.size / 2 + 1);
     const int channels = channel_count(layout);
     const std::vector<uint32_t> values = node_values(g, coarser, channels);
+    const std::vector<uint32_t> stored = stored_samples(g.size, coarser != nullptr);
+    if (layout.byte_planes && coarser)
+        for (int c = 0; c < channels; ++c)
+            for (int j = 0; j < g.size; j += 2)
+                for (int i = 0; i < g.size; i += 2)
+                    if (values[size_t(c) * n + g.index(i, j)] != 0)
+                        fail("patch %u level %d sample (%d, %d) is not its coarser level's sample: levels must nest",
+                             g.patch, g.level, i, j);
     // No row filters: deltas are residuals already, and libpng's filter heuristic picks filters
     // that cost bytes (a 1M-triangle scan-like mesh's dataset 1.8% smaller, the bunny's 0.7%;
     // keeping the filters on level 0, which holds values, was slightly larger still).
-    return png_encode(layout.byte_planes ? byte_planes(values, g.size, channels) : rgb16_pixels(values, g.size, channels),
+    return png_encode(layout.byte_planes ? byte_planes(values, g.size, channels, stored) : rgb16_pixels(values, g.size, channels),
                       compression, false);
 }
 
@@ -275,31 +326,37 @@ std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, 
         return strprintf("decoding level %d needs the patch's decoded level %d", level, level - 1);
     const int channels = channel_count(layout);
     PngImage image;
-    const std::string e = layout.byte_planes ? png_decode(data, size, side, side * (channels + 3), 1, 8, image)
+    const std::vector<uint32_t> stored = stored_samples(side, coarser != nullptr);
+    const std::string e = layout.byte_planes ? png_decode(data, size, int(stored.size()), channels + 3, 1, 8, image)
                                              : png_decode(data, size, 2 * side, side, 3, 16, image);
     if (!e.empty()) return "AQP node image: " + e;
     std::vector<uint32_t> v;
-    if (std::string bad = unpack_values(image, side, channels, layout.byte_planes, v); !bad.empty()) return bad;
+    if (std::string bad = unpack_values(image, side, channels, layout.byte_planes, stored, v); !bad.empty()) return bad;
     out.patch = patch;
     out.level = level;
     out.size = side;
     const size_t n = size_t(side) * side;
+    // Channel by channel: stored values become values in place (planar loops, a row of coarse
+    // samples at a time, instead of predict_from_coarser's per-sample branches: the same sums).
+    if (coarser) {
+        std::vector<int> coarse;
+        for (int c = 0; c < channels; ++c) {
+            channel_plane(*coarser, c, coarse);
+            add_prediction(coarse.data(), side, (1u << channel_bits(c)) - 1, &v[size_t(c) * n]);
+        }
+    }
     out.position.resize(n);
     out.normal.resize(n);
     out.color.assign(colors ? n : 0, Rgb8{0, 0, 0});
-    for (int j = 0; j < side; ++j)
-        for (int i = 0; i < side; ++i) {
-            const size_t s = out.index(i, j);
-            int value[kChannels] = {};
-            for (int c = 0; c < channels; ++c) {
-                const uint32_t stored = v[size_t(c) * n + s];
-                const int mask = (1 << channel_bits(c)) - 1;
-                value[c] = coarser ? (predict_from_coarser(*coarser, c, i, j) + unzigzag(stored)) & mask : int(stored);
-            }
-            out.position[s] = {uint16_t(value[0]), uint16_t(value[1]), uint16_t(value[2])};
-            out.normal[s] = uint16_t(value[3] | (value[4] << 8));
-            if (colors) out.color[s] = {uint8_t(value[5]), uint8_t(value[6]), uint8_t(value[7])};
-        }
+    const uint32_t *x = &v[0], *y = &v[n], *z = &v[2 * n], *nu = &v[3 * n], *nv = &v[4 * n];
+    for (size_t s = 0; s < n; ++s) {
+        out.position[s] = {uint16_t(x[s]), uint16_t(y[s]), uint16_t(z[s])};
+        out.normal[s] = uint16_t(nu[s] | (nv[s] << 8));
+    }
+    if (colors) {
+        const uint32_t *r = &v[5 * n], *g = &v[6 * n], *b = &v[7 * n];
+        for (size_t s = 0; s < n; ++s) out.color[s] = {uint8_t(r[s]), uint8_t(g[s]), uint8_t(b[s])};
+    }
     return "";
 }
 

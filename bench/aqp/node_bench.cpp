@@ -16,11 +16,13 @@
 //                 (a 50k sphere at 33 x 33: 45.9 bits per sample against 20.6), the quantized
 //                 positions are too coarse a few samples apart to predict 8-bit normals
 //   planes-delta  the deltas of one-png-delta as byte planes (x high, x low, ... normal u, v,
-//                 red, green, blue) in one 8-bit grey PNG: the dataset layout since version 3
-//                 (200k scan-like mesh with colours, 17 x 17: 40.8 bits per sample against 47.7;
-//                 bunny: 34.7 against 41.6)
+//                 red, green, blue) in one 8-bit grey PNG, a plane per row (first measured
+//                 as n rows of n per plane: 200k scan-like mesh with colours, 17 x 17, 40.8 bits
+//                 per sample against 47.7; bunny 34.7 against 41.6)
 //   planes-new    as planes-delta, leaving out the samples a coarser level has (always 0): mixed
-//                 (scan 41.5, bunny 32.2), and the planes lose their grid rows
+//                 while planes were n rows of n (scan 41.5, bunny 32.2); with a plane per row it
+//                 pays (1M-triangle mesh 22.7 bits per sample against 25.7) and is the dataset
+//                 layout (version 3)
 //   planes-cubic-pos  as planes-delta, positions between coarse samples predicted by the 4-tap
 //                 cubic (-1 9 9 -1) / 16 where four coarse taps exist: 0.3% smaller on the scan,
 //                 0.4% larger on the bunny, not worth a second predictor
@@ -29,8 +31,8 @@
 // consecutive ids in one image per level, for G = 1 (the dataset layout), 4, 16, 64 and all,
 // bytes per level: each PNG pays its fixed overhead (about 60 bytes) and deflate its code tables
 // once per tile instead of once per patch (1M-triangle scan-like mesh, 900 patches of 33 x 33:
-// 26.1 bits per sample at G = 1, 22.6 at 4, 21.3 at 16; level 0 of all patches in one image
-// 33 KB against 108 KB as 900 images).
+// 22.7 bits per sample at G = 1, 19.8 at 4, 19.2 at 16; level 0 of all patches in one image
+// 27 KB against 101 KB as 900 images).
 //
 // usage: aqp_node_bench DATASET.cpq [--compression N]
 #include <algorithm>
@@ -201,8 +203,8 @@ size_t one_png(const std::vector<Sample>& s, int size, int compression) {
 }
 
 
-// Byte planes in one 8-bit grey PNG, n wide (planes-delta, planes-new). `skip_old`: leave out the
-// samples the coarser level has.
+// Byte planes in one 8-bit grey PNG, a plane per row, no row filters (planes-delta; planes-new,
+// `skip_old`, leaves out the samples the coarser level has: the dataset layout of version 3).
 size_t planes_png(const std::vector<Sample>& s, int size, bool colors, bool skip_old, int compression) {
     std::vector<int> order;
     for (int j = 0; j < size; ++j)
@@ -218,24 +220,28 @@ size_t planes_png(const std::vector<Sample>& s, int size, bool colors, bool skip
             else v = x.v[pl - 3];
             bytes.push_back(uint16_t(v));
         }
-    const int w = size;
-    const int h = int((bytes.size() + w - 1) / w);
-    bytes.resize(size_t(w) * h, 0);
-    PngImage im{w, h, 1, 8, std::move(bytes)};
-    return png_encode(im, compression).size();
+    PngImage im{int(order.size()), planes_n, 1, 8, std::move(bytes)};
+    return png_encode(im, compression, false).size();
 }
 
 // Byte planes of several patches' nodes of one level in one 8-bit grey PNG, plane-major (plane 0
-// of every patch, then plane 1, ...), n wide: what grouping patches into tiles would save.
-size_t tile_png(const std::vector<const std::vector<Sample>*>& nodes, int size, bool colors, int compression) {
+// of every patch, then plane 1, ...), a plane of every patch per row, the samples of the coarser
+// level left out (`skip_old`) as in the dataset: what grouping patches into tiles would save.
+size_t tile_png(const std::vector<const std::vector<Sample>*>& nodes, int size, bool colors, bool skip_old, int compression) {
     const int planes_n = colors ? 11 : 8;
     std::vector<uint16_t> bytes;
-    for (int pl = 0; pl < planes_n; ++pl)
+    size_t per_row = 0;
+    for (int pl = 0; pl < planes_n; ++pl) {
+        per_row = 0;
         for (const std::vector<Sample>* node : nodes)
-            for (const Sample& x : *node)
+            for (size_t s = 0; s < node->size(); ++s) {
+                if (skip_old && (s % size_t(size)) % 2 == 0 && (s / size_t(size)) % 2 == 0) continue;
+                const Sample& x = (*node)[s];
                 bytes.push_back(uint16_t(pl < 6 ? (pl % 2 == 0 ? x.v[pl / 2] >> 8 : x.v[pl / 2] & 0xff) : x.v[pl - 3]));
-    const int h = int(bytes.size() / size_t(size));
-    PngImage im{size, h, 1, 8, std::move(bytes)};
+                ++per_row;
+            }
+    }
+    PngImage im{int(per_row), planes_n, 1, 8, std::move(bytes)};
     return png_encode(im, compression, false).size();
 }
 
@@ -327,7 +333,7 @@ int main(int argc, char** argv) {
                 for (size_t first = 0; first < d.patch_count(); first += group) {
                     std::vector<const std::vector<Sample>*> nodes;
                     for (size_t p = first; p < std::min(d.patch_count(), first + group); ++p) nodes.push_back(&deltas[size_t(l)][p]);
-                    bytes += tile_png(nodes, (1 << l) + 1, colors, compression);
+                    bytes += tile_png(nodes, (1 << l) + 1, colors, l > 0, compression);
                 }
                 total += bytes;
                 std::printf(" %9zu", bytes);

@@ -39,27 +39,25 @@ const Built& torus_dataset() {
 }
 
 // Rewrites `from` into `to` with node (patch, level) changed by `edit` (which gets the decoded
-// grid, then the node is re-encoded against the same coarser level).
+// grid, then the node is re-encoded against the same coarser level). `version2`: every node in
+// the RGB16 layout of metadata version 2, which can hold a level that does not nest.
 void rewrite_with_edit(const std::string& from, const std::string& to, uint32_t patch, int level,
-                       const std::function<void(PatchGrid&)>& edit) {
+                       const std::function<void(PatchGrid&)>& edit, bool version2 = false) {
     AqpDataset d(from);
     ArchiveWriter w(to, ArchiveKind::Aqp);
     const std::vector<ArchiveEntry>& entries = d.archive().entries();
+    const NodeLayout layout{d.meta().has_colors(), !version2};
     for (size_t i = 0; i < entries.size(); ++i) {
-        std::string error;
-        const uint8_t* bytes = d.archive().node(i, &error);
-        ASSERT_NE(bytes, nullptr) << error;
-        if (aqp_key_patch(entries[i].key) != patch || aqp_key_level(entries[i].key) != level) {
-            w.add_node(entries[i], bytes, entries[i].size);
-            continue;
-        }
-        std::vector<PatchGrid> levels = d.decode_levels(patch, level);
-        edit(levels.back());
-        std::vector<uint8_t> node =
-            encode_patch_node(levels.back(), level > 0 ? &levels[level - 1] : nullptr, d.meta().node_layout());
+        const uint32_t p = aqp_key_patch(entries[i].key);
+        const int l = aqp_key_level(entries[i].key);
+        std::vector<PatchGrid> levels = d.decode_levels(p, l);
+        if (p == patch && l == level) edit(levels.back());
+        std::vector<uint8_t> node = encode_patch_node(levels.back(), l > 0 ? &levels[l - 1] : nullptr, layout);
         w.add_node(entries[i], node.data(), node.size());
     }
-    w.finish(d.archive().meta());
+    std::vector<uint8_t> meta = d.archive().meta();
+    if (version2) meta[8] = 2;
+    w.finish(meta);
 }
 
 }  // namespace
@@ -160,7 +158,12 @@ TEST(AqpDataset, VerifyCatchesACoarseSampleThatIsNotTheFineOne) {
     const Built& b = sphere_dataset();
     const std::string broken = (test::scratch_dir() / "not_nested.cpq").string();
     const int k = AqpDataset(b.path).finest_level();
-    rewrite_with_edit(b.path, broken, 5, k, [](PatchGrid& g) { g.normal[g.index(2, 2)] ^= 0x0101; });
+    auto edit = [](PatchGrid& g) { g.normal[g.index(2, 2)] ^= 0x0101; };
+    // Version 3 cannot hold it: a level stores only the samples its coarser level lacks, and the
+    // encoder refuses a level that does not nest rather than drop the difference.
+    EXPECT_THROW(rewrite_with_edit(b.path, broken, 5, k, edit), Error);
+    // Version 2 stored every sample: verify finds the one that is not the coarser level's.
+    rewrite_with_edit(b.path, broken, 5, k, edit, true);
     AqpVerifyReport r = verify_aqp(AqpDataset(broken));
     EXPECT_EQ(r.nesting_mismatches, 1u);
     EXPECT_FALSE(r.ok());

@@ -16,11 +16,12 @@
 //
 // Node (key = patch << 8 | level, level = level, count = samples, error = bound in world units):
 // the bytes of one PNG file (nothing else: the index names the node, the archive checksums it).
-// Version 3: an 8-bit grey image n wide and P x n high for n = 2^level + 1 samples per side,
-// P byte planes of n x n one below the other: x high, x low, y high, y low, z high, z low
+// Version 3: an 8-bit grey image m wide and P high for n = 2^level + 1 samples per side, row r
+// the byte plane r of the stored samples in grid order (level 0: all n^2; a finer level only
+// those with an odd coordinate, the others being the coarser level's): x high, x low, y high, y low, z high, z low
 // (16-bit local position), normal u, normal v (the bytes of common_codec/octahedral.h), then
-// red, green, blue with colours (P = 11, else 8). Row j of a plane is grid row j
-// (v = j / 2^level), column i is u = i / 2^level. Versions 1-2: RGB 16-bit, 2n x n pixels,
+// red, green, blue with colours (P = 11, else 8); grid row j is v = j / 2^level, column i is
+// u = i / 2^level. Versions 1-2: RGB 16-bit, 2n x n pixels, every sample,
 // pixel (i, j) local x y z, pixel (n + i, j) normal u << 8 | v, red << 8 | green, blue << 8.
 // Level 0 stores the values; a finer level stores every channel's difference from its prediction
 // by the coarser level (predict_from_coarser), modulo 2^16 (8-bit channels modulo 2^8), zigzag
@@ -105,7 +106,8 @@ struct PatchGrid {
 int predict_from_coarser(const PatchGrid& coarser, int channel, int i, int j);
 
 // The node payload of `grid` (PNG at zlib level `compression`) in `layout`; `coarser` is the same
-// patch one level down (nullptr at level 0). Writers use the current layout; the older one is
+// patch one level down (nullptr at level 0). Throws Error in the version-3 layout when `grid`
+// does not nest in `coarser` (it could not store the difference). Writers use the current layout; the older one is
 // kept for tests of old datasets.
 std::vector<uint8_t> encode_patch_node(const PatchGrid& grid, const PatchGrid* coarser, NodeLayout layout,
                                        int compression = 6);
