@@ -3,8 +3,7 @@
 //
 // Usage: decode_bench ARCHIVE.cpq... [--runs N]
 //
-// Loads the encoded bytes of every fragment of each archive (a node is u8 slot mask, then per slot
-// u32 size + fragment), then times fragment_decode over all of them into one reused FragmentMesh
+// Loads the encoded bytes of every fragment of each archive (split_diamond_node), then times fragment_decode over all of them into one reused FragmentMesh
 // (best of N runs, CPU time of the thread: other processes on a shared machine only steal wall
 // time). A digest (XXH3 of every decoded vertex and index buffer, chained) is printed per archive:
 // two builds whose digests agree decoded the same bits, which is what decoder speed-ups must keep.
@@ -16,6 +15,7 @@
 #include "base/checksum.h"
 #include "base/error.h"
 #include "base/sysinfo.h"
+#include "catp/format.h"
 #include "common_codec/archive.h"
 #include "common_codec/fragment_codec.h"
 
@@ -30,18 +30,11 @@ std::vector<std::vector<uint8_t>> load_fragments(const std::string& path) {
     for (size_t e = 0; e < reader.entries().size(); ++e) {
         std::string error;
         const uint8_t* p = reader.node(e, &error);
-        if (!p) fail("%s: node %zu: %s", path.c_str(), e, error.c_str());
-        const uint8_t* end = p + reader.entries()[e].size;
-        const uint8_t mask = *p++;
-        for (int s = 0; s < 8; ++s) {
-            if (!(mask & (1 << s))) continue;
-            if (end - p < 4) fail("node %zu truncated", e);
-            uint32_t n = uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
-            p += 4;
-            if (size_t(end - p) < n) fail("node %zu truncated", e);
-            out.emplace_back(p, p + n);
-            p += n;
-        }
+        DiamondNodeSlots node;
+        if (p) error = split_diamond_node(p, reader.entries()[e].size, node);
+        if (!error.empty()) fail("%s: node %zu: %s", path.c_str(), e, error.c_str());
+        for (int s = 0; s < 8; ++s)
+            if (node.slot_mask & (1 << s)) out.emplace_back(node.fragment[s], node.fragment[s] + node.size[s]);
     }
     return out;
 }

@@ -24,6 +24,7 @@
 #include "base/checksum.h"
 #include "base/error.h"
 #include "base/sysinfo.h"
+#include "catp/format.h"
 #include "common_codec/archive.h"
 #include "common_codec/barycentric.h"
 #include "common_codec/fragment_codec.h"
@@ -33,28 +34,18 @@ using namespace catpaq;
 
 namespace {
 
-// Every fragment of a CATP archive. A node is u8 slot mask, then per slot u32 size + fragment.
+// Every fragment of a CATP archive, decoded (decode_diamond_node).
 std::vector<FragmentMesh> load_fragments(const std::string& path) {
     ArchiveReader reader(path);
     std::vector<FragmentMesh> out;
     for (size_t e = 0; e < reader.entries().size(); ++e) {
         std::string error;
         const uint8_t* p = reader.node(e, &error);
-        if (!p) fail("%s: node %zu: %s", path.c_str(), e, error.c_str());
-        const uint8_t* end = p + reader.entries()[e].size;
-        const uint8_t mask = *p++;
-        for (int s = 0; s < 8; ++s) {
-            if (!(mask & (1 << s))) continue;
-            if (end - p < 4) fail("node %zu truncated", e);
-            uint32_t n = uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
-            p += 4;
-            if (size_t(end - p) < n) fail("node %zu truncated", e);
-            FragmentMesh m;
-            FragmentStatus st = fragment_decode(p, n, m);
-            if (st != FragmentStatus::Ok) fail("node %zu slot %d: %s", e, s, fragment_status_name(st));
-            out.push_back(std::move(m));
-            p += n;
-        }
+        DiamondFragments node;
+        if (p) error = decode_diamond_node(p, reader.entries()[e].size, std::nullopt, node);
+        if (!error.empty()) fail("%s: node %zu: %s", path.c_str(), e, error.c_str());
+        for (int s = 0; s < 8; ++s)
+            if (node.slot_mask & (1 << s)) out.push_back(std::move(node.slots[s]));
     }
     return out;
 }

@@ -102,26 +102,37 @@ std::vector<uint8_t> encode_diamond_node(const DiamondFragments& f, std::vector<
     return out;
 }
 
-std::string decode_diamond_node(const uint8_t* data, size_t size, const std::optional<VertexLayout>& layout,
-                                DiamondFragments& out) {
+std::string split_diamond_node(const uint8_t* data, size_t size, DiamondNodeSlots& out) {
     ByteReader r(data, size);
+    out = {};
     out.slot_mask = r.u8();
     if (!r.ok()) return "empty diamond node";
+    for (int s = 0; s < 8; ++s) {
+        if (!(out.slot_mask & (1 << s))) continue;
+        out.size[s] = r.u32();
+        out.fragment[s] = r.take(out.size[s]);
+        if (!out.fragment[s]) return strprintf("diamond node truncated in slot %d", s);
+    }
+    if (r.remaining() != 0) return "trailing bytes after the diamond's fragments";
+    return "";
+}
+
+std::string decode_diamond_node(const uint8_t* data, size_t size, const std::optional<VertexLayout>& layout,
+                                DiamondFragments& out) {
+    DiamondNodeSlots node;
+    if (std::string e = split_diamond_node(data, size, node); !e.empty()) return e;
+    out.slot_mask = node.slot_mask;
     for (int s = 0; s < 8; ++s) {
         out.slots[s].vertices.clear();
         out.slots[s].indices.clear();
         if (!(out.slot_mask & (1 << s))) continue;
-        uint32_t n = r.u32();
-        const uint8_t* p = r.take(n);
-        if (!p) return strprintf("diamond node truncated in slot %d", s);
-        FragmentStatus status = fragment_decode(p, n, out.slots[s]);
+        FragmentStatus status = fragment_decode(node.fragment[s], node.size[s], out.slots[s]);
         if (status != FragmentStatus::Ok)
             return strprintf("slot %d: fragment %s", s, fragment_status_name(status));
         if (layout && out.slots[s].layout != *layout)
             return strprintf("slot %d: fragment in the %s layout with grid %d, the dataset's is %s with grid %d", s,
                              out.slots[s].layout.name(), out.slots[s].layout.grid, layout->name(), layout->grid);
     }
-    if (r.remaining() != 0) return "trailing bytes after the diamond's fragments";
     return "";
 }
 

@@ -21,6 +21,7 @@
 #include "common_codec/archive.h"
 #include "common_codec/octahedral.h"
 #include "estimate.h"
+#include "kdtree.h"
 #include "splat.h"
 
 namespace catpaq {
@@ -620,15 +621,7 @@ size_t Builder::nearest_all(const float q[3], size_t k, uint32_t* index, float* 
             const float dx = x[0] - q[0], dy = x[1] - q[1], dz = x[2] - q[2];
             const float d2 = dx * dx + dy * dy + dz * dz;
             if (found == k && !(d2 < worst)) continue;
-            size_t at = found < k ? found++ : k - 1;
-            while (at > 0 && distance2[at - 1] > d2) {
-                distance2[at] = distance2[at - 1];
-                index[at] = index[at - 1];
-                --at;
-            }
-            distance2[at] = d2;
-            index[at] = p;
-            if (found == k) worst = distance2[k - 1];
+            knn_insert(index, distance2, k, found, worst, p, d2);
         }
     }
     return found;

@@ -172,15 +172,7 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                     const float d = d2[j];
                     if (!(d <= worst)) continue;
                     if (found == want && d == worst) continue;  // ties: the earlier in the block
-                    size_t at = found < want ? found++ : want - 1;
-                    while (at > 0 && distance2[at - 1] > d) {
-                        distance2[at] = distance2[at - 1];
-                        index[at] = index[at - 1];
-                        --at;
-                    }
-                    distance2[at] = d;
-                    index[at] = uint32_t(j);
-                    if (found == want) worst = distance2[want - 1];
+                    knn_insert(index, distance2, want, found, worst, uint32_t(j), d);
                 }
                 for (size_t j = 0; j < found; ++j) index[j] = points_[at_point[index[j]]].id;
             } else {

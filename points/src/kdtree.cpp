@@ -89,16 +89,7 @@ struct KdTree::Query {
     float* distance2;
 
     void offer(uint32_t id, float d2) {
-        if (d2 >= worst) return;
-        size_t at = found < k ? found++ : k - 1;
-        while (at > 0 && distance2[at - 1] > d2) {
-            distance2[at] = distance2[at - 1];
-            index[at] = index[at - 1];
-            --at;
-        }
-        distance2[at] = d2;
-        index[at] = id;
-        if (found == k) worst = distance2[k - 1];
+        if (d2 < worst) knn_insert(index, distance2, k, found, worst, id, d2);
     }
 };
 

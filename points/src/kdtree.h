@@ -15,6 +15,22 @@
 
 namespace catpaq::points_detail {
 
+// Inserts a candidate into a k-nearest list being filled: `index` and `distance2` sorted nearest
+// first, `found` entries of at most k; when full the farthest drops out. `worst` becomes the
+// k-th's distance once there are k (callers start it at infinity, or at a search bound). Every
+// neighbour search of the converter (kd-tree, grids, the hierarchy-wide search) keeps its list so.
+inline void knn_insert(uint32_t* index, float* distance2, size_t k, size_t& found, float& worst, uint32_t id, float d2) {
+    size_t at = found < k ? found++ : k - 1;
+    while (at > 0 && distance2[at - 1] > d2) {
+        distance2[at] = distance2[at - 1];
+        index[at] = index[at - 1];
+        --at;
+    }
+    distance2[at] = d2;
+    index[at] = id;
+    if (found == k) worst = distance2[k - 1];
+}
+
 class KdTree {
 public:
     static constexpr uint32_t kLeafSize = 12;

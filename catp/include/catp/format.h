@@ -75,6 +75,15 @@ std::vector<uint8_t> encode_diamond_node(const DiamondFragments& fragments, std:
 inline uint64_t diamond_slot_offset(uint64_t bytes_of_earlier_slots, int earlier_slots) {
     return 1 + bytes_of_earlier_slots + 4 * uint64_t(earlier_slots + 1);
 }
+// A node's encoded fragments, not decoded: for each slot in the mask, where its bytes are.
+struct DiamondNodeSlots {
+    uint8_t slot_mask = 0;
+    std::array<const uint8_t*, 8> fragment{};
+    std::array<uint32_t, 8> size{};
+};
+// Splits a node into its slots' fragment bytes (pointing into `data`): empty string on success,
+// else what is wrong (truncated, trailing bytes).
+std::string split_diamond_node(const uint8_t* data, size_t size, DiamondNodeSlots& out);
 // Empty string on success, else what is wrong (truncated, corrupt fragment, a fragment of
 // another vertex layout than the dataset's `layout` when given, ...).
 std::string decode_diamond_node(const uint8_t* data, size_t size, const std::optional<VertexLayout>& layout,

@@ -218,7 +218,9 @@ public:
         items_.clear();
         for (const DrawnPart& p : parts)
             if (p.part == 0) items_.push_back({p.key});
-        return renderer_.render(camera, items_, settings);
+        const RenderStats stats = renderer_.render(camera, items_, settings);
+        if (renderer_.template_bytes() != counted_templates_) apply_budget();  // a level's grid was built
+        return stats;
     }
     // The template grids are GPU memory too: counted, and the textures get what the cache
     // budget leaves them (the templates of the levels drawn so far: 16 KB up to level 5).
@@ -227,19 +229,16 @@ public:
         budget_ = bytes;
         apply_budget();
     }
-    size_t evict_to_budget() override {
-        apply_budget();
-        return store_.evict_to_budget();
-    }
 
 private:
+    // The textures' budget: the cache budget less the templates (0: unlimited). Evicts at once.
     void apply_budget() {
-        if (budget_ == 0) return store_.set_budget(0);  // unlimited
-        const uint64_t templates = renderer_.template_bytes();
-        store_.set_budget(budget_ > templates ? budget_ - templates : 1);
+        counted_templates_ = renderer_.template_bytes();
+        if (budget_ == 0) return store_.set_budget(0);
+        store_.set_budget(budget_ > counted_templates_ ? budget_ - counted_templates_ : 1);
     }
 
-    uint64_t budget_ = 0;
+    uint64_t budget_ = 0, counted_templates_ = 0;
     const AqpFormat& format_;
     AqpRenderer renderer_;  // draws from store_ (the base's, constructed first)
     std::vector<AqpDrawItem> items_;
