@@ -51,6 +51,8 @@ static const char* kConvertUsage =
     "                           twice the input's vertices in samples)\n"
     "  --domain-triangles N     base domain triangles (default 0.6 sqrt(input triangles)); fewer\n"
     "                           when patches outgrow their charts, more for folds\n"
+    "  --tile-samples N         each level's nodes group 4^s neighbouring patches, as many as keep a\n"
+    "                           node within N stored samples (default 2048; 0: one patch per node)\n"
     "points:\n"
     "  --node-points N          the most points in a node (default 4096)\n"
     "  --split RULE             balanced (default; seed 000) or midpoint (seed 002)\n"
@@ -91,7 +93,8 @@ struct FormatOption {
 static const FormatOption kFormatOptions[] = {
     {"precision", "catp aqp"},      {"memory", "catp aqp points"},       {"vertex-layout", "catp"},
     {"leaf-triangles", "catp"},   {"leaf-level", "catp"},
-    {"patch-level", "aqp"},         {"domain-triangles", "aqp"},  {"node-points", "points"},
+    {"patch-level", "aqp"},         {"domain-triangles", "aqp"},  {"tile-samples", "aqp"},
+    {"node-points", "points"},
     {"split", "points"},            {"error-fraction", "points"}, {"normals", "points"},
     {"surface-samples", "points"},
 };

@@ -136,7 +136,7 @@ void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job, const aqp:
                 r.seconds_clean, r.seconds_parameterize, r.seconds_resample, r.seconds_errors, r.seconds_encode);
     std::printf("size:       %.2f bits per finest sample over all levels (%zu distinct samples)\n", r.bits_per_sample,
                 r.samples);
-    std::printf("%6s %8s %12s %12s %14s %12s %12s\n", "level", "patches", "samples", "bytes", "bits/sample",
+    std::printf("%6s %8s %12s %12s %14s %12s %12s\n", "level", "nodes", "samples", "bytes", "bits/sample",
                 "max error", "mean error");
     for (const aqp::AqpLevelStats& l : r.levels)
         std::printf("%6d %8zu %12zu %12llu %14.2f %12.4g %12.4g\n", l.level, l.nodes, l.samples,
@@ -155,6 +155,7 @@ int convert_aqp(Options& options, const ConvertJob& job) {
                     precision.c_str());
     o.patch_level = int(options.integer("patch-level", -1, 1, aqp::kMaxPatchLevel));
     o.domain_triangles = size_t(options.integer("domain-triangles", 0, 4, 10000000));
+    o.tile_samples = size_t(options.integer("tile-samples", int64_t(o.tile_samples), 0, int64_t(1) << 30));
     o.threads = unsigned(options.integer("threads", 0, 0, 1024));
     const std::string up = options.get("up", "y");
     UpAxis axis;

@@ -161,8 +161,37 @@ float float_at_least(double x) {
     return double(f) < x ? std::nextafter(f, INFINITY) : f;
 }
 
+// The patches in dataset order: sorted along a Morton curve over their boxes' centres on the
+// quantization grid, so that a tile's consecutive patches lie together on the surface (a view
+// then needs few tiles). order[d] is the layout patch that is dataset patch d.
+std::vector<uint32_t> morton_patch_order(const Quantization& q) {
+    const size_t patches = q.patch_origin.size();
+    std::vector<std::array<uint64_t, 3>> centre(patches);
+    uint64_t top = 1;
+    for (size_t p = 0; p < patches; ++p)
+        for (int a = 0; a < 3; ++a) {
+            centre[p][size_t(a)] = 2 * uint64_t(q.patch_origin[p][a]) + q.extent[p][a];
+            top = std::max(top, centre[p][size_t(a)] + 1);
+        }
+    auto spread = [](uint64_t x) {  // 10 bits to every third of 30
+        uint64_t out = 0;
+        for (int b = 0; b < 10; ++b) out |= ((x >> b) & 1) << (3 * b);
+        return out;
+    };
+    std::vector<std::pair<uint64_t, uint32_t>> code(patches);
+    for (size_t p = 0; p < patches; ++p) {
+        uint64_t c = 0;
+        for (int a = 0; a < 3; ++a) c |= spread(centre[p][size_t(a)] * 1024 / top) << a;  // one scale: cells stay cubes
+        code[p] = {c, uint32_t(p)};
+    }
+    std::sort(code.begin(), code.end());
+    std::vector<uint32_t> order(patches);
+    for (size_t d = 0; d < patches; ++d) order[d] = code[d].second;
+    return order;
+}
+
 AqpMeta make_meta(const QuadLayout& layout, const Quantization& q, const std::vector<SurfaceSample>& samples, int k,
-                  bool colors, const Mesh& input, double mean_edge) {
+                  bool colors, const Mesh& input, double mean_edge, const std::vector<uint32_t>& order) {
     AqpMeta m;
     m.patch_level = uint32_t(k);
     m.base_vertices = uint32_t(layout.domain().vertex_count());
@@ -179,18 +208,38 @@ AqpMeta make_meta(const QuadLayout& layout, const Quantization& q, const std::ve
     m.precision = q.step * std::sqrt(3.0) / 2;
     m.mean_edge = mean_edge;
     m.atlas_columns = uint32_t(std::ceil(std::sqrt(double(layout.patch_count()))));
+    std::vector<uint32_t> dataset_patch(order.size());
+    for (uint32_t d = 0; d < order.size(); ++d) dataset_patch[order[d]] = d;
     m.patches.resize(layout.patch_count());
-    for (uint32_t p = 0; p < layout.patch_count(); ++p) {
-        m.patches[p].corner = layout.patches()[p].corner;
-        m.patches[p].link = layout.patches()[p].link;
-        m.patches[p].origin = q.patch_origin[p];
-        m.patches[p].extent = q.extent[p];
+    for (uint32_t d = 0; d < layout.patch_count(); ++d) {
+        const uint32_t p = order[d];
+        m.patches[d].corner = layout.patches()[p].corner;
+        m.patches[d].link = layout.patches()[p].link;
+        for (PatchLink& l : m.patches[d].link)
+            if (l.patch != kNone) l.patch = dataset_patch[l.patch];
+        m.patches[d].origin = q.patch_origin[p];
+        m.patches[d].extent = q.extent[p];
     }
     return m;
 }
 
 }  // namespace
 
+std::vector<uint8_t> tile_shifts(int finest_level, size_t patches, size_t tile_samples) {
+    std::vector<uint8_t> shifts(size_t(finest_level) + 1, 0);
+    if (tile_samples == 0) return shifts;
+    for (int l = 0; l <= finest_level; ++l) {
+        const uint64_t side = (uint64_t(1) << l) + 1, coarse = l > 0 ? (uint64_t(1) << (l - 1)) + 1 : 0;
+        const uint64_t stored = side * side - coarse * coarse;
+        // The largest tile within the target (one patch when a patch alone exceeds it), no larger
+        // than needed to hold every patch.
+        int s = 0;
+        while (s < kMaxTileShift && (uint64_t(1) << (2 * s + 2)) * stored <= tile_samples && (uint64_t(1) << (2 * s)) < patches)
+            ++s;
+        shifts[size_t(l)] = uint8_t(l > 0 ? std::min<int>(s, shifts[size_t(l) - 1]) : s);
+    }
+    return shifts;
+}
 
 void build_aqp_dataset(const Mesh& input, const std::string& out_path, const AqpBuildOptions& o, AqpBuildReport* report_out) {
     const auto start = Clock::now();
@@ -306,55 +355,70 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
     t = Clock::now();
     if (progress) progress->phase("encoding", layout.patch_count() * size_t(k + 1), "node");
     const bool colors = input.has_colors();
+    const std::vector<uint32_t> order = morton_patch_order(q);
+    AqpMeta meta = make_meta(layout, q, samples, k, colors, input, r.mean_edge, order);
+    meta.up_axis = o.up_axis;
+    meta.tile_shift = tile_shifts(k, layout.patch_count(), o.tile_samples);
     ArchiveWriter writer(out_path, ArchiveKind::Aqp);
     r.levels.resize(size_t(k) + 1);
-    std::vector<std::vector<uint64_t>> bytes(layout.patch_count(), std::vector<uint64_t>(size_t(k) + 1));
-    tbb::parallel_for(size_t(0), layout.patch_count(), [&](size_t p) {
-        PatchGrid g, coarser;
-        for (int l = 0; l <= k; ++l) {
-            g.patch = uint32_t(p);
-            g.level = l;
-            g.size = (1 << l) + 1;
-            const int stride = 1 << (k - l);
-            const size_t count = size_t(g.size) * g.size;
-            g.position.resize(count);
-            g.normal.resize(count);
-            g.color.resize(colors ? count : 0);
-            for (int j = 0; j < g.size; ++j)
-                for (int i = 0; i < g.size; ++i) {
-                    const uint32_t s = numbering.id(uint32_t(p), i * stride, j * stride);
-                    const size_t at = g.index(i, j);
-                    for (int a = 0; a < 3; ++a) g.position[at][a] = uint16_t(q.position[s][a] - q.patch_origin[p][a]);
-                    g.normal[at] = normals[s];
-                    if (colors) g.color[at] = samples[s].color;
-                }
-            std::vector<uint8_t> node = encode_patch_node(g, l > 0 ? &coarser : nullptr, NodeLayout{colors, true}, o.png_compression);
-            std::swap(coarser, g);
-            ArchiveEntry entry;
-            entry.key = aqp_node_key(uint32_t(p), l);
-            entry.level = uint16_t(l);
-            entry.count = uint32_t(count);
-            entry.error = float_at_least(error[p][l]);
-            writer.add_node(entry, node.data(), node.size());
-            bytes[p][l] = node.size();
-        }
-        if (progress) progress->add(size_t(k) + 1);
-    });
+    // Dataset patch d's grid at level l (its samples every 2^(k - l) finest samples).
+    auto make_grid = [&](uint32_t d, int l, PatchGrid& g) {
+        const uint32_t p = order[d];
+        g.patch = d;
+        g.level = l;
+        g.size = (1 << l) + 1;
+        const int stride = 1 << (k - l);
+        const size_t count = size_t(g.size) * g.size;
+        g.position.resize(count);
+        g.normal.resize(count);
+        g.color.resize(colors ? count : 0);
+        for (int j = 0; j < g.size; ++j)
+            for (int i = 0; i < g.size; ++i) {
+                const uint32_t s = numbering.id(p, i * stride, j * stride);
+                const size_t at = g.index(i, j);
+                for (int a = 0; a < 3; ++a) g.position[at][a] = uint16_t(q.position[s][a] - q.patch_origin[p][a]);
+                g.normal[at] = normals[s];
+                if (colors) g.color[at] = samples[s].color;
+            }
+    };
     for (int l = 0; l <= k; ++l) {
-        AqpLevelStats& s = r.levels[l];
+        std::vector<uint64_t> tile_bytes(meta.tile_count(l));
+        tbb::parallel_for(uint32_t(0), meta.tile_count(l), [&](uint32_t tile) {
+            const uint32_t first = meta.first_patch(tile, l), count = meta.tile_patches(tile, l);
+            std::vector<PatchGrid> grids(count), coarser(l > 0 ? count : 0);
+            std::vector<const PatchGrid*> grid_ptrs, coarser_ptrs;
+            double tile_error = 0;
+            for (uint32_t i = 0; i < count; ++i) {
+                make_grid(first + i, l, grids[i]);
+                grid_ptrs.push_back(&grids[i]);
+                if (l > 0) {
+                    make_grid(first + i, l - 1, coarser[i]);
+                    coarser_ptrs.push_back(&coarser[i]);
+                }
+                tile_error = std::max(tile_error, error[order[first + i]][size_t(l)]);
+            }
+            const std::vector<uint8_t> node = encode_tile_node(grid_ptrs, coarser_ptrs, colors, o.png_compression);
+            ArchiveEntry entry;
+            entry.key = aqp_node_key(tile, l);
+            entry.level = uint16_t(l);
+            entry.count = uint32_t(count * grids[0].position.size());
+            entry.error = float_at_least(tile_error);
+            writer.add_node(entry, node.data(), node.size());
+            tile_bytes[tile] = node.size();
+            if (progress) progress->add(count);
+        });
+        AqpLevelStats& s = r.levels[size_t(l)];
         s.level = l;
-        s.nodes = layout.patch_count();
+        s.nodes = meta.tile_count(l);
         s.samples = layout.patch_count() * size_t((1 << l) + 1) * size_t((1 << l) + 1);
+        for (uint64_t b : tile_bytes) s.bytes += b;
         for (size_t p = 0; p < layout.patch_count(); ++p) {
-            s.bytes += bytes[p][l];
-            s.max_error = std::max(s.max_error, error[p][l]);
-            s.mean_error += error[p][l] / double(layout.patch_count());
+            s.max_error = std::max(s.max_error, error[p][size_t(l)]);
+            s.mean_error += error[p][size_t(l)] / double(layout.patch_count());
         }
         r.payload_bytes += s.bytes;
     }
     if (progress) progress->phase("writing", 0, "");
-    AqpMeta meta = make_meta(layout, q, samples, k, colors, input, r.mean_edge);
-    meta.up_axis = o.up_axis;
     r.file_bytes = writer.finish(encode_aqp_meta(meta));
     r.seconds_encode = seconds_since(t);
     r.bits_per_sample = 8.0 * double(r.payload_bytes) / double(r.samples);

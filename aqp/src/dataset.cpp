@@ -5,20 +5,29 @@
 
 namespace catpaq::aqp {
 
+size_t aqp_entry_index(const AqpMeta& meta, uint32_t tile, int level) {
+    size_t index = tile;
+    for (int l = 0; l < level; ++l) index += meta.tile_count(l);
+    return index;
+}
+
 std::string check_aqp_index(const AqpMeta& meta, const std::vector<ArchiveEntry>& entries) {
-    const size_t levels = size_t(meta.patch_level) + 1;
-    if (entries.size() != meta.patches.size() * levels)
-        return strprintf("the index has %zu nodes, %zu patches at %zu levels need %zu", entries.size(), meta.patches.size(),
-                         levels, meta.patches.size() * levels);
-    // The archive sorts entries by (level, key), and key = patch << 8 | level: entry
-    // l * patches + p must be patch p at level l.
-    for (size_t l = 0; l < levels; ++l)
-        for (size_t p = 0; p < meta.patches.size(); ++p) {
-            const ArchiveEntry& e = entries[l * meta.patches.size() + p];
+    const int levels = int(meta.patch_level) + 1;
+    size_t nodes = 0;
+    for (int l = 0; l < levels; ++l) nodes += meta.tile_count(l);
+    if (entries.size() != nodes)
+        return strprintf("the index has %zu nodes, %zu patches at %d levels in tiles need %zu", entries.size(),
+                         meta.patches.size(), levels, nodes);
+    // The archive sorts entries by (level, key), and key = tile << 8 | level: entry
+    // aqp_entry_index(t, l) must be tile t at level l.
+    size_t i = 0;
+    for (int l = 0; l < levels; ++l)
+        for (uint32_t t = 0; t < meta.tile_count(l); ++t, ++i) {
+            const ArchiveEntry& e = entries[i];
             const size_t side = (size_t(1) << l) + 1;
-            if (e.key != aqp_node_key(uint32_t(p), int(l)) || e.level != l || e.count != side * side)
-                return strprintf("index entry %zu is not patch %zu at level %zu", l * meta.patches.size() + p, p, l);
-            if (!(e.error >= 0)) return strprintf("patch %zu level %zu has an invalid error bound", p, l);
+            if (e.key != aqp_node_key(t, l) || e.level != l || e.count != side * side * meta.tile_patches(t, l))
+                return strprintf("index entry %zu is not tile %u at level %d", i, t, l);
+            if (!(e.error >= 0)) return strprintf("tile %u level %d has an invalid error bound", t, l);
         }
     return "";
 }
@@ -36,22 +45,39 @@ AqpDataset::AqpDataset(const std::string& path) : path_(path) {
 AqpDataset::~AqpDataset() = default;
 
 const ArchiveEntry& AqpDataset::entry(uint32_t patch, int level) const {
-    return archive_->entries()[size_t(level) * meta_.patches.size() + patch];
+    return archive_->entries()[aqp_entry_index(meta_, meta_.tile_of(patch, level), level)];
+}
+
+std::vector<PatchGrid> AqpDataset::decode_tile(uint32_t tile, int level, const std::vector<const PatchGrid*>& coarser) const {
+    if (level < 0 || level > finest_level() || tile >= meta_.tile_count(level))
+        fail("'%s' has no tile %u at level %d", path_.c_str(), tile, level);
+    const size_t index = aqp_entry_index(meta_, tile, level);
+    std::string error;
+    const uint8_t* bytes = archive_->node(index, &error);
+    if (!bytes) fail("'%s' tile %u level %d: %s", path_.c_str(), tile, level, error.c_str());
+    std::vector<PatchGrid> grids;
+    if (std::string e = decode_tile_node(bytes, archive_->entries()[index].size, meta_.first_patch(tile, level),
+                                         meta_.tile_patches(tile, level), level, meta_.node_layout(), coarser, grids);
+        !e.empty())
+        fail("'%s' tile %u level %d: %s", path_.c_str(), tile, level, e.c_str());
+    return grids;
 }
 
 PatchGrid AqpDataset::decode(uint32_t patch, int level, const PatchGrid& coarser) const {
     if (patch >= meta_.patches.size() || level < 0 || level > finest_level())
         fail("'%s' has no patch %u at level %d", path_.c_str(), patch, level);
-    const size_t index = size_t(level) * meta_.patches.size() + patch;
-    std::string error;
-    const uint8_t* bytes = archive_->node(index, &error);
-    if (!bytes) fail("'%s' patch %u level %d: %s", path_.c_str(), patch, level, error.c_str());
-    PatchGrid grid;
-    if (std::string e = decode_patch_node(bytes, archive_->entries()[index].size, patch, level, meta_.node_layout(),
-                                          level > 0 ? &coarser : nullptr, grid);
-        !e.empty())
-        fail("'%s' patch %u level %d: %s", path_.c_str(), patch, level, e.c_str());
-    return grid;
+    const uint32_t tile = meta_.tile_of(patch, level), first = meta_.first_patch(tile, level);
+    // The tile's image, unpacking only this patch.
+    std::vector<const PatchGrid*> coarser_grids;
+    if (level > 0) {
+        coarser_grids.assign(meta_.tile_patches(tile, level), nullptr);
+        coarser_grids[patch - first] = &coarser;
+    }
+    try {
+        return std::move(decode_tile(tile, level, coarser_grids)[patch - first]);
+    } catch (const Error& e) {
+        fail("patch %u level %d: %s", patch, level, e.what());
+    }
 }
 
 std::vector<PatchGrid> AqpDataset::decode_levels(uint32_t patch, int level) const {

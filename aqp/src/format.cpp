@@ -1,6 +1,7 @@
 // AQP metadata and node payloads (aqp/format.h).
 #include "aqp/format.h"
 
+#include <algorithm>
 #include <cassert>
 #include <cmath>
 #include <cstring>
@@ -31,6 +32,7 @@ std::vector<uint8_t> encode_aqp_meta(const AqpMeta& m) {
     w.f64(m.mean_edge);
     w.u32(m.atlas_columns);
     w.u32(m.up_axis);
+    for (uint32_t l = 0; l <= m.patch_level; ++l) w.u8(l < m.tile_shift.size() ? m.tile_shift[l] : 0);  // none: one patch per tile
     for (const AqpPatchInfo& p : m.patches) {
         for (uint32_t c : p.corner) w.u32(c);
         for (const PatchLink& l : p.link) {
@@ -70,11 +72,21 @@ std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
     m.up_axis = version >= 2 ? r.u32() : 0;
     if (!r.ok()) return "AQP metadata truncated";
     if (m.up_axis > 6) return strprintf("AQP metadata has an invalid up axis %u", m.up_axis);
+    if (m.patch_level > uint32_t(kMaxPatchLevel)) return strprintf("AQP patch level %u is above %d", m.patch_level, kMaxPatchLevel);
+    m.tile_shift.clear();
+    if (version >= 4) {
+        for (uint32_t l = 0; l <= m.patch_level; ++l) m.tile_shift.push_back(r.u8());
+        if (!r.ok()) return "AQP metadata truncated";
+        for (uint32_t l = 0; l <= m.patch_level; ++l)
+            if (m.tile_shift[l] > kMaxTileShift || (l > 0 && m.tile_shift[l] > m.tile_shift[l - 1]))
+                return strprintf("AQP metadata has an invalid tile shift %u at level %u (tiles must nest)", m.tile_shift[l], l);
+        // One patch per tile everywhere is how older versions read.
+        if (std::all_of(m.tile_shift.begin(), m.tile_shift.end(), [](uint8_t x) { return x == 0; })) m.tile_shift.clear();
+    }
     constexpr size_t kPatchBytes = 16 + 4 * 6 + 12 + 6;
     if (r.remaining() != size_t(patch_count) * kPatchBytes)
         return strprintf("AQP metadata holds %zu bytes of patches, %u patches need %zu", r.remaining(), patch_count,
                          size_t(patch_count) * kPatchBytes);
-    if (m.patch_level > uint32_t(kMaxPatchLevel)) return strprintf("AQP patch level %u is above %d", m.patch_level, kMaxPatchLevel);
     if (patch_count == 0) return "AQP metadata has no patches";
     if (!(m.step > 0) || !std::isfinite(m.step)) return "AQP metadata has an invalid quantization step";
     for (int i = 0; i < 3; ++i)
@@ -177,31 +189,33 @@ std::vector<uint32_t> stored_samples(int side, bool delta) {
     return out;
 }
 
-// Version 3: one byte plane per 8-bit channel and two (high, low) per 16-bit one, one plane per
-// row of an 8-bit grey image. Planes keep alike bytes together: a position's high byte is
-// nearly always 0 in a delta level, and deflate sees long runs of it instead of every sixth
-// byte. A whole plane per row (not n rows of n) because libpng's cost is per row: with 17-byte
-// rows, decoding took longer than the RGB16 layout's.
-PngImage byte_planes(const std::vector<uint32_t>& v, int side, int channels, const std::vector<uint32_t>& stored) {
-    const size_t n = size_t(side) * side;
-    PngImage im;
-    im.width = int(stored.size());
-    im.channels = 1;
-    im.bit_depth = 8;
-    im.height = 0;
+// Versions 3-4: one byte plane per 8-bit channel and two (high, low) per 16-bit one, one plane
+// per row of an 8-bit grey image, the tile's patches side by side in each row. Planes keep alike
+// bytes together: a position's high byte is nearly always 0 in a delta level, and deflate sees
+// long runs of it instead of every sixth byte. A whole plane per row (not n rows of n) because
+// libpng's cost is per row: with 17-byte rows, decoding took longer than the RGB16 layout's.
+// Writes patch `q` of a tile whose rows are `width` bytes (`values`: node_values of its grid).
+void put_byte_planes(const std::vector<uint32_t>& v, int side, int channels, const std::vector<uint32_t>& stored, size_t q,
+                     PngImage& im) {
+    const size_t n = size_t(side) * side, m = stored.size(), width = size_t(im.width);
+    size_t row = 0;
     for (int c = 0; c < channels; ++c) {
         const uint32_t* values = &v[size_t(c) * n];
+        uint16_t* out = &im.values[row * width + q * m];
         if (channel_bits(c) == 16) {
-            for (uint32_t s : stored) im.values.push_back(uint16_t(values[s] >> 8));
-            for (uint32_t s : stored) im.values.push_back(uint16_t(values[s] & 0xff));
-            im.height += 2;
+            for (size_t k = 0; k < m; ++k) out[k] = uint16_t(values[stored[k]] >> 8);
+            out += width;
+            for (size_t k = 0; k < m; ++k) out[k] = uint16_t(values[stored[k]] & 0xff);
+            row += 2;
         } else {
-            for (uint32_t s : stored) im.values.push_back(uint16_t(values[s]));
-            im.height += 1;
+            for (size_t k = 0; k < m; ++k) out[k] = uint16_t(values[stored[k]]);
+            row += 1;
         }
     }
-    return im;
 }
+
+// Planes per sample: two per 16-bit channel, one per 8-bit one.
+int plane_count(int channels) { return channels + 3; }
 
 // Versions 1-2: RGB 16-bit, positions on the left half, normals and colours on the right.
 PngImage rgb16_pixels(const std::vector<uint32_t>& v, int side, int channels) {
@@ -226,24 +240,24 @@ PngImage rgb16_pixels(const std::vector<uint32_t>& v, int side, int channels) {
     return im;
 }
 
-// The inverse of byte_planes / rgb16_pixels on a decoded image of the expected shape; an empty
-// string, or what is wrong (bits outside the channels).
-// (planes: `stored` as byte_planes had it; the samples left out stay 0).
+// The inverse of put_byte_planes (patch q of the tile) / rgb16_pixels on a decoded image of the
+// expected shape; an empty string, or what is wrong (bits outside the channels).
+// (planes: `stored` as put_byte_planes had it; the samples left out stay 0).
 std::string unpack_values(const PngImage& im, int side, int channels, bool planes, const std::vector<uint32_t>& stored,
-                          std::vector<uint32_t>& v) {
+                          size_t q, std::vector<uint32_t>& v) {
     const size_t n = size_t(side) * side;
     v.assign(size_t(channels) * n, 0);
     if (planes) {
-        const size_t m = stored.size();
-        const uint16_t* byte = im.values.data();
+        const size_t m = stored.size(), width = size_t(im.width);
+        const uint16_t* byte = im.values.data() + q * m;
         for (int c = 0; c < channels; ++c) {
             uint32_t* values = &v[size_t(c) * n];
             if (channel_bits(c) == 16) {
-                for (size_t k = 0; k < m; ++k) values[stored[k]] = uint32_t(byte[k]) << 8 | byte[m + k];
-                byte += 2 * m;
+                for (size_t k = 0; k < m; ++k) values[stored[k]] = uint32_t(byte[k]) << 8 | byte[width + k];
+                byte += 2 * width;
             } else {
                 for (size_t k = 0; k < m; ++k) values[stored[k]] = byte[k];
-                byte += m;
+                byte += width;
             }
         }
         return "";
@@ -291,15 +305,18 @@ void add_prediction(const int* coarse, int side, uint32_t mask, uint32_t* values
 
 }  // namespace
 
-std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coarser, NodeLayout layout, int compression) {
+namespace {
+
+// A grid's stored values (node_values), after checking its shape and, in the byte-plane layout,
+// that it nests in `coarser`: the samples a coarser level has are left out of its planes.
+std::vector<uint32_t> checked_node_values(const PatchGrid& g, const PatchGrid* coarser, NodeLayout layout) {
     const size_t n = size_t(g.size) * g.size;
     assert(g.size == (1 << g.level) + 1 && g.position.size() == n && g.normal.size() == n);
     assert(!layout.colors || g.color.size() == n);
     assert((g.level == 0) == (coarser == nullptr));
-    assert(!coarser || coarser->size == g.size / 2 + 1);
+    assert(!coarser || (coarser->size == g.size / 2 + 1 && coarser->patch == g.patch));
     const int channels = channel_count(layout);
-    const std::vector<uint32_t> values = node_values(g, coarser, channels);
-    const std::vector<uint32_t> stored = stored_samples(g.size, coarser != nullptr);
+    std::vector<uint32_t> values = node_values(g, coarser, channels);
     if (layout.byte_planes && coarser)
         for (int c = 0; c < channels; ++c)
             for (int j = 0; j < g.size; j += 2)
@@ -307,31 +324,14 @@ std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coar
                     if (values[size_t(c) * n + g.index(i, j)] != 0)
                         fail("patch %u level %d sample (%d, %d) is not its coarser level's sample: levels must nest",
                              g.patch, g.level, i, j);
-    // No row filters: deltas are residuals already, and libpng's filter heuristic picks filters
-    // that cost bytes (a 1M-triangle scan-like mesh's dataset 1.8% smaller, the bunny's 0.7%;
-    // keeping the filters on level 0, which holds values, was slightly larger still).
-    return png_encode(layout.byte_planes ? byte_planes(values, g.size, channels, stored) : rgb16_pixels(values, g.size, channels),
-                      compression, false);
+    return values;
 }
 
-std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, NodeLayout layout,
-                              const PatchGrid* coarser, PatchGrid& out) {
-    if (level < 0 || level > kMaxPatchLevel) return strprintf("patch level %d out of range", level);
-    if (level == 0) coarser = nullptr;
+// The grid of `patch` at `level` from its stored values (unpack_values; in place) and its
+// decoded coarser level (nullptr at level 0).
+void values_to_grid(std::vector<uint32_t>& v, uint32_t patch, int level, bool colors, int channels, const PatchGrid* coarser,
+                    PatchGrid& out) {
     const int side = (1 << level) + 1;
-    const bool colors = layout.colors;
-    if (level > 0 && (!coarser || coarser->size != side / 2 + 1 || coarser->position.size() != size_t(coarser->size) * coarser->size ||
-                      coarser->normal.size() != coarser->position.size() ||
-                      coarser->color.size() != (colors ? coarser->position.size() : 0)))
-        return strprintf("decoding level %d needs the patch's decoded level %d", level, level - 1);
-    const int channels = channel_count(layout);
-    PngImage image;
-    const std::vector<uint32_t> stored = stored_samples(side, coarser != nullptr);
-    const std::string e = layout.byte_planes ? png_decode(data, size, int(stored.size()), channels + 3, 1, 8, image)
-                                             : png_decode(data, size, 2 * side, side, 3, 16, image);
-    if (!e.empty()) return "AQP node image: " + e;
-    std::vector<uint32_t> v;
-    if (std::string bad = unpack_values(image, side, channels, layout.byte_planes, stored, v); !bad.empty()) return bad;
     out.patch = patch;
     out.level = level;
     out.size = side;
@@ -357,6 +357,93 @@ std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, 
         const uint32_t *r = &v[5 * n], *g = &v[6 * n], *b = &v[7 * n];
         for (size_t s = 0; s < n; ++s) out.color[s] = {uint8_t(r[s]), uint8_t(g[s]), uint8_t(b[s])};
     }
+}
+
+// Whether `coarser` can be level - 1 of a patch in this layout.
+bool usable_coarser(const PatchGrid* coarser, int level, bool colors) {
+    const int side = (1 << level) + 1;
+    return coarser && coarser->size == side / 2 + 1 && coarser->position.size() == size_t(coarser->size) * coarser->size &&
+           coarser->normal.size() == coarser->position.size() &&
+           coarser->color.size() == (colors ? coarser->position.size() : 0);
+}
+
+}  // namespace
+
+std::vector<uint8_t> encode_tile_node(const std::vector<const PatchGrid*>& grids, const std::vector<const PatchGrid*>& coarser,
+                                      bool colors, int compression) {
+    assert(!grids.empty() && (coarser.empty() || coarser.size() == grids.size()));
+    const NodeLayout layout{colors, true};
+    const int side = grids[0]->size, channels = channel_count(layout);
+    const std::vector<uint32_t> stored = stored_samples(side, !coarser.empty());
+    const size_t width = stored.size() * grids.size();
+    if (width > size_t(1) << 30) fail("a tile of %zu patches at level %d is too wide for one image", grids.size(), grids[0]->level);
+    PngImage im{int(width), plane_count(channels), 1, 8, {}};
+    im.values.resize(im.value_count());
+    for (size_t q = 0; q < grids.size(); ++q) {
+        assert(grids[q]->size == side);
+        const std::vector<uint32_t> values = checked_node_values(*grids[q], coarser.empty() ? nullptr : coarser[q], layout);
+        put_byte_planes(values, side, channels, stored, q, im);
+    }
+    // No row filters: deltas are residuals already, and libpng's filter heuristic picks filters
+    // that cost bytes (a 1M-triangle scan-like mesh's dataset 1.8% smaller, the bunny's 0.7%;
+    // keeping the filters on level 0, which holds values, was slightly larger still).
+    return png_encode(im, compression, false);
+}
+
+std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coarser, NodeLayout layout, int compression) {
+    if (layout.byte_planes) return encode_tile_node({&g}, coarser ? std::vector<const PatchGrid*>{coarser} : std::vector<const PatchGrid*>{},
+                                                    layout.colors, compression);
+    const std::vector<uint32_t> values = checked_node_values(g, coarser, layout);
+    return png_encode(rgb16_pixels(values, g.size, channel_count(layout)), compression, false);
+}
+
+std::string decode_tile_node(const uint8_t* data, size_t size, uint32_t first_patch, uint32_t count, int level,
+                             NodeLayout layout, const std::vector<const PatchGrid*>& coarser, std::vector<PatchGrid>& out) {
+    if (level < 0 || level > kMaxPatchLevel) return strprintf("patch level %d out of range", level);
+    if (count == 0) return "a tile of no patches";
+    if (!layout.byte_planes && count != 1) return "a node of this dataset's version holds one patch";
+    const int side = (1 << level) + 1;
+    const bool colors = layout.colors;
+    if (level > 0 && coarser.size() != count)
+        return strprintf("decoding level %d needs the tile's decoded level %d", level, level - 1);
+    bool any = level == 0;
+    for (size_t q = 0; level > 0 && q < count; ++q) {
+        if (!coarser[q]) continue;
+        if (!usable_coarser(coarser[q], level, colors) || coarser[q]->patch != first_patch + q)
+            return strprintf("decoding patch %u at level %d needs its decoded level %d", first_patch + uint32_t(q), level,
+                             level - 1);
+        any = true;
+    }
+    if (!any) return "no patch of the tile asked for";
+    const int channels = channel_count(layout);
+    const std::vector<uint32_t> stored = stored_samples(side, level > 0);
+    const uint64_t width = uint64_t(stored.size()) * count;
+    if (width > uint64_t(1) << 30) return strprintf("a tile of %u patches at level %d is too wide", count, level);
+    PngImage image;
+    const std::string e = layout.byte_planes ? png_decode(data, size, int(width), plane_count(channels), 1, 8, image)
+                                             : png_decode(data, size, 2 * side, side, 3, 16, image);
+    if (!e.empty()) return "AQP node image: " + e;
+    out.assign(count, PatchGrid{});
+    std::vector<uint32_t> v;
+    for (size_t q = 0; q < count; ++q) {
+        const PatchGrid* c = level > 0 ? coarser[q] : nullptr;
+        if (level > 0 && !c) continue;
+        if (std::string bad = unpack_values(image, side, channels, layout.byte_planes, stored, q, v); !bad.empty()) return bad;
+        values_to_grid(v, first_patch + uint32_t(q), level, colors, channels, c, out[q]);
+    }
+    return "";
+}
+
+std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, NodeLayout layout,
+                              const PatchGrid* coarser, PatchGrid& out) {
+    if (level > 0 && !usable_coarser(coarser, level, layout.colors))
+        return strprintf("decoding level %d needs the patch's decoded level %d", level, level - 1);
+    std::vector<PatchGrid> grids;
+    if (std::string e = decode_tile_node(data, size, patch, 1, level, layout,
+                                         level > 0 ? std::vector<const PatchGrid*>{coarser} : std::vector<const PatchGrid*>{}, grids);
+        !e.empty())
+        return e;
+    out = std::move(grids[0]);
     return "";
 }
 

@@ -31,24 +31,35 @@ AqpVerifyReport verify_aqp(const AqpDataset& d) {
     AqpVerifyReport r;
     const AqpMeta& m = d.meta();
     const int k = d.finest_level();
-    // Every patch's levels, coarse to fine (a level decodes from the one below).
+    // Every patch's levels, coarse to fine, a tile at a time (a level decodes from the one below).
     std::vector<std::vector<PatchGrid>> all(d.patch_count());
     std::vector<int> decoded_levels(d.patch_count(), 0);  // levels that decoded
-    for (uint32_t p = 0; p < d.patch_count(); ++p) {
-        PatchGrid none;
-        for (int l = 0; l <= k; ++l) {
+    for (int l = 0; l <= k; ++l)
+        for (uint32_t t = 0; t < m.tile_count(l); ++t) {
             ++r.nodes;
+            const uint32_t first = m.first_patch(t, l), count = m.tile_patches(t, l);
+            std::vector<const PatchGrid*> coarser;
+            bool any = l == 0;
+            for (uint32_t p = first; l > 0 && p < first + count; ++p) {
+                coarser.push_back(decoded_levels[p] == l ? &all[p].back() : nullptr);
+                any |= coarser.back() != nullptr;
+            }
+            if (!any) {  // a coarser tile was corrupt: this one cannot be decoded
+                ++r.corrupt_nodes;
+                continue;
+            }
             try {
-                all[p].push_back(d.decode(p, l, l > 0 ? all[p].back() : none));
-                decoded_levels[p] = l + 1;
+                std::vector<PatchGrid> grids = d.decode_tile(t, l, coarser);
+                for (uint32_t q = 0; q < count; ++q)
+                    if (l == 0 || coarser[q]) {
+                        all[first + q].push_back(std::move(grids[q]));
+                        decoded_levels[first + q] = l + 1;
+                    }
             } catch (const Error& e) {
-                r.corrupt_nodes += size_t(k + 1 - l);
-                r.nodes += size_t(k - l);
+                ++r.corrupt_nodes;
                 note(r, e.what());
-                break;
             }
         }
-    }
     std::vector<PatchGrid> finer(d.patch_count());
     for (int l = k; l >= 0; --l) {
         std::vector<PatchGrid> grids(d.patch_count());

@@ -259,10 +259,9 @@ int main(int argc, char** argv) {
         AqpDataset d(argv[1]);
         const bool colors = d.meta().has_colors();
         const int k = d.finest_level();
-        // Distinct finest samples: corners and shared edges counted once, as the converter does.
+        // The dataset's node bytes (whatever its tiles).
         size_t stored = 0;
-        for (int l = 0; l <= k; ++l)
-            for (uint32_t p = 0; p < d.patch_count(); ++p) stored += d.entry(p, l).size;
+        for (const ArchiveEntry& e : d.archive().entries()) stored += e.size;
         struct Variant {
             const char* name;
             size_t bytes = 0;

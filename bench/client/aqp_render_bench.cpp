@@ -74,19 +74,19 @@ void decode_throughput(const std::string& path) {
     const Hierarchy& h = format.hierarchy();
     const auto start = std::chrono::steady_clock::now();
     uint64_t bytes = 0, samples = 0;
-    for (uint32_t p = 0; p < format.meta().patches.size(); ++p) {
-        std::shared_ptr<const DecodedNode> parent;
-        for (int l = 0; l <= int(format.meta().patch_level); ++l) {
-            const HierarchyNode& n = h.node(h.find(aqp::aqp_node_key(p, l)));
-            std::shared_ptr<const DecodedNode> out;
-            const uint8_t* data = file.data() + n.payload_offset;
-            const std::string problem = l == 0 ? format.decode(n.index, data, n.payload_bytes, out)
-                                               : format.decode_with_parent(n.index, *parent, data, n.payload_bytes, out);
-            if (!problem.empty()) fail("%s", problem.c_str());
-            bytes += n.payload_bytes;
-            samples += aqp_grid(*out).position.size();
-            parent = out;
-        }
+    // Node order is coarse to fine: a node's decode parent is decoded before it.
+    std::vector<std::shared_ptr<const DecodedNode>> decoded(h.size());
+    for (uint32_t i = 0; i < h.size(); ++i) {
+        const HierarchyNode& n = h.node(i);
+        std::shared_ptr<const DecodedNode> out;
+        const uint8_t* data = file.data() + n.payload_offset;
+        const std::string problem = n.decode_parent == kNoNode
+                                        ? format.decode(n.index, data, n.payload_bytes, out)
+                                        : format.decode_with_parent(n.index, *decoded[n.decode_parent], data, n.payload_bytes, out);
+        if (!problem.empty()) fail("%s", problem.c_str());
+        bytes += n.payload_bytes;
+        for (const aqp::PatchGrid& g : aqp_grids(*out)) samples += g.position.size();
+        decoded[i] = std::move(out);
     }
     const double s = seconds_since(start);
     std::printf("AQP decode (one thread, every level of %zu patches): %.2f MB in %.3f s = %.1f MB/s compressed, %.1f M "

@@ -65,11 +65,12 @@ inline void for_each_triangle(const AqpDataset& d, const PatchGrid& g, auto&& fn
 }
 
 // Points on every level surface (triangle centroids and edge midpoints: not samples, which the
-// converter measured) are within their patch's stored bound of the input; the input's vertices
+// converter measured) are within their node's stored bound of the input; the input's vertices
 // are within the level's largest bound of the level surface (its triangles, and the edges of
 // those quantization flattened, which draw as lines). With `not_vacuous`, some point comes within
-// a factor 3 of its patch's bound at every level (the bound is a parametric distance: on a flat
-// input it can be far above the true one).
+// a factor 4 of its node's bound at every level (the bound is a parametric distance: on a flat
+// input it can be far above the true one; and a tile's is the largest of its patches', so only
+// the patch that sets it can come close).
 inline void expect_bounds_hold(const Mesh& input, const std::string& path, bool not_vacuous = true) {
     AqpDataset d(path);
     SurfaceDistance to_input(input.positions, input.indices);
@@ -100,7 +101,7 @@ inline void expect_bounds_hold(const Mesh& input, const std::string& path, bool 
             worst = std::max(worst, std::min(to_level.distance(v), to_level_edges.distance(v)));
         EXPECT_LE(worst, level_bound * (1 + 1e-6)) << "level " << l;
         if (not_vacuous) {
-            EXPECT_GT(worst_ratio, 1.0 / 3) << "level " << l;
+            EXPECT_GT(worst_ratio, 1.0 / 4) << "level " << l;
         }
     }
 }

@@ -70,6 +70,7 @@ AqpMeta small_meta() {
     m.mean_edge = 1.5;
     m.atlas_columns = 2;
     m.up_axis = 2;  // +y
+    m.tile_shift = {1, 1, 0, 0};  // levels 0-1: both patches in one tile
     m.patches.resize(2);
     m.patches[0].corner = {4, 0, 5, 1};
     m.patches[1].corner = {5, 1, 4, 0};
@@ -180,9 +181,10 @@ TEST(AqpFormat, PatchNodeDecoderRefusesTruncationsAndMissingCoarserLevels) {
 TEST(AqpFormat, MetadataRoundTripsAndHasGoldenBytes) {
     const AqpMeta m = small_meta();
     const std::vector<uint8_t> bytes = encode_aqp_meta(m);
-    // 8 magic + 7 u32 + 10 f64 + 2 u64 + 2 f64 + 2 u32 = 156 bytes, then 58 per patch
-    // (docs/formats/aqp.md); a few fields at their documented offsets.
-    ASSERT_EQ(bytes.size(), 156u + 2 * 58);
+    // 8 magic + 7 u32 + 10 f64 + 2 u64 + 2 f64 + 2 u32 = 156 bytes, a tile shift per level (4),
+    // then 58 per patch (docs/formats/aqp.md); a few fields at their documented offsets.
+    constexpr size_t P = 160;  // the first patch
+    ASSERT_EQ(bytes.size(), P + 2 * 58);
     auto u32_at = [&](size_t at) { return uint32_t(bytes[at] | bytes[at + 1] << 8 | bytes[at + 2] << 16 | uint32_t(bytes[at + 3]) << 24); };
     auto f64_at = [&](size_t at) {
         uint64_t u = 0;
@@ -200,26 +202,33 @@ TEST(AqpFormat, MetadataRoundTripsAndHasGoldenBytes) {
     EXPECT_EQ(f64_at(60), 0.25);   // step
     EXPECT_EQ(u32_at(148), 2u);    // atlas columns
     EXPECT_EQ(u32_at(152), 2u);    // up axis: +y
-    EXPECT_EQ(u32_at(156 + 8), 5u);                     // patch 0, corner 2
-    EXPECT_EQ(u32_at(156 + 16), 1u);                    // patch 0, link 0: patch 1
-    EXPECT_EQ(bytes[156 + 16 + 4], 2);                  //   its edge 2
-    EXPECT_EQ(bytes[156 + 16 + 5], 1);                  //   reversed
-    EXPECT_EQ(u32_at(156 + 58 + 40), 7u);               // patch 1, origin x
-    EXPECT_EQ(bytes[156 + 58 + 52] | bytes[156 + 58 + 53] << 8, 100);  // patch 1, extent x
+    EXPECT_EQ(bytes[156], 1);      // tile shift, level 0
+    EXPECT_EQ(bytes[159], 0);      // tile shift, level 3
+    EXPECT_EQ(u32_at(P + 8), 5u);                     // patch 0, corner 2
+    EXPECT_EQ(u32_at(P + 16), 1u);                    // patch 0, link 0: patch 1
+    EXPECT_EQ(bytes[P + 16 + 4], 2);                  //   its edge 2
+    EXPECT_EQ(bytes[P + 16 + 5], 1);                  //   reversed
+    EXPECT_EQ(u32_at(P + 58 + 40), 7u);               // patch 1, origin x
+    EXPECT_EQ(bytes[P + 58 + 52] | bytes[P + 58 + 53] << 8, 100);  // patch 1, extent x
     // Golden: any change to the layout must be deliberate (and the version bumped).
-    EXPECT_EQ(checksum64(bytes.data(), bytes.size()), 16444494129994587719ull);  // version 3 (only the version field differs from 2)
+    EXPECT_EQ(checksum64(bytes.data(), bytes.size()), 3257074371872359046ull);  // version 4 (tile shifts added)
     AqpMeta out;
     ASSERT_EQ(decode_aqp_meta(bytes.data(), bytes.size(), out), "");
     EXPECT_EQ(encode_aqp_meta(out), bytes);
     EXPECT_EQ(out.patches[1].origin, m.patches[1].origin);
     EXPECT_EQ(out.world(1, 0, 4), -1 + 0.25 * (7 + 4));
     EXPECT_EQ(out.up_axis, 2u);
+    EXPECT_EQ(out.tile_shift, m.tile_shift);
+    EXPECT_EQ(out.tile_count(0), 1u);
+    EXPECT_EQ(out.tile_patches(0, 1), 2u);
+    EXPECT_EQ(out.tile_count(2), 2u);
+    EXPECT_EQ(out.tile_of(1, 3), 1u);
 }
 
 // Version 1 metadata (before the up axis) still reads, with no up axis.
 TEST(AqpFormat, VersionOneMetadataReadsWithoutAnUpAxis) {
     std::vector<uint8_t> v1 = encode_aqp_meta(small_meta());
-    v1.erase(v1.begin() + 152, v1.begin() + 156);
+    v1.erase(v1.begin() + 152, v1.begin() + 160);  // the up axis and the tile shifts
     v1[8] = 1;
     AqpMeta out;
     ASSERT_EQ(decode_aqp_meta(v1.data(), v1.size(), out), "");
@@ -227,6 +236,8 @@ TEST(AqpFormat, VersionOneMetadataReadsWithoutAnUpAxis) {
     EXPECT_FALSE(out.node_layout().byte_planes);  // versions 1-2 store RGB16 node images
     EXPECT_EQ(out.patches.size(), 2u);
     EXPECT_EQ(out.patches[1].extent[0], 100);
+    EXPECT_TRUE(out.tile_shift.empty());  // one patch per node
+    EXPECT_EQ(out.tile_count(0), 2u);
 }
 
 TEST(AqpFormat, MetadataDecoderRefusesTruncationsAndBrokenFields) {
@@ -246,6 +257,8 @@ TEST(AqpFormat, MetadataDecoderRefusesTruncationsAndBrokenFields) {
     EXPECT_TRUE(refused([](AqpMeta& m) { m.step = 0; }));
     EXPECT_TRUE(refused([](AqpMeta& m) { m.atlas_columns = 3; }));
     EXPECT_TRUE(refused([](AqpMeta& m) { m.up_axis = 7; }));
+    EXPECT_TRUE(refused([](AqpMeta& m) { m.tile_shift = {0, 1, 0, 0}; }));  // tiles that do not nest
+    EXPECT_TRUE(refused([](AqpMeta& m) { m.tile_shift = {16, 1, 0, 0}; }));  // above kMaxTileShift
     std::vector<uint8_t> other_version = bytes;
     other_version[8] = uint8_t(kAqpMetaVersion + 1);
     EXPECT_NE(decode_aqp_meta(other_version.data(), other_version.size(), out).find("version"), std::string::npos);

@@ -38,26 +38,57 @@ const Built& torus_dataset() {
     return b;
 }
 
-// Rewrites `from` into `to` with node (patch, level) changed by `edit` (which gets the decoded
-// grid, then the node is re-encoded against the same coarser level). `version2`: every node in
-// the RGB16 layout of metadata version 2, which can hold a level that does not nest.
+// The sphere with one patch per node at every level (no tiles).
+const Built& sphere_untiled_dataset() {
+    AqpBuildOptions options;
+    options.tile_samples = 0;
+    static const Built b = build(make_sphere(20000, 7), "sphere_untiled", options);
+    return b;
+}
+
+// The metadata of an untiled dataset as version 2 or 3 wrote it: without the tile shifts
+// (which follow the up axis, at byte 156: format.h), and the version number.
+std::vector<uint8_t> meta_as_version(const AqpMeta& m, uint32_t version) {
+    EXPECT_TRUE(m.tile_shift.empty());
+    std::vector<uint8_t> bytes = encode_aqp_meta(m);
+    constexpr size_t kTileShiftOffset = 156;
+    bytes.erase(bytes.begin() + kTileShiftOffset, bytes.begin() + kTileShiftOffset + m.patch_level + 1);
+    bytes[8] = uint8_t(version);
+    return bytes;
+}
+
+// Rewrites `from` into `to` with patch `patch` at `level` changed by `edit` (which gets the
+// decoded grid, then its tile is re-encoded against the same coarser level). `version2`: every
+// node in the RGB16 layout of metadata version 2, which can hold a level that does not nest
+// (`from` must have no tiles).
 void rewrite_with_edit(const std::string& from, const std::string& to, uint32_t patch, int level,
                        const std::function<void(PatchGrid&)>& edit, bool version2 = false) {
     AqpDataset d(from);
+    const AqpMeta& meta = d.meta();
     ArchiveWriter w(to, ArchiveKind::Aqp);
     const std::vector<ArchiveEntry>& entries = d.archive().entries();
-    const NodeLayout layout{d.meta().has_colors(), !version2};
     for (size_t i = 0; i < entries.size(); ++i) {
-        const uint32_t p = aqp_key_patch(entries[i].key);
+        const uint32_t t = aqp_key_tile(entries[i].key);
         const int l = aqp_key_level(entries[i].key);
-        std::vector<PatchGrid> levels = d.decode_levels(p, l);
-        if (p == patch && l == level) edit(levels.back());
-        std::vector<uint8_t> node = encode_patch_node(levels.back(), l > 0 ? &levels[l - 1] : nullptr, layout);
+        const uint32_t first = meta.first_patch(t, l), count = meta.tile_patches(t, l);
+        std::vector<std::vector<PatchGrid>> levels(count);
+        std::vector<const PatchGrid*> grids, coarser;
+        for (uint32_t q = 0; q < count; ++q) {
+            levels[q] = d.decode_levels(first + q, l);
+            if (first + q == patch && l == level) edit(levels[q].back());
+            grids.push_back(&levels[q].back());
+            if (l > 0) coarser.push_back(&levels[q][size_t(l) - 1]);
+        }
+        std::vector<uint8_t> node;
+        if (version2) {
+            EXPECT_EQ(count, 1u);
+            node = encode_patch_node(*grids[0], l > 0 ? coarser[0] : nullptr, NodeLayout{meta.has_colors(), false});
+        } else {
+            node = encode_tile_node(grids, coarser, meta.has_colors());
+        }
         w.add_node(entries[i], node.data(), node.size());
     }
-    std::vector<uint8_t> meta = d.archive().meta();
-    if (version2) meta[8] = 2;
-    w.finish(meta);
+    w.finish(version2 ? meta_as_version(meta, 2) : d.archive().meta());
 }
 
 }  // namespace
@@ -68,7 +99,7 @@ TEST(AqpDataset, SharedEdgeAndCornerSamplesAreBitIdenticalAtEveryLevel) {
         AqpVerifyReport r = verify_aqp(d);
         EXPECT_EQ(r.shared_sample_mismatches, 0u) << b->path;
         EXPECT_EQ(r.corrupt_nodes, 0u) << (r.problems.empty() ? "" : r.problems[0]);
-        EXPECT_EQ(r.nodes, d.patch_count() * size_t(d.finest_level() + 1));
+        EXPECT_EQ(r.nodes, d.archive().entries().size());
         EXPECT_TRUE(r.ok());
     }
 }
@@ -163,7 +194,7 @@ TEST(AqpDataset, VerifyCatchesACoarseSampleThatIsNotTheFineOne) {
     // encoder refuses a level that does not nest rather than drop the difference.
     EXPECT_THROW(rewrite_with_edit(b.path, broken, 5, k, edit), Error);
     // Version 2 stored every sample: verify finds the one that is not the coarser level's.
-    rewrite_with_edit(b.path, broken, 5, k, edit, true);
+    rewrite_with_edit(sphere_untiled_dataset().path, broken, 5, k, edit, true);
     AqpVerifyReport r = verify_aqp(AqpDataset(broken));
     EXPECT_EQ(r.nesting_mismatches, 1u);
     EXPECT_FALSE(r.ok());
@@ -172,25 +203,11 @@ TEST(AqpDataset, VerifyCatchesACoarseSampleThatIsNotTheFineOne) {
 // Datasets written before byte planes (meta version 2, RGB16 node images) still read: the same
 // dataset rewritten in the old layout decodes to the same samples at every level.
 TEST(AqpDataset, AVersionTwoDatasetWithRgb16NodesDecodesTheSameSamples) {
-    const std::string path = sphere_dataset().path;
+    const std::string path = sphere_untiled_dataset().path;
     const std::string old_path = (test::scratch_dir() / "version2.cpq").string();
     AqpDataset d(path);
     ASSERT_TRUE(d.meta().node_layout().byte_planes);
-    {
-        ArchiveWriter w(old_path, ArchiveKind::Aqp);
-        const std::vector<ArchiveEntry>& entries = d.archive().entries();
-        const NodeLayout old_layout{d.meta().has_colors(), false};
-        for (const ArchiveEntry& e : entries) {
-            const uint32_t patch = aqp_key_patch(e.key);
-            const int level = aqp_key_level(e.key);
-            std::vector<PatchGrid> levels = d.decode_levels(patch, level);
-            std::vector<uint8_t> node = encode_patch_node(levels.back(), level > 0 ? &levels[level - 1] : nullptr, old_layout);
-            w.add_node(e, node.data(), node.size());
-        }
-        std::vector<uint8_t> meta = d.archive().meta();
-        meta[8] = 2;  // version 2: the layout before byte planes, otherwise the same bytes
-        w.finish(meta);
-    }
+    rewrite_with_edit(path, old_path, 0, 0, [](PatchGrid&) {}, true);
     AqpDataset old(old_path);
     EXPECT_EQ(old.meta().version, 2u);
     EXPECT_FALSE(old.meta().node_layout().byte_planes);
@@ -204,6 +221,48 @@ TEST(AqpDataset, AVersionTwoDatasetWithRgb16NodesDecodesTheSameSamples) {
             EXPECT_EQ(then[l].color, now[l].color);
         }
     }
+}
+
+// Tiles change how nodes group patches, not the samples: the same sphere converted with tiles
+// and without decodes to the same samples in every patch at every level, in fewer nodes and
+// fewer bytes. And a version-3 dataset (before tiles: no tile shifts in the metadata, one patch
+// per node, nodes laid out as a tile of one) still reads.
+TEST(AqpDataset, TilesHoldTheSameSamplesInFewerNodesAndBytesAndVersionThreeStillReads) {
+    AqpDataset tiled(sphere_dataset().path), untiled(sphere_untiled_dataset().path);
+    ASSERT_EQ(tiled.patch_count(), untiled.patch_count());
+    ASSERT_FALSE(tiled.meta().tile_shift.empty());
+    EXPECT_GT(tiled.meta().shift(0), 0);
+    EXPECT_LT(tiled.archive().entries().size(), untiled.archive().entries().size() / 2);
+    EXPECT_LT(sphere_dataset().report.file_bytes, untiled.archive().header().file_size);
+    std::printf("sphere: %zu nodes, %llu bytes with tiles; %zu nodes, %llu bytes without\n", tiled.archive().entries().size(),
+                (unsigned long long)sphere_dataset().report.file_bytes, untiled.archive().entries().size(),
+                (unsigned long long)untiled.archive().header().file_size);
+    const std::string v3_path = (test::scratch_dir() / "version3.cpq").string();
+    {
+        ArchiveWriter w(v3_path, ArchiveKind::Aqp);
+        for (size_t e = 0; e < untiled.archive().entries().size(); ++e) {
+            std::string error;
+            const uint8_t* bytes = untiled.archive().node(e, &error);
+            ASSERT_NE(bytes, nullptr) << error;
+            w.add_node(untiled.archive().entries()[e], bytes, untiled.archive().entries()[e].size);
+        }
+        w.finish(meta_as_version(untiled.meta(), 3));
+    }
+    AqpDataset v3(v3_path);
+    EXPECT_EQ(v3.meta().version, 3u);
+    for (uint32_t p = 0; p < tiled.patch_count(); ++p) {
+        const std::vector<PatchGrid> a = tiled.decode_levels(p, tiled.finest_level());
+        const std::vector<PatchGrid> b = untiled.decode_levels(p, tiled.finest_level());
+        const std::vector<PatchGrid> c = v3.decode_levels(p, tiled.finest_level());
+        for (size_t l = 0; l < a.size(); ++l) {
+            ASSERT_EQ(a[l].position, b[l].position) << p << " " << l;
+            ASSERT_EQ(a[l].normal, b[l].normal);
+            ASSERT_EQ(a[l].color, b[l].color);
+            ASSERT_EQ(c[l].position, b[l].position);
+        }
+    }
+    EXPECT_TRUE(verify_aqp(tiled).ok());
+    EXPECT_TRUE(verify_aqp(v3).ok());
 }
 
 TEST(AqpDataset, ACorruptNodeIsReportedNotACrash) {
@@ -255,4 +314,30 @@ TEST(AqpDataset, BadInputIsRefusedWithAMessageAndLeavesNoFile) {
         EXPECT_NE(std::string(e.what()).find("budget"), std::string::npos) << e.what();
     }
     EXPECT_FALSE(std::filesystem::exists(path));
+}
+
+// Tile shifts: the largest tiles within the target, one patch where a patch alone exceeds it,
+// no larger than the dataset, nesting (non-increasing), none with a target of 0.
+TEST(AqpTiles, ShiftsKeepTilesWithinTheTargetAndNest) {
+    // Level l stores 4, 5, 16, 56, 208, 800 samples per patch (a finer level only the new ones).
+    EXPECT_EQ(tile_shifts(5, 1272, 2048), (std::vector<uint8_t>{4, 4, 3, 2, 1, 0}));
+    EXPECT_EQ(tile_shifts(5, 10, 2048), (std::vector<uint8_t>{2, 2, 2, 2, 1, 0}));  // 16 patches hold all 10
+    EXPECT_EQ(tile_shifts(5, 1272, 0), (std::vector<uint8_t>(6, 0)));
+    EXPECT_EQ(tile_shifts(3, 1, 1 << 20), (std::vector<uint8_t>(4, 0)));
+    for (size_t target : {size_t(100), size_t(4096), size_t(1) << 24})
+        for (size_t patches : {size_t(1), size_t(30), size_t(5000), size_t(1) << 22}) {
+            const std::vector<uint8_t> s = tile_shifts(8, patches, target);
+            for (int l = 0; l <= 8; ++l) {
+                const uint64_t side = (uint64_t(1) << l) + 1, coarse = l ? (uint64_t(1) << (l - 1)) + 1 : 0;
+                const uint64_t stored = side * side - coarse * coarse, tile = uint64_t(1) << (2 * s[size_t(l)]);
+                if (l > 0) {
+                    EXPECT_LE(s[size_t(l)], s[size_t(l) - 1]);
+                }
+                if (s[size_t(l)] > 0) {
+                    EXPECT_LE(tile * stored, target);
+                    EXPECT_LT(tile / 4, patches) << "no larger than needed to hold every patch";
+                }
+                EXPECT_LE(s[size_t(l)], kMaxTileShift);
+            }
+        }
 }

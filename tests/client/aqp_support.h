@@ -47,18 +47,22 @@ inline Mesh aqp_model_mesh(AqpModel m) {
     return read_mesh(std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply");
 }
 
-// An AQP dataset of the model, built on first use (finest level 4: patches of 17 x 17 samples).
-inline const std::string& aqp_dataset_path(AqpModel m) {
-    static std::map<AqpModel, std::string> paths;
-    auto it = paths.find(m);
+// An AQP dataset of the model, built on first use (finest level 4: patches of 17 x 17 samples),
+// with the default tiles (several patches per node at coarse levels) or, `untiled`, one patch
+// per node at every level (tile_samples 0): the renderer tests draw any per-patch levels with it.
+inline const std::string& aqp_dataset_path(AqpModel m, bool untiled = false) {
+    static std::map<std::pair<AqpModel, bool>, std::string> paths;
+    auto it = paths.find({m, untiled});
     if (it != paths.end()) return it->second;
-    const std::string path = aqp_scratch_dir() + "/" + aqp_model_name(m) + ".cpq";
+    const std::string path = aqp_scratch_dir() + "/" + aqp_model_name(m) + (untiled ? "_untiled" : "") + ".cpq";
     aqp::AqpBuildOptions options;
     options.patch_level = 4;
     options.progress = false;
+    if (untiled) options.tile_samples = 0;
     aqp::build_aqp_dataset(aqp_model_mesh(m), path, options);
-    return paths.emplace(m, path).first->second;
+    return paths.emplace(std::make_pair(m, untiled), path).first->second;
 }
+inline const std::string& aqp_untiled_dataset_path(AqpModel m) { return aqp_dataset_path(m, true); }
 
 inline std::vector<uint8_t> read_file_bytes(const std::string& path) {
     std::ifstream in(path, std::ios::binary);
@@ -91,6 +95,55 @@ inline std::shared_ptr<const DecodedNode> decode_chain(const OpenedAqp& o, uint3
         problem = o.format->decode_with_parent(node, *parent, o.node_bytes(node), o.node_size(node), out);
     }
     EXPECT_EQ(problem, "") << "node " << n.key;
+    return out;
+}
+
+// Every node decoded, by hierarchy index (nodes come coarse to fine, so a node's decode parent
+// is decoded before it).
+inline std::vector<std::shared_ptr<const DecodedNode>> decode_all(const OpenedAqp& o) {
+    const Hierarchy& h = o.format->hierarchy();
+    std::vector<std::shared_ptr<const DecodedNode>> out(h.size());
+    for (uint32_t i = 0; i < h.size(); ++i) {
+        const HierarchyNode& n = h.node(i);
+        const std::string problem =
+            n.decode_parent == kNoNode
+                ? o.format->decode(i, o.node_bytes(i), o.node_size(i), out[i])
+                : o.format->decode_with_parent(i, *out[n.decode_parent], o.node_bytes(i), o.node_size(i), out[i]);
+        EXPECT_EQ(problem, "") << "node " << n.key;
+    }
+    return out;
+}
+
+// The box of a patch's samples (world).
+inline Aabb patch_box(const aqp::AqpMeta& meta, uint32_t patch) {
+    Aabb box;
+    for (int a = 0; a < 3; ++a) {
+        box.min[size_t(a)] = meta.world(patch, a, 0);
+        box.max[size_t(a)] = meta.world(patch, a, meta.patches[patch].extent[size_t(a)]);
+    }
+    return box;
+}
+
+// The node (tile) holding a patch at a level.
+inline uint32_t patch_node(const OpenedAqp& o, uint32_t patch, int level) {
+    const aqp::AqpMeta& meta = o.format->meta();
+    return o.format->hierarchy().find(aqp::aqp_node_key(meta.tile_of(patch, level), level));
+}
+
+// A patch's grid in a decoded tile (a test failure, and the first grid, when it has none).
+inline const aqp::PatchGrid& patch_grid(const DecodedNode& tile, uint32_t patch) {
+    const std::vector<aqp::PatchGrid>& grids = aqp_grids(tile);
+    for (const aqp::PatchGrid& g : grids)
+        if (g.patch == patch) return g;
+    ADD_FAILURE() << "the tile does not hold patch " << patch;
+    return grids.front();
+}
+
+// A node holding one patch's grid of a decoded tile: drawn_geometry over any per-patch levels,
+// not only the ones a cut of tiles can give.
+inline std::shared_ptr<const DecodedNode> single_patch_node(const DecodedNode& tile, uint32_t patch) {
+    auto out = std::make_shared<AqpNode>();
+    out->grids.push_back(patch_grid(tile, patch));
     return out;
 }
 

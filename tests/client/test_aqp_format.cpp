@@ -25,45 +25,58 @@ namespace {
 
 const AqpModel kModels[] = {AqpModel::Sphere, AqpModel::Torus, AqpModel::Bunny};
 
-TEST(AqpHierarchy, EveryPatchIsAChainOfLevelsWithMonotoneErrorsAndBoxesHoldingTheSamples) {
+TEST(AqpHierarchy, TilesFormATreeWithMonotoneErrorsAndBoxesHoldingTheSamples) {
     for (AqpModel m : kModels) {
         const std::string& path = test::aqp_dataset_path(m);
         test::OpenedAqp o = test::open_aqp(path);
         aqp::AqpDataset dataset(path);
+        const aqp::AqpMeta& meta = dataset.meta();
         const Hierarchy& h = o.format->hierarchy();
-        const size_t patches = dataset.patch_count(), levels = size_t(dataset.finest_level()) + 1;
+        const size_t patches = dataset.patch_count();
         SCOPED_TRACE(test::aqp_model_name(m));
+        size_t nodes = 0;
+        for (int l = 0; l <= dataset.finest_level(); ++l) nodes += meta.tile_count(l);
         EXPECT_EQ(h.check(), "");
-        EXPECT_EQ(h.size(), patches * levels);
-        EXPECT_EQ(h.roots().size(), patches);
+        EXPECT_EQ(h.size(), nodes);
+        EXPECT_LT(h.size(), patches * size_t(dataset.finest_level() + 1)) << "coarse levels are tiles of several patches";
+        EXPECT_EQ(h.roots().size(), meta.tile_count(0));
         EXPECT_EQ(h.virtual_count(), 0u);
         EXPECT_TRUE(h.decodes_against_parents());
+        std::vector<size_t> patches_per_level(size_t(dataset.finest_level()) + 1, 0);
         for (uint32_t i = 0; i < h.size(); ++i) {
             const HierarchyNode& n = h.node(i);
-            const uint32_t patch = aqp::aqp_key_patch(n.key);
+            const uint32_t tile = aqp::aqp_key_tile(n.key);
             const int level = aqp::aqp_key_level(n.key);
-            ASSERT_LT(patch, patches);
+            ASSERT_LT(tile, meta.tile_count(level));
+            const uint32_t first = meta.first_patch(tile, level), count = meta.tile_patches(tile, level);
+            patches_per_level[size_t(level)] += count;
             EXPECT_EQ(n.level, level);
-            EXPECT_EQ(n.error, double(dataset.entry(patch, level).error));  // the stored bounds are monotone already
+            EXPECT_EQ(n.error, double(dataset.entry(first, level).error));  // the stored bounds are monotone already
             ASSERT_EQ(n.parts.size(), 1u);
-            EXPECT_EQ(n.primitives, uint32_t(2) << (2 * level));
+            EXPECT_EQ(n.primitives, count * (uint32_t(2) << (2 * level)));
             if (level == 0) {
                 EXPECT_TRUE(n.parents.empty());
                 EXPECT_EQ(n.decode_parent, kNoNode);
             } else {
+                // The one parent: the tile one level down holding every patch of this one.
                 ASSERT_EQ(n.parents.size(), 1u);
-                EXPECT_EQ(h.node(n.parents[0]).key, aqp::aqp_node_key(patch, level - 1));
+                const HierarchyNode& parent = h.node(n.parents[0]);
+                EXPECT_EQ(parent.level, level - 1);
+                const uint32_t pfirst = meta.first_patch(aqp::aqp_key_tile(parent.key), level - 1);
+                EXPECT_LE(pfirst, first);
+                EXPECT_LE(first + count, pfirst + meta.tile_patches(aqp::aqp_key_tile(parent.key), level - 1));
                 EXPECT_EQ(n.decode_parent, n.parents[0]);
                 EXPECT_EQ(n.parts[0].parent, n.parents[0]);
-                EXPECT_GE(h.node(n.parents[0]).error, n.error);
+                EXPECT_GE(parent.error, n.error);
             }
             EXPECT_EQ(n.leaf, level == dataset.finest_level());
         }
+        for (size_t c : patches_per_level) EXPECT_EQ(c, patches) << "every patch in one tile per level";
         // Boxes hold the decoded samples (world) of every level of a sample of patches.
         for (uint32_t p = 0; p < patches; p += 7) {
             const std::vector<aqp::PatchGrid> grids = dataset.decode_levels(p, dataset.finest_level());
             for (const aqp::PatchGrid& g : grids) {
-                const Aabb& box = h.node(h.find(aqp::aqp_node_key(p, g.level))).bounds;
+                const Aabb& box = h.node(test::patch_node(o, p, g.level)).bounds;
                 for (size_t s = 0; s < g.position.size(); ++s) {
                     Aabb point;
                     point.extend(dataset.world_position(g, s));
@@ -74,31 +87,33 @@ TEST(AqpHierarchy, EveryPatchIsAChainOfLevelsWithMonotoneErrorsAndBoxesHoldingTh
     }
 }
 
-TEST(AqpDecode, DecodingThroughTheChainGivesTheDatasetsSamples) {
+TEST(AqpDecode, DecodingTilesThroughTheTreeGivesTheDatasetsSamples) {
     for (AqpModel m : {AqpModel::Sphere, AqpModel::Bunny}) {
         const std::string& path = test::aqp_dataset_path(m);
         test::OpenedAqp o = test::open_aqp(path);
         aqp::AqpDataset dataset(path);
         const Hierarchy& h = o.format->hierarchy();
+        const std::vector<std::shared_ptr<const DecodedNode>> decoded = test::decode_all(o);
+        for (uint32_t i = 0; i < h.size(); ++i) {
+            const std::shared_ptr<const DecodedNode>& out = decoded[i];
+            ASSERT_TRUE(out);
+            const int level = aqp::aqp_key_level(h.node(i).key);
+            const uint32_t tile = aqp::aqp_key_tile(h.node(i).key);
+            const std::vector<aqp::PatchGrid>& grids = aqp_grids(*out);
+            ASSERT_EQ(grids.size(), dataset.meta().tile_patches(tile, level));
+            EXPECT_EQ(out->part_primitives, std::vector<uint32_t>{h.node(i).primitives});
+            EXPECT_TRUE(h.node(i).bounds.contains(out->data_bounds));
+            EXPECT_FALSE(out->data_bounds.empty());
+            EXPECT_EQ(out->bytes.gpu, grids.size() * aqp_gpu_bytes(level, dataset.meta().has_colors()));
+        }
         for (uint32_t p = 0; p < dataset.patch_count(); p += 5) {
             const std::vector<aqp::PatchGrid> expected = dataset.decode_levels(p, dataset.finest_level());
-            std::shared_ptr<const DecodedNode> parent;
             for (int l = 0; l <= dataset.finest_level(); ++l) {
-                const uint32_t node = h.find(aqp::aqp_node_key(p, l));
-                std::shared_ptr<const DecodedNode> out;
-                const std::string problem =
-                    l == 0 ? o.format->decode(node, o.node_bytes(node), o.node_size(node), out)
-                           : o.format->decode_with_parent(node, *parent, o.node_bytes(node), o.node_size(node), out);
-                ASSERT_EQ(problem, "") << "patch " << p << " level " << l;
-                const aqp::PatchGrid& g = aqp_grid(*out);
-                EXPECT_EQ(g.position, expected[size_t(l)].position);
+                const aqp::PatchGrid& g = test::patch_grid(*decoded[test::patch_node(o, p, l)], p);
+                EXPECT_EQ(g.level, l);
+                EXPECT_EQ(g.position, expected[size_t(l)].position) << "patch " << p << " level " << l;
                 EXPECT_EQ(g.normal, expected[size_t(l)].normal);
                 EXPECT_EQ(g.color, expected[size_t(l)].color);
-                EXPECT_EQ(out->part_primitives, std::vector<uint32_t>{h.node(node).primitives});
-                EXPECT_TRUE(h.node(node).bounds.contains(out->data_bounds));
-                EXPECT_FALSE(out->data_bounds.empty());
-                EXPECT_EQ(out->bytes.gpu, aqp_gpu_bytes(l, dataset.meta().has_colors()));
-                parent = out;
             }
         }
     }
@@ -106,21 +121,29 @@ TEST(AqpDecode, DecodingThroughTheChainGivesTheDatasetsSamples) {
 
 TEST(AqpDecode, AFinerLevelWithoutItsParentOrWithAnotherIsAClearError) {
     test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Sphere));
-    const Hierarchy& h = o.format->hierarchy();
-    const uint32_t p0l0 = h.find(aqp::aqp_node_key(0, 0)), p0l1 = h.find(aqp::aqp_node_key(0, 1));
-    const uint32_t p1l0 = h.find(aqp::aqp_node_key(1, 0)), p0l2 = h.find(aqp::aqp_node_key(0, 2));
+    const aqp::AqpMeta& meta = o.format->meta();
+    const uint32_t last = uint32_t(meta.patches.size() - 1);
+    // A level whose coarser level has several tiles (so that one does not hold patch `last`).
+    int level = 2;
+    while (level <= int(meta.patch_level) && meta.tile_count(level - 1) < 2) ++level;
+    ASSERT_LE(level, int(meta.patch_level));
+    const uint32_t p0l0 = test::patch_node(o, 0, 0), p0l1 = test::patch_node(o, 0, 1);
+    const uint32_t mine = test::patch_node(o, last, level), other_tile = test::patch_node(o, 0, level - 1);
+    const uint32_t two_down = test::patch_node(o, last, level - 2);
+    ASSERT_NE(o.format->hierarchy().node(mine).parents[0], other_tile);
     std::shared_ptr<const DecodedNode> out;
     // Without a parent.
     std::string problem = o.format->decode(p0l1, o.node_bytes(p0l1), o.node_size(p0l1), out);
     EXPECT_NE(problem.find("difference from level 0, which was not given"), std::string::npos) << problem;
     EXPECT_FALSE(out);
-    // Another patch's level 0, or the same patch two levels down.
-    std::shared_ptr<const DecodedNode> other = test::decode_chain(o, p1l0), own = test::decode_chain(o, p0l0);
-    problem = o.format->decode_with_parent(p0l1, *other, o.node_bytes(p0l1), o.node_size(p0l1), out);
-    EXPECT_NE(problem.find("not the same patch one level down"), std::string::npos) << problem;
-    problem = o.format->decode_with_parent(p0l2, *own, o.node_bytes(p0l2), o.node_size(p0l2), out);
-    EXPECT_NE(problem.find("not the same patch one level down"), std::string::npos) << problem;
-    EXPECT_FALSE(out);
+    // The tile one level down that does not hold its patches, or its own patches two levels down.
+    for (uint32_t wrong : {other_tile, two_down}) {
+        std::shared_ptr<const DecodedNode> parent = test::decode_chain(o, wrong);
+        problem = o.format->decode_with_parent(mine, *parent, o.node_bytes(mine), o.node_size(mine), out);
+        EXPECT_NE(problem.find("not the tile holding its patches one level down"), std::string::npos) << problem;
+        EXPECT_FALSE(out);
+    }
+    std::shared_ptr<const DecodedNode> own = test::decode_chain(o, p0l0);
     // Damaged bytes: an error, not a crash.
     std::vector<uint8_t> bytes(o.node_bytes(p0l1), o.node_bytes(p0l1) + o.node_size(p0l1));
     for (size_t i = 40; i < bytes.size(); i += 17) bytes[i] ^= 0x5a;
@@ -133,30 +156,23 @@ TEST(AqpDecode, AFinerLevelWithoutItsParentOrWithAnotherIsAClearError) {
     EXPECT_TRUE(o.format->decode(p0l0, o.node_bytes(p0l0), o.node_size(p0l0), out).empty());
 }
 
-TEST(AqpDecode, ThroughputOfTheChain) {
+TEST(AqpDecode, ThroughputOfTheTree) {
     test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Bunny));
     const Hierarchy& h = o.format->hierarchy();
     const int k = int(o.format->meta().patch_level);
     const auto start = std::chrono::steady_clock::now();
     uint64_t bytes = 0, samples = 0;
-    for (uint32_t p = 0; p < o.format->meta().patches.size(); ++p) {
-        std::shared_ptr<const DecodedNode> parent;
-        for (int l = 0; l <= k; ++l) {
-            const uint32_t node = h.find(aqp::aqp_node_key(p, l));
-            std::shared_ptr<const DecodedNode> out;
-            ASSERT_EQ(l == 0 ? o.format->decode(node, o.node_bytes(node), o.node_size(node), out)
-                             : o.format->decode_with_parent(node, *parent, o.node_bytes(node), o.node_size(node), out),
-                      "");
-            bytes += o.node_size(node);
-            samples += aqp_grid(*out).position.size();
-            parent = out;
-        }
+    const std::vector<std::shared_ptr<const DecodedNode>> decoded = test::decode_all(o);
+    for (uint32_t i = 0; i < h.size(); ++i) {
+        bytes += o.node_size(i);
+        for (const aqp::PatchGrid& g : aqp_grids(*decoded[i])) samples += g.position.size();
     }
     const double seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
-    std::printf("bunny: decoded %zu patches x %d levels, %.2f MB compressed, %.2f M samples in %.3f s: %.1f MB/s, %.1f M samples/s, "
-                "%.2f bytes per sample compressed, %.1f GPU bytes per sample\n",
-                o.format->meta().patches.size(), k + 1, bytes / 1e6, samples / 1e6, seconds, bytes / 1e6 / seconds,
-                samples / 1e6 / seconds, double(bytes) / double(samples), double(aqp_gpu_bytes(k, o.format->meta().has_colors())) / double(((1 << k) + 1) * ((1 << k) + 1)));
+    std::printf("bunny: decoded %zu patches x %d levels in %zu tiles, %.2f MB compressed, %.2f M samples in %.3f s: %.1f MB/s, "
+                "%.1f M samples/s, %.2f bytes per sample compressed, %.1f GPU bytes per sample\n",
+                o.format->meta().patches.size(), k + 1, h.size(), bytes / 1e6, samples / 1e6, seconds, bytes / 1e6 / seconds,
+                samples / 1e6 / seconds, double(bytes) / double(samples),
+                double(aqp_gpu_bytes(k, o.format->meta().has_colors())) / double(((1 << k) + 1) * ((1 << k) + 1)));
     EXPECT_GT(samples, 0u);
 }
 
@@ -189,23 +205,29 @@ size_t requests_without_resident_parent(const Hierarchy& h, const std::array<dou
 }
 
 TEST(AqpHierarchy, TheCutEngineNeverAsksForALevelWhoseParentIsNotResidentEvenWhenSkipping) {
-    test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Bunny));
-    const Hierarchy& h = o.format->hierarchy();
-    const Aabb b = o.format->world_bounds();
-    const std::array<double, 3> target{(b.min[0] + b.max[0]) / 2, (b.min[1] + b.max[1]) / 2, (b.min[2] + b.max[2]) / 2};
-    const std::array<double, 3> eye{target[0] + 0.9 * (b.max[0] - b.min[0]), target[1] + 0.2, target[2] + 0.3};
-    EXPECT_EQ(requests_without_resident_parent(h, eye, target), 0u);
-    Hierarchy skippable = h;
-    for (uint32_t i = 0; i < skippable.size(); ++i) skippable.mutable_node(i).decode_parent = kNoNode;
-    skippable.finalize();
-    ASSERT_FALSE(skippable.decodes_against_parents());
-    EXPECT_GT(requests_without_resident_parent(skippable, eye, target), 0u) << "without decode parents the engine skips levels";
+    for (bool untiled : {false, true}) {
+        test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Bunny, untiled));
+        const Hierarchy& h = o.format->hierarchy();
+        const Aabb b = o.format->world_bounds();
+        const std::array<double, 3> target{(b.min[0] + b.max[0]) / 2, (b.min[1] + b.max[1]) / 2, (b.min[2] + b.max[2]) / 2};
+        const std::array<double, 3> eye{target[0] + 0.9 * (b.max[0] - b.min[0]), target[1] + 0.2, target[2] + 0.3};
+        EXPECT_EQ(requests_without_resident_parent(h, eye, target), 0u) << (untiled ? "untiled" : "tiled");
+        if (!untiled) continue;
+        // The control (on patch chains, where skipping is plain): without decode parents the
+        // engine skips levels.
+        Hierarchy skippable = h;
+        for (uint32_t i = 0; i < skippable.size(); ++i) skippable.mutable_node(i).decode_parent = kNoNode;
+        skippable.finalize();
+        ASSERT_FALSE(skippable.decodes_against_parents());
+        EXPECT_GT(requests_without_resident_parent(skippable, eye, target), 0u) << "without decode parents the engine skips levels";
+    }
 }
 
 TEST(AqpHierarchy, ADecodeParentThatIsNotAParentIsRejected) {
     test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Sphere));
     Hierarchy h = o.format->hierarchy();
-    const uint32_t node = h.find(aqp::aqp_node_key(0, 2)), other = h.find(aqp::aqp_node_key(1, 1));
+    const int k = int(o.format->meta().patch_level);
+    const uint32_t node = test::patch_node(o, 0, k), other = test::patch_node(o, 0, k - 2);
     h.mutable_node(node).decode_parent = other;
     try {
         h.finalize();
@@ -293,16 +315,15 @@ std::set<std::array<double, 3>> surface_border_positions(const test::OpenedAqp& 
                                                          const std::array<double, 3>& eye) {
     std::set<std::array<double, 3>> out;
     const aqp::AqpMeta& meta = d.meta();
-    const Hierarchy& h = o.format->hierarchy();
     for (uint32_t p = 0; p < meta.patches.size(); ++p) {
         bool border = false;
         for (const aqp::PatchLink& l : meta.patches[p].link) border |= l.patch >= meta.patches.size();
         if (!border) continue;
         // The finest level's edge samples hold every coarser level's.
-        const uint32_t node = h.find(aqp::aqp_node_key(p, d.finest_level()));
-        std::shared_ptr<const DecodedNode> decoded = test::decode_chain(o, node);
+        const uint32_t node = test::patch_node(o, p, d.finest_level());
+        std::shared_ptr<const DecodedNode> decoded = test::single_patch_node(*test::decode_chain(o, node), p);
         const DrawnGeometry g = o.format->drawn_geometry({{node, decoded.get(), 0}}, eye);
-        const int size = aqp_grid(*decoded).size;
+        const int size = aqp_grids(*decoded)[0].size;
         for (int e = 0; e < 4; ++e) {
             if (meta.patches[p].link[size_t(e)].patch < meta.patches.size()) continue;
             for (int t = 0; t < size; ++t) {
@@ -319,23 +340,14 @@ void expect_random_cuts_are_crack_free(AqpModel m) {
     const std::string& path = test::aqp_dataset_path(m);
     test::OpenedAqp o = test::open_aqp(path);
     aqp::AqpDataset dataset(path);
-    const Hierarchy& h = o.format->hierarchy();
     const size_t patches = dataset.patch_count();
     const int k = dataset.finest_level();
-    // Every level of every patch, decoded once.
+    // Every level of every patch, decoded once, each patch level as a node of its own: any
+    // per-patch levels, not only those of a cut of tiles.
+    const std::vector<std::shared_ptr<const DecodedNode>> tiles = test::decode_all(o);
     std::vector<std::vector<std::shared_ptr<const DecodedNode>>> decoded(patches);
-    for (uint32_t p = 0; p < patches; ++p) {
-        std::shared_ptr<const DecodedNode> parent;
-        for (int l = 0; l <= k; ++l) {
-            const uint32_t node = h.find(aqp::aqp_node_key(p, l));
-            std::shared_ptr<const DecodedNode> out;
-            ASSERT_EQ(l == 0 ? o.format->decode(node, o.node_bytes(node), o.node_size(node), out)
-                             : o.format->decode_with_parent(node, *parent, o.node_bytes(node), o.node_size(node), out),
-                      "");
-            decoded[p].push_back(out);
-            parent = out;
-        }
-    }
+    for (uint32_t p = 0; p < patches; ++p)
+        for (int l = 0; l <= k; ++l) decoded[p].push_back(test::single_patch_node(*tiles[test::patch_node(o, p, l)], p));
     const Aabb bounds = o.format->world_bounds();
     std::mt19937_64 rng(uint64_t(m) * 7919 + 1);
     size_t unstitched_cracks = 0;
@@ -348,20 +360,20 @@ void expect_random_cuts_are_crack_free(AqpModel m) {
                                                          std::uniform_real_distribution<double>(-1.0, 2.0)(rng);
         const std::set<std::array<double, 3>> border = surface_border_positions(o, dataset, eye);
         const uint32_t focus = uint32_t(rng() % patches);
-        const Aabb& fbox = h.node(h.find(aqp::aqp_node_key(focus, 0))).bounds;
+        const Aabb fbox = test::patch_box(dataset.meta(), focus);
         std::vector<DecodedPart> parts;
         std::set<int> levels;
         for (uint32_t p = 0; p < patches; ++p) {
             int level = int(rng() % uint64_t(k + 1));
             if (trial % 2 == 1) {  // finer near the focus
-                const Aabb& box = h.node(h.find(aqp::aqp_node_key(p, 0))).bounds;
+                const Aabb box = test::patch_box(dataset.meta(), p);
                 double d = 0;
                 for (int a = 0; a < 3; ++a) d = std::max(d, std::abs((box.min[size_t(a)] + box.max[size_t(a)]) - (fbox.min[size_t(a)] + fbox.max[size_t(a)])) / 2);
                 const double diag = bounds.max[0] - bounds.min[0];
                 level = std::clamp(k - int(d / diag * 2.0 * k), 0, k);
             }
             levels.insert(level);
-            parts.push_back({h.find(aqp::aqp_node_key(p, level)), decoded[p][size_t(level)].get(), 0});
+            parts.push_back({test::patch_node(o, p, level), decoded[p][size_t(level)].get(), 0});
         }
         const DrawnGeometry g = o.format->drawn_geometry(parts, eye);
         const CrackCount c = count_cracks(g, border);
@@ -413,7 +425,6 @@ double point_triangle_distance(const std::array<double, 3>& p, const Vec3d& a, c
 // neighbours or not (the cut engine's projected errors rely on it), and not far below it.
 TEST(AqpFormat, DataDistanceBoundsTheDistanceToTheStitchedTrianglesFromBelow) {
     test::OpenedAqp o = test::open_aqp(test::aqp_dataset_path(AqpModel::Torus));
-    const Hierarchy& h = o.format->hierarchy();
     const aqp::AqpMeta& meta = o.format->meta();
     const int k = int(meta.patch_level);
     const Aabb bounds = o.format->world_bounds();
@@ -425,15 +436,15 @@ TEST(AqpFormat, DataDistanceBoundsTheDistanceToTheStitchedTrianglesFromBelow) {
         std::vector<std::shared_ptr<const DecodedNode>> keep;
         std::vector<DecodedPart> parts;
         auto add = [&](uint32_t patch, int l) {
-            const uint32_t node = h.find(aqp::aqp_node_key(patch, l));
-            keep.push_back(test::decode_chain(o, node));
+            const uint32_t node = test::patch_node(o, patch, l);
+            keep.push_back(test::single_patch_node(*test::decode_chain(o, node), patch));
             parts.push_back({node, keep.back().get(), 0});
         };
         add(p, level);  // first: its vertices come first in the drawn geometry
         for (const aqp::PatchLink& link : meta.patches[p].link)
             if (link.patch < meta.patches.size()) add(link.patch, int(rng() % uint64_t(level + 1)));
         // An eye near the patch (inside its box sometimes) or anywhere around the model.
-        const Aabb& box = h.node(parts[0].node).bounds;
+        const Aabb box = test::patch_box(meta, p);
         std::array<double, 3> eye;
         for (int a = 0; a < 3; ++a) {
             const Aabb& around = trial % 2 ? box : bounds;
@@ -441,7 +452,7 @@ TEST(AqpFormat, DataDistanceBoundsTheDistanceToTheStitchedTrianglesFromBelow) {
             eye[size_t(a)] = lo + (hi - lo) * std::uniform_real_distribution<double>(-0.3, 1.3)(rng);
         }
         const DrawnGeometry g = o.format->drawn_geometry(parts, eye);
-        const uint32_t own = uint32_t(aqp_grid(*keep[0]).position.size());
+        const uint32_t own = uint32_t(aqp_grids(*keep[0])[0].position.size());
         double drawn = std::numeric_limits<double>::infinity();
         auto world = [&](uint32_t v) {
             const Vec3d& q = g.mesh.positions[v];
@@ -477,7 +488,7 @@ TEST(AqpFormat, OpeningRejectsBadMetadataAndIndexWithAClearError) {
         EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
     }
     AqpFormat ok(prefix);
-    EXPECT_EQ(ok.summary().lines.size(), 6u);
+    EXPECT_EQ(ok.summary().lines.size(), 7u);
     EXPECT_FALSE(ok.world_bounds().empty());
 }
 

@@ -13,7 +13,9 @@
 // 6. Measure each node's error (the largest distance between the level's triangulated surface
 //    and the input surface at corresponding points; see measure_errors in build.cpp), monotone
 //    up the levels.
-// 7. Encode every (patch, level) node as PNG images and write the archive atomically.
+// 7. Order the patches along a Morton curve, group each level's consecutive patches into tiles
+//    of at least `tile_samples` stored samples (tile_shifts), encode every (tile, level) node as
+//    one PNG image and write the archive atomically.
 //
 // Memory is proportional to the input (in core: peak 42 MiB for the bunny's 75k triangles, 322 MiB
 // for a 1M-triangle scan); all cores are used for the smoothing, the resampling, the errors and
@@ -41,12 +43,23 @@ struct AqpBuildOptions {
     double min_component_area_fraction = 1e-3;  // CleanOptions
     Precision precision;  // the quantization's largest distance from a sample's true position
     int png_compression = 6;      // zlib level of the node images (9: 4% smaller, encoding 7.6x slower on a 1M scan)
+    // Each level's tiles hold 4^s consecutive patches, s the largest keeping a tile's stored
+    // samples within this many (0: one patch per node). Coarse levels then cost one image for
+    // many patches, not one each (tile_shifts).
+    size_t tile_samples = 2048;
     // Refuse to start when the estimated working memory exceeds this many bytes (0: no limit).
     uint64_t memory_budget = 0;
     uint32_t up_axis = 0;         // stored for viewers (AqpMeta::up_axis numbering; 0: unknown)
     unsigned threads = 0;         // 0: all cores
     bool progress = true;         // named phases on a terminal
 };
+
+// Per level 0..k, the tile shift (AqpMeta::tile_shift) for `patches` patches: the largest s
+// whose 4^s patches store at most `tile_samples` samples at that level (a finer level stores
+// only the samples its coarser one lacks; 0 when one patch stores more), no more than holds
+// every patch; 0 everywhere when tile_samples is 0. Non-increasing with the level, as tiles
+// must nest.
+std::vector<uint8_t> tile_shifts(int finest_level, size_t patches, size_t tile_samples);
 
 struct AqpLevelStats {
     int level = 0;

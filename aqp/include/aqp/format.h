@@ -1,32 +1,42 @@
 #pragma once
-// The AQP dataset: an archive (common_codec/archive.h) of kind Aqp whose nodes are (patch, level)
-// pairs. Byte tables: docs/formats/aqp.md. All integers little-endian.
+// The AQP dataset: an archive (common_codec/archive.h) of kind Aqp whose nodes are tiles: the
+// same level of a run of consecutive patches. Byte tables: docs/formats/aqp.md. All integers
+// little-endian.
 //
 // Meta:
-//   char[8] "AQPMETA\0" | u32 version (3) | u32 finest level k | u32 patch count
+//   char[8] "AQPMETA\0" | u32 version (4) | u32 finest level k | u32 patch count
 //   u32 base vertices | u32 base triangles | u32 border edges | u32 flags (bit 0: colours)
 //   f64 origin[3] | f64 step        world = origin + step * (patch origin + local), per axis
 //   f64 bounds_min[3] | f64 bounds_max[3]   (world, of the samples)
 //   u64 input vertices | u64 input triangles | f64 precision | f64 mean edge | u32 atlas columns
 //   u32 up axis (version 2; version 1 has no field and reads as 0): 0 unknown, 1-6 = +x +y +z
 //       -x -y -z, the numbering of catp/format.h's UpAxis (which the point format uses too)
+//   u8 tile shift[k + 1] (version 4; older versions have none and read as 0): level l's tile t
+//       holds patches t * 4^s .. (t + 1) * 4^s - 1 (s = shift[l], the last tile fewer),
+//       shifts non-increasing with the level, so a tile lies in one tile of each coarser level
 //   per patch: u32 corner[4] (quad vertex ids)
 //              4 x (u32 neighbour patch or 0xFFFFFFFF, u8 its edge, u8 reversed)
 //              u32 origin[3] (quantization grid) | u16 extent[3] (largest local coordinate)
 //
-// Node (key = patch << 8 | level, level = level, count = samples, error = bound in world units):
-// the bytes of one PNG file (nothing else: the index names the node, the archive checksums it).
-// Version 3: an 8-bit grey image m wide and P high for n = 2^level + 1 samples per side, row r
-// the byte plane r of the stored samples in grid order (level 0: all n^2; a finer level only
-// those with an odd coordinate, the others being the coarser level's): x high, x low, y high, y low, z high, z low
-// (16-bit local position), normal u, normal v (the bytes of common_codec/octahedral.h), then
-// red, green, blue with colours (P = 11, else 8); grid row j is v = j / 2^level, column i is
-// u = i / 2^level. Versions 1-2: RGB 16-bit, 2n x n pixels, every sample,
-// pixel (i, j) local x y z, pixel (n + i, j) normal u << 8 | v, red << 8 | green, blue << 8.
+// Node (key = tile << 8 | level, level = level, count = samples of its patches' grids, error =
+// bound in world units, the largest of its patches'): the bytes of one PNG file (nothing else:
+// the index names the node, the archive checksums it). Patches are numbered along a Morton curve
+// over their boxes (by the converter), so a tile's patches lie together on the surface.
+// Versions 3-4: an 8-bit grey image m * T wide and P high for T patches of n = 2^level + 1
+// samples per side, row r the byte plane r of the stored samples of each patch in turn, m per
+// patch in grid order (level 0: all n^2; a finer level only those with an odd coordinate, the
+// others being the coarser level's): x high, x low, y high, y low, z high, z low (16-bit local
+// position), normal u, normal v (the bytes of common_codec/octahedral.h), then red, green, blue
+// with colours (P = 11, else 8); grid row j is v = j / 2^level, column i is u = i / 2^level.
+// (Version 3 has one patch per tile.) Versions 1-2: one patch per node, RGB 16-bit, 2n x n
+// pixels, every sample, pixel (i, j) local x y z, pixel (n + i, j) normal u << 8 | v,
+// red << 8 | green, blue << 8.
 // Level 0 stores the values; a finer level stores every channel's difference from its prediction
 // by the coarser level (predict_from_coarser), modulo 2^16 (8-bit channels modulo 2^8), zigzag
 // coded: decoding level l needs levels 0..l-1. (bench/aqp/node_bench measures the layouts:
-// deltas in byte planes are 14-17% smaller than in RGB16 pixels, docs/formats/aqp.md.)
+// deltas in byte planes are 14-17% smaller than in RGB16 pixels, docs/formats/aqp.md; tiles pay
+// a PNG's fixed costs once for several patches.)
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <string>
@@ -37,9 +47,10 @@
 
 namespace catpaq::aqp {
 
-constexpr uint32_t kAqpMetaVersion = 3;  // 1 (no up axis) and 2 (RGB16 nodes) still read
+constexpr uint32_t kAqpMetaVersion = 4;  // 1 (no up axis), 2 (RGB16 nodes) and 3 (no tiles) still read
 constexpr int kMaxPatchLevel = 10;
 constexpr uint32_t kAqpColorFlag = 1;
+constexpr int kMaxTileShift = 15;  // 4^15 patches: above any patch count the metadata allows
 
 struct AqpPatchInfo {
     std::array<uint32_t, 4> corner{};
@@ -67,10 +78,23 @@ struct AqpMeta {
     double mean_edge = 0;  // the input's mean edge length
     uint32_t atlas_columns = 1;  // patch p's images sit at column p % columns, row p / columns
     uint32_t up_axis = 0;        // 0 unknown, 1-6 = +x +y +z -x -y -z (catp/format.h's UpAxis)
+    std::vector<uint8_t> tile_shift;  // per level 0..k (empty: one patch per tile, versions 1-3)
     std::vector<AqpPatchInfo> patches;
 
     bool has_colors() const { return flags & kAqpColorFlag; }
     NodeLayout node_layout() const { return {has_colors(), version >= 3}; }
+    // Tiles: level l's tile t holds patches first_patch(t, l) .. + tile_patches(t, l) - 1.
+    int shift(int level) const { return tile_shift.empty() ? 0 : tile_shift[size_t(level)]; }
+    uint32_t tile_count(int level) const {
+        const uint64_t size = uint64_t(1) << (2 * shift(level));
+        return uint32_t((patches.size() + size - 1) / size);
+    }
+    uint32_t tile_of(uint32_t patch, int level) const { return patch >> (2 * shift(level)); }
+    uint32_t first_patch(uint32_t tile, int level) const { return tile << (2 * shift(level)); }
+    uint32_t tile_patches(uint32_t tile, int level) const {
+        const uint64_t first = uint64_t(tile) << (2 * shift(level)), size = uint64_t(1) << (2 * shift(level));
+        return uint32_t(std::min<uint64_t>(size, patches.size() - first));
+    }
     // World coordinate `axis` of local coordinate `local` of patch p.
     double world(uint32_t p, int axis, uint32_t local) const {
         return origin[axis] + step * double(uint64_t(patches[p].origin[axis]) + local);
@@ -82,8 +106,9 @@ std::vector<uint8_t> encode_aqp_meta(const AqpMeta& meta);
 // counts, links pointing at patches that link back).
 std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& out);
 
-inline uint64_t aqp_node_key(uint32_t patch, int level) { return (uint64_t(patch) << 8) | uint64_t(level); }
-inline uint32_t aqp_key_patch(uint64_t key) { return uint32_t(key >> 8); }
+// A node's key: its tile at its level (with one patch per tile, the tile is the patch).
+inline uint64_t aqp_node_key(uint32_t tile, int level) { return (uint64_t(tile) << 8) | uint64_t(level); }
+inline uint32_t aqp_key_tile(uint64_t key) { return uint32_t(key >> 8); }
 inline int aqp_key_level(uint64_t key) { return int(key & 0xff); }
 
 // One patch at one level: (2^level + 1)^2 samples, row-major (index j * size + i).
@@ -105,15 +130,25 @@ struct PatchGrid {
 // only, so patches sharing an edge decode it identically.
 int predict_from_coarser(const PatchGrid& coarser, int channel, int i, int j);
 
-// The node payload of `grid` (PNG at zlib level `compression`) in `layout`; `coarser` is the same
-// patch one level down (nullptr at level 0). Throws Error in the version-3 layout when `grid`
-// does not nest in `coarser` (it could not store the difference). Writers use the current layout; the older one is
-// kept for tests of old datasets.
+// The node payload of a tile: `grids` (consecutive patches, one level; PNG at zlib level
+// `compression`) in the version-3 layout; `coarser` holds the same patches one level down
+// (empty at level 0). Throws Error when a grid does not nest in its coarser level (it could not
+// store the difference).
+std::vector<uint8_t> encode_tile_node(const std::vector<const PatchGrid*>& grids, const std::vector<const PatchGrid*>& coarser,
+                                      bool colors, int compression = 6);
+// Decodes a tile node of `count` patches from `first_patch` at `level` (0 <= level <=
+// kMaxPatchLevel) laid out as `layout` (colours exactly when layout.colors; byte planes: RGB16
+// nodes hold one patch). Above level 0, `coarser` gives each patch's decoded coarser level
+// (count pointers); a patch whose pointer is null is skipped (left empty in `out`: a reader
+// after one patch of a tile need not have the others). Safe on untrusted bytes: empty string on
+// success, else what is wrong.
+std::string decode_tile_node(const uint8_t* data, size_t size, uint32_t first_patch, uint32_t count, int level,
+                             NodeLayout layout, const std::vector<const PatchGrid*>& coarser, std::vector<PatchGrid>& out);
+
+// One patch as a node of its own (a tile of one): `layout` may be the older RGB16 one, kept for
+// tests of old datasets.
 std::vector<uint8_t> encode_patch_node(const PatchGrid& grid, const PatchGrid* coarser, NodeLayout layout,
                                        int compression = 6);
-// Decodes a node, which must be patch `patch` at `level` (0 <= level <= kMaxPatchLevel), be laid
-// out as `layout` (colours exactly when layout.colors), and come with the patch's decoded coarser
-// level when level > 0. Safe on untrusted bytes: empty string on success, else what is wrong.
 std::string decode_patch_node(const uint8_t* data, size_t size, uint32_t patch, int level, NodeLayout layout,
                               const PatchGrid* coarser, PatchGrid& out);
 

@@ -75,28 +75,30 @@ double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, 
 Hierarchy build_aqp_hierarchy(const AqpMeta& meta, const std::vector<ArchiveEntry>& entries) {
     if (std::string e = aqp::check_aqp_index(meta, entries); !e.empty()) fail("%s", e.c_str());
     Hierarchy h;
-    const size_t patches = meta.patches.size();
-    // Entries are sorted by (level, key): entry l * patches + p is (p, l) (check_aqp_index), and
-    // nodes are added in that order, so node index = entry index.
+    // Entries are sorted by (level, key) = (level, tile) (check_aqp_index), and nodes are added
+    // in that order, so node index = entry index = aqp_entry_index(tile, level).
     for (size_t e = 0; e < entries.size(); ++e) {
         const ArchiveEntry& entry = entries[e];
-        const uint32_t patch = aqp::aqp_key_patch(entry.key);
+        const uint32_t tile = aqp::aqp_key_tile(entry.key);
         const int level = aqp::aqp_key_level(entry.key);
         const double error = std::isfinite(entry.error) ? std::max(0.0, double(entry.error)) : -1.0;
         if (error < 0) fail("index entry %zu has a bad error bound", e);
-        const uint32_t n = h.add_node(entry.key, uint16_t(level), error, patch_box(meta, patch), true);
+        const uint32_t first = meta.first_patch(tile, level), count = meta.tile_patches(tile, level);
+        Aabb box;
+        for (uint32_t p = first; p < first + count; ++p) box.extend(patch_box(meta, p));
+        const uint32_t n = h.add_node(entry.key, uint16_t(level), error, box, true);
         HierarchyNode& node = h.mutable_node(n);
         node.entry = uint32_t(e);
         node.payload_offset = entry.offset;
         node.payload_bytes = entry.size;
         node.checksum = entry.checksum;
         node.flags = entry.flags;
-        node.primitives = uint32_t(2) << (2 * level);  // 2 (n - 1)^2 grid triangles, n - 1 = 2^level
+        node.primitives = count * (uint32_t(2) << (2 * level));  // 2 (n - 1)^2 grid triangles, n - 1 = 2^level
         HierarchyPart part;
         part.id = 0;
         part.primitives = node.primitives;
         if (level > 0) {
-            const uint32_t parent = uint32_t(e - patches);
+            const uint32_t parent = uint32_t(aqp::aqp_entry_index(meta, meta.tile_of(first, level - 1), level - 1));
             h.add_parent(n, parent);
             part.parent = parent;
             node.decode_parent = parent;
@@ -107,10 +109,10 @@ Hierarchy build_aqp_hierarchy(const AqpMeta& meta, const std::vector<ArchiveEntr
     return h;
 }
 
-const PatchGrid& aqp_grid(const DecodedNode& node) {
+const std::vector<PatchGrid>& aqp_grids(const DecodedNode& node) {
     const auto* a = dynamic_cast<const AqpNode*>(&node);
     if (!a) fail("a node of another format given to AQP");
-    return a->grid;
+    return a->grids;
 }
 
 uint64_t aqp_gpu_bytes(int level, bool colors) {
@@ -145,23 +147,25 @@ AqpFormat::AqpFormat(const DatasetPrefix& prefix) {
     }
 }
 
-std::string AqpFormat::node_patch_level(uint32_t node, uint32_t& patch, int& level) const {
+std::string AqpFormat::node_tile_level(uint32_t node, uint32_t& tile, int& level) const {
     if (node >= hierarchy_.size()) return "no such node";
     const uint64_t key = hierarchy_.node(node).key;
-    patch = aqp::aqp_key_patch(key);
+    tile = aqp::aqp_key_tile(key);
     level = aqp::aqp_key_level(key);
     return "";
 }
 
 std::string AqpFormat::decode(uint32_t node, const uint8_t* data, size_t size, std::shared_ptr<const DecodedNode>& out) const {
-    uint32_t patch = 0;
+    uint32_t tile = 0;
     int level = 0;
-    if (std::string e = node_patch_level(node, patch, level); !e.empty()) return e;
+    if (std::string e = node_tile_level(node, tile, level); !e.empty()) return e;
     if (level > 0)
-        return strprintf("patch %u level %d is stored as a difference from level %d, which was not given", patch, level,
+        return strprintf("tile %u level %d is stored as a difference from level %d, which was not given", tile, level,
                          level - 1);
     auto decoded = std::make_shared<AqpNode>();
-    if (std::string e = aqp::decode_patch_node(data, size, patch, level, meta_.node_layout(), nullptr, decoded->grid); !e.empty())
+    if (std::string e = aqp::decode_tile_node(data, size, meta_.first_patch(tile, 0), meta_.tile_patches(tile, 0), 0,
+                                              meta_.node_layout(), {}, decoded->grids);
+        !e.empty())
         return e;
     account(*decoded);
     out = std::move(decoded);
@@ -170,14 +174,20 @@ std::string AqpFormat::decode(uint32_t node, const uint8_t* data, size_t size, s
 
 std::string AqpFormat::decode_with_parent(uint32_t node, const DecodedNode& parent, const uint8_t* data, size_t size,
                                           std::shared_ptr<const DecodedNode>& out) const {
-    uint32_t patch = 0;
+    uint32_t tile = 0;
     int level = 0;
-    if (std::string e = node_patch_level(node, patch, level); !e.empty()) return e;
+    if (std::string e = node_tile_level(node, tile, level); !e.empty()) return e;
     const auto* coarser = dynamic_cast<const AqpNode*>(&parent);
-    if (level == 0 || !coarser || coarser->grid.patch != patch || coarser->grid.level != level - 1)
-        return strprintf("patch %u level %d: the parent given is not the same patch one level down", patch, level);
+    const uint32_t first = meta_.first_patch(tile, level), count = meta_.tile_patches(tile, level);
+    // The parent tile holds this tile's patches, one level down.
+    std::vector<const PatchGrid*> coarser_grids;
+    if (level > 0 && coarser && !coarser->grids.empty() && coarser->grids[0].level == level - 1 &&
+        coarser->grids[0].patch <= first && first + count <= coarser->grids[0].patch + coarser->grids.size())
+        for (uint32_t p = first; p < first + count; ++p) coarser_grids.push_back(&coarser->grids[p - coarser->grids[0].patch]);
+    if (coarser_grids.empty())
+        return strprintf("tile %u level %d: the parent given is not the tile holding its patches one level down", tile, level);
     auto decoded = std::make_shared<AqpNode>();
-    if (std::string e = aqp::decode_patch_node(data, size, patch, level, meta_.node_layout(), &coarser->grid, decoded->grid);
+    if (std::string e = aqp::decode_tile_node(data, size, first, count, level, meta_.node_layout(), coarser_grids, decoded->grids);
         !e.empty())
         return e;
     account(*decoded);
@@ -186,32 +196,45 @@ std::string AqpFormat::decode_with_parent(uint32_t node, const DecodedNode& pare
 }
 
 void AqpFormat::account(AqpNode& node) const {
-    const PatchGrid& g = node.grid;
-    node.bytes.cpu = g.position.size() * sizeof(g.position[0]) + g.normal.size() * sizeof(g.normal[0]) +
-                     g.color.size() * sizeof(g.color[0]);
-    node.bytes.gpu = aqp_gpu_bytes(g.level, meta_.has_colors());
-    node.part_primitives = {uint32_t(2 * (g.size - 1) * (g.size - 1))};
-    // The box of the samples, clamped to the patch's box (the hierarchy's): a corrupt sample
-    // beyond the extent must not make data_bounds leave it (the converter guarantees it does not).
-    std::array<uint16_t, 3> lo{65535, 65535, 65535}, hi{0, 0, 0};
-    for (const auto& p : g.position)
+    node.bytes = {};
+    uint32_t primitives = 0;
+    for (const PatchGrid& g : node.grids) {
+        node.bytes.cpu += g.position.size() * sizeof(g.position[0]) + g.normal.size() * sizeof(g.normal[0]) +
+                          g.color.size() * sizeof(g.color[0]);
+        node.bytes.gpu += aqp_gpu_bytes(g.level, meta_.has_colors());
+        primitives += uint32_t(2 * (g.size - 1) * (g.size - 1));
+        // The box of the samples, clamped to the patch's box (the hierarchy's): a corrupt sample
+        // beyond the extent must not make data_bounds leave it (the converter guarantees it does not).
+        std::array<uint16_t, 3> lo{65535, 65535, 65535}, hi{0, 0, 0};
+        for (const auto& p : g.position)
+            for (int a = 0; a < 3; ++a) {
+                lo[size_t(a)] = std::min(lo[size_t(a)], p[size_t(a)]);
+                hi[size_t(a)] = std::max(hi[size_t(a)], p[size_t(a)]);
+            }
+        const aqp::AqpPatchInfo& info = meta_.patches[g.patch];
+        Aabb box;
         for (int a = 0; a < 3; ++a) {
-            lo[size_t(a)] = std::min(lo[size_t(a)], p[size_t(a)]);
-            hi[size_t(a)] = std::max(hi[size_t(a)], p[size_t(a)]);
+            const uint16_t top = info.extent[size_t(a)];
+            box.min[size_t(a)] = meta_.world(g.patch, a, std::min(lo[size_t(a)], top));
+            box.max[size_t(a)] = meta_.world(g.patch, a, std::min(hi[size_t(a)], top));
         }
-    const aqp::AqpPatchInfo& info = meta_.patches[g.patch];
-    for (int a = 0; a < 3; ++a) {
-        const uint16_t top = info.extent[size_t(a)];
-        node.data_bounds.min[size_t(a)] = meta_.world(g.patch, a, std::min(lo[size_t(a)], top));
-        node.data_bounds.max[size_t(a)] = meta_.world(g.patch, a, std::min(hi[size_t(a)], top));
+        node.data_bounds.extend(box);
     }
+    node.part_primitives = {primitives};
 }
 
 std::optional<double> AqpFormat::data_distance(uint32_t node, const DecodedNode& decoded, const std::array<double, 3>& eye) const {
     (void)node;
-    const PatchGrid& g = aqp_grid(decoded);
+    double best = std::numeric_limits<double>::infinity();
+    for (const PatchGrid& g : aqp_grids(decoded)) best = std::min(best, grid_distance(g, eye));
+    if (!std::isfinite(best)) return std::nullopt;
+    // A hair less than measured, never more (rounding).
+    return std::max(0.0, best * (1 - 1e-9) - meta_.step * 1e-6);
+}
+
+double AqpFormat::grid_distance(const PatchGrid& g, const std::array<double, 3>& eye) const {
     const int n = g.size;
-    if (n < 2) return std::nullopt;
+    if (n < 2) return std::numeric_limits<double>::infinity();
     auto world = [&](int i, int j) {
         const auto& q = g.position[g.index(i, j)];
         return Vec3d{meta_.world(g.patch, 0, q[0]), meta_.world(g.patch, 1, q[1]), meta_.world(g.patch, 2, q[2])};
@@ -242,9 +265,7 @@ std::optional<double> AqpFormat::data_distance(uint32_t node, const DecodedNode&
         const double d = corner.distance_to(eye);
         best2 = std::min(best2, d * d);
     }
-    if (!std::isfinite(best2)) return std::nullopt;
-    // A hair less than measured, never more (rounding).
-    return std::max(0.0, std::sqrt(best2) * (1 - 1e-9) - meta_.step * 1e-6);
+    return std::sqrt(best2);
 }
 
 DrawnGeometry AqpFormat::drawn_geometry(const std::vector<DecodedPart>& parts, const std::array<double, 3>& eye) const {
@@ -256,9 +277,12 @@ DrawnGeometry AqpFormat::drawn_geometry(const std::vector<DecodedPart>& parts, c
     std::vector<const PatchGrid*> grids;
     for (const DecodedPart& p : parts) {
         const auto* node = dynamic_cast<const AqpNode*>(p.decoded);
-        if (!node || node->grid.patch >= meta_.patches.size()) continue;
-        drawn_level[node->grid.patch] = std::max(drawn_level[node->grid.patch], node->grid.level);
-        grids.push_back(&node->grid);
+        if (!node) continue;
+        for (const PatchGrid& g : node->grids) {
+            if (g.patch >= meta_.patches.size()) continue;
+            drawn_level[g.patch] = std::max(drawn_level[g.patch], g.level);
+            grids.push_back(&g);
+        }
     }
     const float step = float(meta_.step);
     Mesh& mesh = out.mesh;
@@ -297,7 +321,7 @@ int AqpFormat::up_axis() const { return viewer_up_axis(up_axis_from_code(meta_.u
 FormatSummary AqpFormat::summary() const {
     const AqpMeta& m = meta_;
     FormatSummary s;
-    s.node_noun = "patch levels";
+    s.node_noun = "tiles";
     s.primitive_noun = "samples";
     s.levels_note = strprintf("finest level %u: patches of %u x %u samples", m.patch_level, (1u << m.patch_level) + 1,
                               (1u << m.patch_level) + 1);
@@ -305,6 +329,10 @@ FormatSummary AqpFormat::summary() const {
                                             (unsigned long long)m.input_triangles, m.has_colors() ? "from the input" : "none"));
     s.lines.emplace_back("domain", strprintf("%zu quad patches over %u base triangles (%u base vertices, %u border edges)",
                                              m.patches.size(), m.base_triangles, m.base_vertices, m.border_edges));
+    std::string tiles;
+    for (int l = 0; l <= int(m.patch_level); ++l)
+        tiles += strprintf("%s%u", l ? " " : "", 1u << (2 * m.shift(l)));
+    s.lines.emplace_back("tiles", "patches per tile by level, coarse to fine: " + tiles);
     double d2 = 0;
     for (int i = 0; i < 3; ++i) d2 += (m.bounds_max[i] - m.bounds_min[i]) * (m.bounds_max[i] - m.bounds_min[i]);
     s.lines.emplace_back("bounds", strprintf("[%.9g %.9g %.9g] - [%.9g %.9g %.9g]", m.bounds_min[0], m.bounds_min[1],

@@ -31,10 +31,12 @@ std::string aqp_fragment_shader(bool gles) { return shader_preamble(gles) + "#li
 
 // ---- the texture store --------------------------------------------------------------------
 
-void PatchTextureStore::destroy(GpuPatch& gpu) {
-    if (gpu.samples) glDeleteTextures(1, &gpu.samples);
-    if (gpu.colors) glDeleteTextures(1, &gpu.colors);
-    gpu.samples = gpu.colors = 0;
+void PatchTextureStore::destroy(GpuTile& tile) {
+    for (GpuPatch& gpu : tile.patches) {
+        if (gpu.samples) glDeleteTextures(1, &gpu.samples);
+        if (gpu.colors) glDeleteTextures(1, &gpu.colors);
+        gpu.samples = gpu.colors = 0;
+    }
 }
 
 namespace {
@@ -56,33 +58,45 @@ unsigned make_texture(GLint internal_format, int size, GLenum format, GLenum typ
 
 }  // namespace
 
-void PatchTextureStore::upload(uint64_t key, const aqp::PatchGrid& grid, const aqp::AqpMeta& meta) {
-    const size_t samples = size_t(grid.size) * size_t(grid.size);
-    if (grid.patch >= meta.patches.size() || grid.level < 0 || grid.level > int(meta.patch_level) ||
-        grid.size != (1 << grid.level) + 1 || key != aqp::aqp_node_key(grid.patch, grid.level))
-        fail("AQP upload: node %llu is not a patch level of this dataset", (unsigned long long)key);
-    if (grid.position.size() != samples || grid.normal.size() != samples ||
-        grid.color.size() != (meta.has_colors() ? samples : 0))
-        fail("AQP upload: patch %u level %d has the wrong number of samples", grid.patch, grid.level);
-    std::vector<uint16_t> texels(samples * 4);
-    for (size_t s = 0; s < samples; ++s) {
-        texels[4 * s + 0] = grid.position[s][0];
-        texels[4 * s + 1] = grid.position[s][1];
-        texels[4 * s + 2] = grid.position[s][2];
-        texels[4 * s + 3] = grid.normal[s];
+void PatchTextureStore::upload(uint64_t key, const std::vector<aqp::PatchGrid>& grids, const aqp::AqpMeta& meta) {
+    const uint32_t tile = aqp::aqp_key_tile(key);
+    const int level = aqp::aqp_key_level(key);
+    if (level > int(meta.patch_level) || tile >= meta.tile_count(level) || grids.size() != meta.tile_patches(tile, level))
+        fail("AQP upload: node %llu is not a tile of this dataset", (unsigned long long)key);
+    const uint32_t first = meta.first_patch(tile, level);
+    for (size_t q = 0; q < grids.size(); ++q) {
+        const aqp::PatchGrid& grid = grids[q];
+        const size_t samples = size_t(grid.size) * size_t(grid.size);
+        if (grid.patch != first + q || grid.level != level || grid.size != (1 << level) + 1)
+            fail("AQP upload: node %llu holds a grid of another patch or level", (unsigned long long)key);
+        if (grid.position.size() != samples || grid.normal.size() != samples ||
+            grid.color.size() != (meta.has_colors() ? samples : 0))
+            fail("AQP upload: patch %u level %d has the wrong number of samples", grid.patch, grid.level);
     }
-    GpuPatch gpu;
-    gpu.patch = grid.patch;
-    gpu.level = grid.level;
-    gpu.samples = make_texture(GL_RGBA16UI, grid.size, GL_RGBA_INTEGER, GL_UNSIGNED_SHORT, texels.data());
-    if (meta.has_colors()) {
-        std::vector<uint8_t> rgba(samples * 4, 255);
-        for (size_t s = 0; s < samples; ++s)
-            for (int c = 0; c < 3; ++c) rgba[4 * s + size_t(c)] = grid.color[s][size_t(c)];
-        gpu.colors = make_texture(GL_RGBA8, grid.size, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+    GpuTile tile_gpu;
+    for (const aqp::PatchGrid& grid : grids) {
+        const size_t samples = size_t(grid.size) * size_t(grid.size);
+        std::vector<uint16_t> texels(samples * 4);
+        for (size_t s = 0; s < samples; ++s) {
+            texels[4 * s + 0] = grid.position[s][0];
+            texels[4 * s + 1] = grid.position[s][1];
+            texels[4 * s + 2] = grid.position[s][2];
+            texels[4 * s + 3] = grid.normal[s];
+        }
+        GpuPatch gpu;
+        gpu.patch = grid.patch;
+        gpu.level = grid.level;
+        gpu.samples = make_texture(GL_RGBA16UI, grid.size, GL_RGBA_INTEGER, GL_UNSIGNED_SHORT, texels.data());
+        if (meta.has_colors()) {
+            std::vector<uint8_t> rgba(samples * 4, 255);
+            for (size_t s = 0; s < samples; ++s)
+                for (int c = 0; c < 3; ++c) rgba[4 * s + size_t(c)] = grid.color[s][size_t(c)];
+            gpu.colors = make_texture(GL_RGBA8, grid.size, GL_RGBA, GL_UNSIGNED_BYTE, rgba.data());
+        }
+        tile_gpu.patches.push_back(gpu);
+        tile_gpu.bytes += aqp_gpu_bytes(grid.level, meta.has_colors());
     }
-    gpu.bytes = aqp_gpu_bytes(grid.level, meta.has_colors());
-    insert(key, gpu);
+    insert(key, std::move(tile_gpu));
 }
 
 // ---- the renderer -------------------------------------------------------------------------
@@ -151,14 +165,16 @@ RenderStats AqpRenderer::render(const Camera& camera_in, const std::vector<AqpDr
     // Every patch's drawn level first: edges are drawn at the coarser of the two sharing them.
     drawn_.clear();
     for (const AqpDrawItem& item : items) {
-        const GpuPatch* g = store_.find(item.key);
-        if (!g) {
+        const GpuTile* tile = store_.find(item.key);
+        if (!tile) {
             ++stats.missing;
             continue;
         }
         store_.mark_used(item.key);
-        drawn_level_[g->patch] = std::max(drawn_level_[g->patch], g->level);
-        drawn_.push_back(g);
+        for (const GpuPatch& g : tile->patches) {
+            drawn_level_[g.patch] = std::max(drawn_level_[g.patch], g.level);
+            drawn_.push_back(&g);
+        }
     }
 
     glUseProgram(program_.id());
@@ -206,13 +222,13 @@ RenderStats AqpRenderer::render(const Camera& camera_in, const std::vector<AqpDr
 
 namespace {
 
-// AQP's NodeRenderer: a node's one part is its patch level's textures.
+// AQP's NodeRenderer: a node's one part is its tile's textures.
 class AqpNodeRenderer : public WholeNodeRenderer<PatchTextureStore> {
 public:
     explicit AqpNodeRenderer(const AqpFormat& format) : format_(format), renderer_(store_, format.meta()) {}
 
     void upload(const HierarchyNode& node, const DecodedNode& decoded) override {
-        store_.upload(node.key, aqp_grid(decoded), format_.meta());
+        store_.upload(node.key, aqp_grids(decoded), format_.meta());
     }
     RenderStats draw(const Camera& camera, const std::vector<DrawnPart>& parts, const RenderSettings& settings) override {
         items_.clear();

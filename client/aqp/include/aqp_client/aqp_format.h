@@ -1,11 +1,11 @@
 #pragma once
-// AQP's client plug-in (client/format.h): an AQP dataset's (patch, level) nodes as the Hierarchy
+// AQP's client plug-in (client/format.h): an AQP dataset's (tile, level) nodes as the Hierarchy
 // the cut engine refines, nodes decoded into patch grids, and the geometric queries on them.
 // Its GPU side is aqp_client/aqp_gpu.h (create_aqp_renderer). docs/formats/aqp.md has the format.
 //
 // Level deltas: a level l > 0 is stored as its difference from level l - 1 (decoding needs the
-// decoded coarser level). The hierarchy says so (HierarchyNode::decode_parent = the same patch
-// one level down): the session fetches a level only while the level below is decoded and hands
+// decoded coarser level). The hierarchy says so (HierarchyNode::decode_parent = the tile one
+// level down holding the node's patches): the session fetches a level only while the level below is decoded and hands
 // it to decode_with_parent, and the cut engine never skips levels here. Why this and not another
 // reconstruction: the streaming client refines one level at a time anyway (a patch's level is
 // wanted only once the coarser one is drawn), a node's decode then costs one PNG inflate plus an
@@ -23,22 +23,24 @@
 
 namespace catpaq {
 
-// The AQP hierarchy of a dataset: one node per (patch, level), key patch << 8 | level; each patch
-// is a chain: node (p, l) has the one parent (p, l - 1), which creates its one part (id 0), and
-// decodes against it. Errors: the stored bounds (made monotone). Bounds: the patch's box at every
-// level (origin + step * (patch origin + [0, extent])). Primitives: the level's 2 (n - 1)^2 grid
-// triangles.
+// The AQP hierarchy of a dataset: one node per (tile, level), key tile << 8 | level (format.h);
+// node (t, l) has the one parent at level l - 1, the tile holding its patches, which creates its
+// one part (id 0) and which it decodes against: tiles form a tree (a chain for a patch that is a
+// tile of its own at every level). Errors: the stored bounds (made monotone). Bounds: the union
+// of its patches' boxes (origin + step * (patch origin + [0, extent])). Primitives: its patches'
+// 2 (n - 1)^2 grid triangles each.
 Hierarchy build_aqp_hierarchy(const aqp::AqpMeta& meta, const std::vector<ArchiveEntry>& entries);
 
-// A decoded (patch, level) node. DecodedNode's fields: bytes cpu = the grid's samples (position,
-// normal and colour arrays); gpu = what the renderer uploads (aqp_gpu_bytes); part_primitives =
-// the grid's triangles; data_bounds = the box of its decoded samples.
+// A decoded (tile, level) node: its patches' grids, in patch order. DecodedNode's fields: bytes
+// cpu = the grids' samples (position, normal and colour arrays); gpu = what the renderer uploads
+// (aqp_gpu_bytes per patch); part_primitives = the grids' triangles; data_bounds = the box of
+// its decoded samples.
 class AqpNode : public DecodedNode {
 public:
-    aqp::PatchGrid grid;
+    std::vector<aqp::PatchGrid> grids;
 };
-// The grid of an AqpNode; throws Error for a node another format decoded.
-const aqp::PatchGrid& aqp_grid(const DecodedNode& node);
+// The grids of an AqpNode; throws Error for a node another format decoded.
+const std::vector<aqp::PatchGrid>& aqp_grids(const DecodedNode& node);
 
 // GPU bytes of a level's textures: positions and normal (RGBA16UI, 8 bytes per sample) and, with
 // colours, RGBA8 (4 bytes per sample).
@@ -59,7 +61,7 @@ public:
     // Level 0 nodes; a finer level without its parent is an error (decode_with_parent).
     std::string decode(uint32_t node, const uint8_t* data, size_t size,
                        std::shared_ptr<const DecodedNode>& out) const override;
-    // A level l > 0 given the same patch's decoded level l - 1.
+    // A level l > 0 given the decoded tile at level l - 1 holding its patches.
     std::string decode_with_parent(uint32_t node, const DecodedNode& parent, const uint8_t* data, size_t size,
                                    std::shared_ptr<const DecodedNode>& out) const override;
     // A lower bound of the distance to whatever the node draws, stitched or not: its grid's
@@ -76,10 +78,12 @@ public:
     FormatSummary summary() const override;
 
 private:
-    // DecodedNode's fields of a decoded grid.
+    // DecodedNode's fields of a decoded tile.
     void account(AqpNode& node) const;
-    // (patch, level) of a hierarchy node, checked against the node's key.
-    std::string node_patch_level(uint32_t node, uint32_t& patch, int& level) const;
+    // data_distance's bound for one patch grid (infinity for a grid without cells).
+    double grid_distance(const aqp::PatchGrid& g, const std::array<double, 3>& eye) const;
+    // (tile, level) of a hierarchy node.
+    std::string node_tile_level(uint32_t node, uint32_t& tile, int& level) const;
 
     aqp::AqpMeta meta_;
     Hierarchy hierarchy_;

@@ -1,9 +1,9 @@
 #pragma once
 // AQP patch levels on the GPU, and the renderer.
 //
-// PatchTextureStore keeps the textures of each resident (patch, level) node: samples as RGBA16UI
-// (local x, y, z on the quantization grid and the octahedral normal code: 8 bytes per sample)
-// and, with colours, RGBA8 (4 bytes per sample). Budget policy as CATP's FragmentStore
+// PatchTextureStore keeps the textures of each resident (tile, level) node, a pair per patch:
+// samples as RGBA16UI (local x, y, z on the quantization grid and the octahedral normal code:
+// 8 bytes per sample) and, with colours, RGBA8 (4 bytes per sample). Budget policy as CATP's FragmentStore
 // (client/node_renderer.h): pinned nodes and nodes used in the current frame are never evicted,
 // the others go least recently used first while the store is over its budget.
 //
@@ -35,26 +35,32 @@ struct GpuPatch {
     uint32_t patch = 0;
     int level = 0;
     unsigned samples = 0, colors = 0;  // textures (colors 0 without colours)
+};
+
+// A resident tile: its patches' textures.
+struct GpuTile {
+    std::vector<GpuPatch> patches;
     uint64_t bytes = 0;
 };
 
-// The resident patch levels' textures under the shared GPU store policy (client/gpu_lru_store.h).
-class PatchTextureStore : public GpuLruStore<uint64_t, GpuPatch> {
+// The resident tiles' textures under the shared GPU store policy (client/gpu_lru_store.h).
+class PatchTextureStore : public GpuLruStore<uint64_t, GpuTile> {
 public:
     PatchTextureStore() : GpuLruStore(destroy) {}  // textures are deleted with the store (the context must still be current)
 
-    // Uploads a decoded patch level under its node key (replacing an earlier upload). Throws
-    // Error for a grid that does not fit `meta` (patch, level, sample counts, colours), leaving
-    // the store unchanged. Counts as used this frame; then evicts down to the budget.
-    void upload(uint64_t key, const aqp::PatchGrid& grid, const aqp::AqpMeta& meta);
+    // Uploads a decoded tile under its node key aqp_node_key(tile, level) (replacing an earlier
+    // upload). Throws Error for grids that do not fit `meta` (the tile's patches and level,
+    // sample counts, colours), leaving the store unchanged. Counts as used this frame; then
+    // evicts down to the budget.
+    void upload(uint64_t key, const std::vector<aqp::PatchGrid>& grids, const aqp::AqpMeta& meta);
 
 private:
-    static void destroy(GpuPatch& gpu);
+    static void destroy(GpuTile& gpu);
 };
 
-// One patch level to draw.
+// One tile to draw.
 struct AqpDrawItem {
-    uint64_t key = 0;  // aqp_node_key(patch, level)
+    uint64_t key = 0;  // aqp_node_key(tile, level)
 };
 
 class AqpRenderer {
@@ -93,7 +99,7 @@ private:
     std::vector<Template> templates_;  // by level
     uint64_t template_bytes_ = 0;
     std::vector<int> drawn_level_;     // per patch, this frame (-1: not drawn)
-    std::vector<const GpuPatch*> drawn_;
+    std::vector<const GpuPatch*> drawn_;  // this frame's patches
 };
 
 // The AQP shaders (shaders/aqp.vert and CATP's shaders/catp.frag) with the current context's
