@@ -52,7 +52,7 @@ static const char* kConvertUsage =
     "  --domain-triangles N     base domain triangles (default 0.6 sqrt(input triangles)); fewer\n"
     "                           when patches outgrow their charts, more for folds\n"
     "  --tile-samples N         each level's nodes group 4^s neighbouring patches, as many as keep a\n"
-    "                           node within N stored samples (default 2048; 0: one patch per node)\n"
+    "                           node within N stored samples (default 512; 0: one patch per node)\n"
     "points:\n"
     "  --node-points N          the most points in a node (default 4096)\n"
     "  --split RULE             balanced (default; seed 000) or midpoint (seed 002)\n"

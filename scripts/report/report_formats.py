@@ -244,8 +244,10 @@ def stream_section(raw, paths, stream_triangles, w):
     catp_size = int(read(os.path.join(raw, "scan_dataset_size.txt")).strip())
     aqp = json.loads(read(os.path.join(raw, "convert_scan_aqp.json")).strip().splitlines()[-1])
     pts = json.loads(read(os.path.join(raw, "convert_scan_points.json")).strip().splitlines()[-1])
-    sizes = {"scan": catp_size, "scanaqp": aqp["output"]["bytes"], "scanpts": pts["output"]["bytes"]}
-    names = {"scan": "CATP", "scanaqp": "AQP", "scanpts": "points"}
+    aqp1 = json.loads(read(os.path.join(raw, "convert_scan_aqp1.json")).strip().splitlines()[-1])
+    sizes = {"scan": catp_size, "scanaqp": aqp["output"]["bytes"], "scanaqp1": aqp1["output"]["bytes"],
+             "scanpts": pts["output"]["bytes"]}
+    names = {"scan": "CATP", "scanaqp": "AQP", "scanaqp1": "AQP, a patch per node", "scanpts": "points"}
     aqp_s = float(read(os.path.join(raw, "convert_scan_aqp_ms.txt")).strip()) / 1000
     pts_s = float(read(os.path.join(raw, "convert_scan_points_ms.txt")).strip()) / 1000
     w("## 8. The three formats on the same views (cold starts over HTTP)")
@@ -257,15 +259,19 @@ def stream_section(raw, paths, stream_triangles, w):
       "section 3.2: the bytes and requests it took, what it drew and the command's wall time. The three "
       "errors are not the same quantity: CATP's and AQP's bound the distance to the original surface, "
       "the points' the distance from an input point to its splat, so equal tolerances are not equal "
-      "image quality." %
+      "image quality. *AQP, a patch per node*: the same AQP conversion with `--tile-samples 0` "
+      "(%s bytes, %s nodes against %s), the layout before tiles: every level of every patch a node of "
+      "its own, where AQP's default groups each level's neighbouring patches into tiles of at most 512 "
+      "stored samples (docs/formats/aqp.md)." %
       (f"{stream_triangles:,}", f"{catp_size:,}", f"{sizes['scanaqp']:,}", aqp["patches"],
        (1 << aqp["patch_level"]) + 1, (1 << aqp["patch_level"]) + 1, aqp_s, f"{pts['input']['points']:,}",
-       f"{sizes['scanpts']:,}", pts_s))
+       f"{sizes['scanpts']:,}", pts_s, f"{sizes['scanaqp1']:,}", f"{sum(l['nodes'] for l in aqp1['levels']):,}",
+       f"{sum(l['nodes'] for l in aqp['levels']):,}"))
     w("")
     rows = []
     for p in paths:
         for view in ("first", "last"):
-            for ds in ("scan", "scanaqp", "scanpts"):
+            for ds in ("scan", "scanaqp", "scanaqp1", "scanpts"):
                 c = read_jsonl_one(os.path.join(raw, "cold_%s_%s_%s.jsonl" % (ds, p, view)))
                 wall = float(read(os.path.join(raw, "cold_%s_%s_%s_wall_ms.txt" % (ds, p, view))).strip())
                 drawn = "%s points" % f"{c.get('points', 0):,}" if ds == "scanpts" else "%s triangles" % f"{c['triangles']:,}"

@@ -213,6 +213,10 @@ required "convert scan aqp" "$RAW/convert_scan_aqp.json" "$CATPAQ" convert "$SCA
     --format aqp --json --quiet
 e=$(date +%s%N)
 echo "$(( (e - s) / 1000000 ))" > "$RAW/convert_scan_aqp_ms.txt"
+# And AQP with one patch per node (no tiles): what tiles change on the same views.
+log "convert scan --format aqp --tile-samples 0"
+required "convert scan aqp untiled" "$RAW/convert_scan_aqp1.json" "$CATPAQ" convert "$SCAN_STREAM" \
+    -o "$WORK/root/scanaqp1.cpq" --format aqp --tile-samples 0 --json --quiet
 log "convert scan --format points"
 s=$(date +%s%N)
 required "convert scan points" "$RAW/convert_scan_points.json" "$CATPAQ" convert "$SCAN_STREAM" -o "$WORK/root/scanpts.cpq" \
@@ -274,6 +278,7 @@ for p in $SCAN_PATHS; do
     # AQP and points on the same views.
     for view in first last; do
         cold_start scanaqp "$p" "$view"
+        cold_start scanaqp1 "$p" "$view"
         cold_start scanpts "$p" "$view"
     done
     required "image error scan $p" "$RAW/imgerr_scan_$p.txt" "$PYTHON" "$REPORT_PY" compare \

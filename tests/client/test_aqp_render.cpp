@@ -481,9 +481,7 @@ TEST(AqpSession, StreamingMeetsTheToleranceAndTheCloseUpMixesLevelsWithoutFailur
             }
             EXPECT_EQ(s.holes, 0u);
             EXPECT_TRUE(session.failures().empty());
-            // (The sphere is too small for it: 69 patches, its finest level in tiles of 4 and
-            // level 3 in tiles of 16, so a close-up refines all of it.)
-            if (ci + 1 == cameras.size() && m == AqpModel::Bunny) {
+            if (ci + 1 == cameras.size()) {
                 EXPECT_GT(levels.size(), 1u) << "the close-up mixes levels";
             }
             // The drawn geometry is what the renderer draws: crack-free as a whole.

@@ -1,4 +1,4 @@
-// AQP behind the format seam: the (patch, level) hierarchy, decoding nodes against their coarser
+// AQP behind the format seam: the (tile, level) hierarchy, decoding tiles against their coarser
 // level, measuring them, their drawn (stitched) geometry and what `info` says.
 #include "aqp_client/aqp_format.h"
 

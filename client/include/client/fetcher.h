@@ -21,7 +21,7 @@
 // format decodes and verifies alone, FetchRequest::part). Fetches queued at once whose byte
 // ranges lie next to each other in the file (parts with parts, whole nodes with whole nodes)
 // share one range transfer (FetcherSettings::coalesce_gap_bytes): small nodes listed together
-// (AQP's patch levels, CATP's slots) cost one request per run, not one each. A shared transfer
+// (AQP's tiles, CATP's slots) cost one request per run, not one each. A shared transfer
 // is a plain byte range (server mode: the raw file route; one whole node alone still goes by
 // key), cut into each fetch's slice, and each slice is verified alone (a whole node against its
 // index checksum, a part by its format). A failed or corrupt fetch is retried with exponential
@@ -228,8 +228,8 @@ struct FetcherSettings {
     bool abort_stale_in_flight = false;  // stale transfers already running: finish (default) or abort
     // Fetches queued at once (whole nodes with whole nodes, parts with parts) whose byte ranges
     // lie within this many bytes of each other go in one transfer, up to max_coalesced_bytes:
-    // fewer requests where nodes are small and listed together (AQP's patch levels, 100 bytes
-    // to 2.4 KB, stored by level then patch; one level's kd-tree nodes of a point cloud; a
+    // fewer requests where nodes are small and listed together (AQP's finest tiles, stored by
+    // level then tile along a Morton curve; one level's kd-tree nodes of a point cloud; a
     // diamond's slots that one parent creates, 4 bytes apart). 0: only touching ranges;
     // negative: never. Why 64, measured on cold starts of the 2M-triangle scan as AQP (the 6
     // views of RESULTS section 8, our server): 0 and 64 fetch exactly the bytes wanted (what

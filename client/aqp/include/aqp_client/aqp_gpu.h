@@ -1,5 +1,5 @@
 #pragma once
-// AQP patch levels on the GPU, and the renderer.
+// AQP tiles on the GPU (their patch levels' textures), and the renderer.
 //
 // PatchTextureStore keeps the textures of each resident (tile, level) node, a pair per patch:
 // samples as RGBA16UI (local x, y, z on the quantization grid and the octahedral normal code:
