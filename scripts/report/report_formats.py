@@ -142,13 +142,14 @@ def aqp_section(raw, catp_verify_levels, catp_bunny_bytes, catp_convert_s, bunny
     render_rows(parse_aqp_render_bench(read(os.path.join(raw, "aqp_render_bench.txt"))), w)
     big = models[-1]
     w("Per level on %s: bits per sample %s (coarse to fine): every node is one PNG of byte planes "
-      "(docs/formats/aqp.md), and a coarse node's PNG costs its fixed overhead (signature, header chunk, "
-      "zlib stream: about 60 bytes) and deflate's code tables for a few samples, so levels 0-1 cost more "
-      "per sample than the finest. The paper's 24 bits per sample is %s here over all levels (%.1f at the "
-      "finest level alone). Images holding several patches each would pay that once per tile: "
-      "`bench/aqp/node_bench` measured 22.7 bits per sample on a 1M-triangle scan-like mesh with one patch "
-      "per image (the dataset), 19.8 with 4 and 19.2 with 16, and level 0 of all 900 patches in one image "
-      "27 KB against 101 KB as 900 images (not built yet)." %
+      "(docs/formats/aqp.md) holding a *tile* of neighbouring patches, as many as keep it within 512 stored "
+      "samples (levels 0-3: 64, 64, 16 and 4 patches; finer levels one), so a coarse level pays a PNG's "
+      "fixed overhead (signature, header chunk, zlib stream: about 60 bytes), deflate's code tables and an "
+      "index entry once per tile instead of once per patch of a few samples; levels 0-1 still cost more per "
+      "sample than the finest. The paper's 24 bits per sample is %s here over all levels (%.1f at the "
+      "finest level alone). Before tiles (one patch per node) `bench/aqp/node_bench` measured 22.7 bits "
+      "per sample over all levels on a 1M-triangle scan-like mesh, and level 0 of its 900 patches 101 KB as "
+      "900 images against 27 KB as one; section 8 streams the same mesh with and without tiles." %
       (big["name"], ", ".join("%.0f" % l["bits"] for l in big["levels"]),
        "met" if big["bits_per_sample"] <= 24 else "not met", big["levels"][-1]["bits"]))
     w("")

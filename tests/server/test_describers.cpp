@@ -62,6 +62,14 @@ TEST(Describers, AqpDatasetsAreDescribedWithTheirBoundsAndPatchLayout) {
     EXPECT_EQ(details.at("patch_level").get<int>(), report.patch_level);
     EXPECT_EQ(details.at("input_triangles").get<size_t>(), sphere.triangle_count());
     EXPECT_EQ(details.at("colors").get<bool>(), sphere.has_colors());
+    // Patches per node, by level: level l's node count in the report is the patches over that.
+    const nlohmann::json& tiles = details.at("tile_patches");
+    ASSERT_EQ(tiles.size(), size_t(report.patch_level) + 1);
+    for (int l = 0; l <= report.patch_level; ++l) {
+        const size_t per_tile = tiles[size_t(l)].get<size_t>();
+        EXPECT_EQ(report.levels[size_t(l)].nodes, (report.patches + per_tile - 1) / per_tile) << l;
+    }
+    EXPECT_GT(tiles[0].get<size_t>(), 1u);
 }
 
 TEST(Describers, PointDatasetsAreDescribedWithTheirBoundsAndNodeCount) {

@@ -55,6 +55,9 @@ std::string describe_aqp(const ArchiveHeader&, const std::vector<uint8_t>& meta_
                            {"up_axis", meta.up_axis},
                            {"input_vertices", meta.input_vertices},
                            {"input_triangles", meta.input_triangles}};
+    nlohmann::json tiles = nlohmann::json::array();  // patches per node, by level
+    for (int l = 0; l <= int(meta.patch_level); ++l) tiles.push_back(uint64_t(1) << (2 * meta.shift(l)));
+    details["tile_patches"] = tiles;
     out.details_json = details.dump();
     return "";
 }
