@@ -116,6 +116,26 @@ void put_parameter(BitWriter& w, uint32_t previous, uint32_t k) {
     else w.put(3u | k << 2, 7);
 }
 
+// Bits of a block's values under parameter k (parameter code aside): rice_cost summed, as the
+// quotients' unary parts capped at the escape (a loop without branches, which vectorizes) and
+// the exceptions' codes in a second loop run only when some value escapes (few blocks). The
+// sum of rice_cost per value was most of the encoder's stream time.
+uint64_t block_cost(const uint32_t* values, size_t n, uint32_t k) {
+    uint32_t unary = 0, escaped = 0;
+    for (size_t i = 0; i < n; ++i) {
+        const uint32_t q = values[i] >> k;
+        unary += std::min(q, kRiceEscape);
+        escaped |= uint32_t(q >= kRiceEscape);
+    }
+    uint64_t cost = uint64_t(unary) + uint64_t(n) * (1 + k);
+    if (escaped)
+        for (size_t i = 0; i < n; ++i) {
+            const uint32_t q = values[i] >> k;
+            if (q >= kRiceEscape) cost += escape_cost(q - kRiceEscape);
+        }
+    return cost;
+}
+
 // Chooses the block's Rice parameter: the cheapest k (values and parameter code) among those
 // near log2 of the mean.
 uint32_t choose_k(const uint32_t* values, size_t n, uint32_t previous) {
@@ -127,8 +147,7 @@ uint32_t choose_k(const uint32_t* values, size_t n, uint32_t previous) {
     uint32_t best_k = lo;
     uint64_t best = UINT64_MAX;
     for (uint32_t k = lo; k <= hi; ++k) {
-        uint64_t cost = parameter_bits(previous, k);
-        for (size_t i = 0; i < n; ++i) cost += rice_cost(values[i], k);
+        const uint64_t cost = parameter_bits(previous, k) + block_cost(values, n, k);
         if (cost < best) best = cost, best_k = k;
     }
     return best_k;
@@ -138,16 +157,27 @@ uint32_t choose_k(const uint32_t* values, size_t n, uint32_t previous) {
 // lane i % 4, a little-endian string of 32-bit words stored interleaved (word j of lane l at
 // word 4j + l), 16k bytes in all.
 void put_vertical_block(std::vector<uint8_t>& out, const uint32_t* values, uint32_t k) {
-    uint32_t words[4 * kRiceMaxK] = {};
-    const uint64_t mask = (uint64_t(1) << k) - 1;
-    for (size_t i = 0; i < kRiceBlock; ++i) {
-        const uint32_t lane = uint32_t(i % 4), bit = uint32_t(i / 4) * k, j = bit >> 5, shift = bit & 31;
-        const uint64_t field = (values[i] & mask) << shift;
-        words[4 * j + lane] |= uint32_t(field);
-        if (shift + k > 32) words[4 * j + 4 + lane] |= uint32_t(field >> 32);
+    // One spare row of words: a field's spill past the last word is zero but still written.
+    uint32_t words[4 * kRiceMaxK + 4] = {};
+    if (k == 0) return;
+    const uint32_t mask = k >= 32 ? UINT32_MAX : (uint32_t(1) << k) - 1;
+    // The four lanes' m-th fields share their bit offset m k: each step packs four values with
+    // the same shifts (a loop the compiler turns into SIMD), where a value at a time was most
+    // of the stream writer's instructions.
+    for (uint32_t m = 0; m < kRiceBlock / 4; ++m) {
+        const uint32_t bit = m * k, j = bit >> 5, shift = bit & 31;
+        uint32_t* low = words + 4 * j;
+        for (uint32_t lane = 0; lane < 4; ++lane) low[lane] |= (values[4 * m + lane] & mask) << shift;
+        if (shift + k > 32)
+            for (uint32_t lane = 0; lane < 4; ++lane) low[4 + lane] |= (values[4 * m + lane] & mask) >> (32 - shift);
     }
+    // Appended whole, bytes in little-endian order (a push_back per byte cost more than the
+    // packing above).
+    const size_t at = out.size(), bytes = 16 * size_t(k);
+    out.resize(at + bytes);
+    uint8_t* to = out.data() + at;
     for (size_t w = 0; w < 4 * size_t(k); ++w)
-        for (int b = 0; b < 4; ++b) out.push_back(uint8_t(words[w] >> (8 * b)));
+        for (int b = 0; b < 4; ++b) to[4 * w + size_t(b)] = uint8_t(words[w] >> (8 * b));
 }
 
 // An escape's excess quotient e in the Exp-Golomb code of escape_cost.
@@ -255,7 +285,32 @@ void morton_order(const std::vector<uint32_t>& q, std::vector<uint32_t>& order) 
                        spread_bits21(q[3 * i + 2] >> shift) << 2;
         keys[i] = {key, uint32_t(i)};
     }
-    std::sort(keys.begin(), keys.end());
+    if (n < 256) {
+        std::sort(keys.begin(), keys.end());
+    } else {
+        // By key, ties by index, as the sort of the pairs: a stable LSD radix sort on the key
+        // in 11-bit digits (a digit every key shares skipped) from the index order. The
+        // comparison sort's branches mispredicted (1.4% of the conversion's time).
+        constexpr int kDigitBits = 11, kDigits = 6;  // 66 bits, for the 63 of a key
+        constexpr size_t kBuckets = size_t(1) << kDigitBits;
+        std::vector<uint32_t> counts(kDigits * kBuckets, 0);
+        for (const auto& k : keys)
+            for (int d = 0; d < kDigits; ++d) ++counts[size_t(d) * kBuckets + ((k.first >> (kDigitBits * d)) & (kBuckets - 1))];
+        std::vector<std::pair<uint64_t, uint32_t>> scratch(n);
+        for (int d = 0; d < kDigits; ++d) {
+            uint32_t* c = &counts[size_t(d) * kBuckets];
+            const int at = kDigitBits * d;
+            if (c[(keys[0].first >> at) & (kBuckets - 1)] == n) continue;
+            uint32_t sum = 0;
+            for (size_t v = 0; v < kBuckets; ++v) {
+                const uint32_t count = c[v];
+                c[v] = sum;
+                sum += count;
+            }
+            for (const auto& k : keys) scratch[c[(k.first >> at) & (kBuckets - 1)]++] = k;
+            keys.swap(scratch);
+        }
+    }
     order.resize(n);
     for (size_t i = 0; i < n; ++i) order[i] = keys[i].second;
 }
@@ -318,19 +373,27 @@ int32_t quantize_radius(double r, float base, float step) {
 // position error against the input, then sets the pad so that every decoded splat covers its
 // input splat grown by that error, and seals the node with its checksum. `decoded` receives
 // the final decode.
+//
+// The node is decoded once, with a pad of 0: the pad changes nothing but the radii, which the
+// decoder computes as radius_value(b, t, e, q) = (b + q t) + e in float arithmetic, and
+// (b + q t) + 0 is (b + q t) itself; so the radii under any pad are the pad-0 radii plus the
+// pad, the same float additions the decoder makes. (This saved a second decode and checksum
+// of every node: 2% of the conversion.)
 void seal_node(ByteWriter& out, size_t pad_at, size_t body_end, const PointSamplesView& points,
                const std::vector<uint32_t>& order, DecodedPoints& decoded, PointEncodeStats& stats) {
     const size_t n = points.count;
-    auto decode_with_pad = [&](float pad) {
+    auto seal = [&](float pad) {
         uint32_t pad_bits;
         std::memcpy(&pad_bits, &pad, 4);
         out.patch_u32(pad_at, pad_bits);
         out.patch_u64(body_end, checksum64(out.bytes().data(), body_end));
+    };
+    seal(0.0f);
+    {
         std::string problem = decode_point_node(out.bytes().data(), out.size(), decoded);
         assert(problem.empty() && "the encoder's own output must decode");
         (void)problem;
-    };
-    decode_with_pad(0.0f);
+    }
     std::vector<double> error(n);
     double worst = 0;
     for (size_t i = 0; i < n; ++i) {
@@ -343,14 +406,16 @@ void seal_node(ByteWriter& out, size_t pad_at, size_t body_end, const PointSampl
     stats.position_error = worst;
     float pad = round_up(worst);
     for (int attempt = 0;; ++attempt) {
-        decode_with_pad(pad);
         double deficit = 0;
         for (size_t i = 0; i < n; ++i)
-            deficit = std::max(deficit, double(points.radii[order[i]]) + error[i] - double(decoded.radii[i]));
+            deficit = std::max(deficit, double(points.radii[order[i]]) + error[i] - double(decoded.radii[i] + pad));
         if (deficit <= 0) break;
         assert(attempt < 8);
         pad = round_up(double(pad) + deficit * (1.0 + 1e-6));
     }
+    seal(pad);
+    for (float& r : decoded.radii) r += pad;
+    decoded.position_error = pad;
 }
 
 }  // namespace
@@ -382,6 +447,8 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
 
     // Header; the position error (radius pad) is patched once measured.
     ByteWriter out;
+    // Room for the usual node (about 4 bytes a point), so the streams rarely regrow it.
+    out.bytes().reserve(kHeaderSize + kChecksumSize + 8 * n);
     out.raw(kPointNodeMagic, 4);
     out.u8(kPointNodeVersion);
     out.u8(uint8_t((has_normals ? kPointHasNormals : 0) | (has_colors ? kPointHasColors : 0)));

@@ -53,6 +53,7 @@ void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double poin
     h_ = cell_size(extent, std::max(1.0, double(n) / points_per_cell));
     const double max_cells = std::max(64.0, kMaxCellsPerPoint * double(n));
     size_t cells = 0;
+    uint64_t squares = 0;  // of the cells' point counts
     for (int attempt = 0;; ++attempt) {
         // Cells per axis are bounded so that the cell array stays within max_cells.
         for (;;) {
@@ -69,30 +70,34 @@ void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double poin
         cell_start_.assign(cells + 1, 0);
         cell_of_.resize(n);
         size_t occupied = 0;
+        squares = 0;
         for (size_t i = 0; i < n; ++i) {
             int c[3];
             for (int a = 0; a < 3; ++a)
                 c[a] = std::clamp(int((xyz[3 * i + a] - lo_[a]) * inv_h_), 0, dims_[a] - 1);
             const uint32_t cell = uint32_t((size_t(c[0]) * size_t(dims_[1]) + size_t(c[1])) * size_t(dims_[2]) + size_t(c[2]));
             cell_of_[i] = cell;
-            occupied += cell_start_[cell + 1]++ == 0;
+            // Counted in place (cell c's count at c); the sum of squared counts grows by
+            // 2 count + 1 per point, exactly as summing them afterwards.
+            const uint32_t count = cell_start_[cell]++;
+            occupied += count == 0;
+            squares += 2 * uint64_t(count) + 1;
         }
         const double crowd = double(n) / double(std::max<size_t>(occupied, 1));
         if (attempt > 0 || crowd < 1.5 * points_per_cell) break;
         h_ *= float(std::sqrt(points_per_cell / crowd));
     }
-    double squares = 0;
-    for (size_t c = 1; c <= cells; ++c) {
-        squares += double(cell_start_[c]) * double(cell_start_[c]);
-        cell_start_[c] += cell_start_[c - 1];
-    }
-    expected_scan_ = n ? squares / double(n) : 0;
+    // Counts to ends (cell c's points end at cell_start_[c]), then a scatter from the last point
+    // back, the ends as cursors: each cursor ends at its cell's start, and a cell's points keep
+    // their input order. (Two passes over the cells, which outnumber the points up to 16 times,
+    // where a scatter forwards needs a third to shift the cursors back.)
+    for (size_t c = 1; c < cells; ++c) cell_start_[c] += cell_start_[c - 1];
+    cell_start_[cells] = uint32_t(n);
+    expected_scan_ = n ? double(squares) / double(n) : 0;
     points_.resize(n);
-    // Scatter with the starts as cursors, then shift them back (cell c's start is where c - 1's
-    // cursor ended).
     sorted_cell_.resize(n);
-    for (size_t i = 0; i < n; ++i) {
-        const uint32_t at = cell_start_[cell_of_[i]]++;
+    for (size_t i = n; i-- > 0;) {
+        const uint32_t at = --cell_start_[cell_of_[i]];
         points_[at] = {{xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]}, ids ? ids[i] : uint32_t(i)};
         sorted_cell_[at] = cell_of_[i];
     }
@@ -100,8 +105,6 @@ void GridKnn::build(const float* xyz, const uint32_t* ids, size_t n, double poin
     occupied_.clear();
     for (size_t i = 0; i < n; ++i)
         if (i == 0 || sorted_cell_[i] != sorted_cell_[i - 1]) occupied_.push_back(sorted_cell_[i]);
-    for (size_t c = cells; c > 0; --c) cell_start_[c] = cell_start_[c - 1];
-    cell_start_[0] = 0;
     px_.resize(n);
     py_.resize(n);
     pz_.resize(n);

@@ -96,6 +96,35 @@ void sort_edges(std::vector<Edge>& edges, std::vector<Edge>& scratch) {
     }
 }
 
+// Sorts 64-bit keys ascending: an LSD radix sort in 11-bit digits, a digit all keys share
+// skipped. For the edges of splats numbered below 2^16, whose (cost, a, b) pack into one key.
+void sort_keys(std::vector<uint64_t>& keys, std::vector<uint64_t>& scratch) {
+    constexpr int kDigitBits = 11, kDigits = 6;  // 66 bits
+    constexpr size_t kBuckets = size_t(1) << kDigitBits;
+    const size_t n = keys.size();
+    if (n < 256) {
+        std::sort(keys.begin(), keys.end());
+        return;
+    }
+    std::vector<uint32_t> counts(kDigits * kBuckets, 0);
+    for (const uint64_t k : keys)
+        for (int d = 0; d < kDigits; ++d) ++counts[size_t(d) * kBuckets + ((k >> (kDigitBits * d)) & (kBuckets - 1))];
+    scratch.resize(n);
+    for (int d = 0; d < kDigits; ++d) {
+        uint32_t* c = &counts[size_t(d) * kBuckets];
+        const int shift = kDigitBits * d;
+        if (c[(keys[0] >> shift) & (kBuckets - 1)] == n) continue;  // one digit value: in order already
+        uint32_t sum = 0;
+        for (size_t v = 0; v < kBuckets; ++v) {
+            const uint32_t count = c[v];
+            c[v] = sum;
+            sum += count;
+        }
+        for (const uint64_t k : keys) scratch[c[(k >> shift) & (kBuckets - 1)]++] = k;
+        keys.swap(scratch);
+    }
+}
+
 // The graph's edges come sorted once (cheapest first, a plain sort); only edges re-priced after
 // a merge go through the heap. Each step takes the cheaper of the two fronts, so the merges are
 // those of one heap holding everything, with far fewer heap operations.
@@ -106,6 +135,7 @@ struct Simplifier {
     size_t next = 0;
     std::vector<Edge> heap;    // re-priced edges
     std::vector<Edge> scratch;  // sort_edges's
+    std::vector<uint64_t> keys, key_scratch;  // sort_keys's
     size_t alive;
 
     explicit Simplifier(std::vector<Splat>& s) : splats(s), parent(s.size()), generation(s.size(), 0), alive(s.size()) {
@@ -151,14 +181,39 @@ struct Simplifier {
                 if (lists[i * stride + k] == j) return true;
             return false;
         };
+        // Splats numbered below 2^16 (nodes of up to 32768 points): each edge as one key,
+        // (cost bits, a, b), which sort as the edges do (a positive float's bits order as it
+        // does) in 8 bytes rather than 20 and with no ties left; the edges are then rebuilt
+        // from the keys. (Moving the edges themselves, the radix sort's scatter took 2.4% of
+        // the conversion's time.)
+        const bool packed = splats.size() <= (size_t(1) << 16);
+        keys.clear();
         for (size_t i = 0; i < live.size(); ++i)
             for (size_t k = 0; k < stride; ++k) {
                 uint32_t j = lists[i * stride + k];
                 if (j == UINT32_MAX || j == i || (j < i && lists_contain(j, uint32_t(i)))) continue;
                 uint32_t a = std::min(live[i], live[j]), b = std::max(live[i], live[j]);
-                sorted.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
+                const float cost = merge_cost(splats[a], splats[b]);
+                if (packed) {
+                    uint32_t bits;
+                    std::memcpy(&bits, &cost, 4);
+                    keys.push_back(uint64_t(bits) << 32 | uint64_t(a) << 16 | b);
+                } else {
+                    sorted.push_back({cost, a, b, generation[a], generation[b]});
+                }
             }
-        sort_edges(sorted, scratch);
+        if (packed) {
+            sort_keys(keys, key_scratch);
+            sorted.resize(keys.size());
+            for (size_t e = 0; e < keys.size(); ++e) {
+                const uint32_t bits = uint32_t(keys[e] >> 32), a = uint32_t(keys[e] >> 16) & 0xffff, b = uint32_t(keys[e]) & 0xffff;
+                float cost;
+                std::memcpy(&cost, &bits, 4);
+                sorted[e] = {cost, a, b, generation[a], generation[b]};
+            }
+        } else {
+            sort_edges(sorted, scratch);
+        }
     }
 
     // The cheapest edge of either front, or false when both are empty.
