@@ -1205,8 +1205,23 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
     // which reuses the array).
     thread_local std::vector<uint8_t> locked;
     locked.assign(vertex_count, 0);
+    // The planes as arrays, so that the first test below, the smallest |n.p - d| over every
+    // plane, is one loop without exits that the compiler vectorizes: nearly every vertex is far
+    // from all of them (they bound the diamond) and needs nothing else.
+    const size_t planes = outer.size();
+    std::vector<double> nx(planes), ny(planes), nz(planes), nd(planes);
+    for (size_t k = 0; k < planes; ++k) {
+        nx[k] = outer[k].n[0];
+        ny[k] = outer[k].n[1];
+        nz[k] = outer[k].n[2];
+        nd[k] = double(outer[k].d);
+    }
     for (size_t v = 0; v < vertex_count; ++v) {
         const Vec3d& p = gathered.positions[v];
+        double nearest = 1e300;
+        for (size_t k = 0; k < planes; ++k)
+            nearest = std::min(nearest, std::fabs(nx[k] * p[0] + ny[k] * p[1] + nz[k] * p[2] - nd[k]));
+        if (!(nearest < 1e-3)) continue;
         for (const LatticePlane& plane : outer) {
             double value = plane.n[0] * p[0] + plane.n[1] * p[1] + plane.n[2] * p[2] - double(plane.d);
             if (std::fabs(value) < 1e-3 && plane_side(plane, p) == 0) {
