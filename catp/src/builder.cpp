@@ -8,7 +8,6 @@
 #include <malloc.h>
 #include <map>
 #include <mutex>
-#include <thread>
 #include <type_traits>
 #include <unordered_map>
 
@@ -1059,14 +1058,7 @@ CatpBuildReport CatpBuild::run() {
     report_.memory_budget = budget_;
     report_.input_vertices = in_.vertex_count();
     report_.dropped_input = in_.dropped();
-    // The heap is warmed on a thread of its own while the vertices are read: mapping hundreds of
-    // MiB in bulk took the first few percent of a 10M-triangle build with one core busy and the
-    // other idle. The warm heap is only used once the reading is over (the thread is joined
-    // then, or on the way out if reading fails). HeapWarmup sets malloc's options before its
-    // first allocation; a thread that allocated before that keeps its own arena, which costs
-    // nothing but warm pages.
-    const uint64_t vertex_count = in_.vertex_count();
-    std::jthread warming([this, vertex_count] { warm_heap_ = make_heap_warmup(budget_, vertex_count); });
+    warm_heap_ = make_heap_warmup(budget_, in_.vertex_count());
     bool needs_normals = !in_.has_normals();
     // One phase per pass, each counting its own units exactly (a phase's total is known when it
     // begins), so no bar runs past its end.
@@ -1083,7 +1075,6 @@ CatpBuildReport CatpBuild::run() {
 
     // ---- Read: vertices, placement, normals, levels.
     read_vertices();
-    warming.join();
     uint64_t estimate = in_.triangle_estimate();
     if (estimate == 0) fail("the mesh has no triangles");
     report_.diagonal = bounds_.diagonal();
