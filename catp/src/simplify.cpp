@@ -704,9 +704,9 @@ void Simplifier::collect_candidates() {
     candidate_count_ = n;
 }
 
-// Asks the cache for what try_collapse(c.x, c.y) reads first: both vertices' data, quadrics,
-// kinds and x's fan. The candidates of a pass come in cost order, so these lie at random: in
-// perf, the loads of vertex and quadric data were a fifth of simplify_mesh's own time, nearly
+// Asks the cache for what try_collapse(c.x, c.y) reads first: both vertices' kinds, data,
+// quadrics and fan starts. The candidates of a pass come in cost order, so these lie at random:
+// in perf, the loads of vertex and quadric data were a fifth of simplify_mesh's own time, nearly
 // all of it waiting for memory. A prefetch changes no result.
 void Simplifier::prefetch_collapse(const Candidate& c) const {
     __builtin_prefetch(&kind_[c.x]);
