@@ -413,34 +413,58 @@ private:
     const Rgb8 default_color_{180, 180, 180};
 };
 
-// Pass over the vertices: keeps them (paged), their bounds and a regular sample.
+// Pass over the vertices: keeps them (paged), their bounds and a regular sample. Two stages
+// overlap on the cores, each serial and in input order: parsing a chunk of the input, and
+// storing the previous chunk's vertices (one thread doing both was the build's only serial
+// stretch, the first 3% of a 2M-triangle build's time). Chunks are recycled: fresh memory costs
+// page faults.
 void CatpBuild::read_vertices() {
     uint64_t count = in_.vertex_count();
     if (count == 0) fail("the mesh has no vertices");
     if (count > uint64_t(UINT32_MAX)) fail("the mesh has %llu vertices; at most 2^32 - 1 are supported", (unsigned long long)count);
     vertices_ = std::make_unique<PagedArray<VertexRecord>>(count, shares_->vertex_cache, output_);
     uint64_t stride = std::max<uint64_t>(1, count / kSampleTarget);
-    std::vector<Vec3d> positions;
-    std::vector<Vec3f> normals;
-    std::vector<Rgb8> colors;
+    struct Chunk {
+        std::vector<Vec3d> positions;
+        std::vector<Vec3f> normals;
+        std::vector<Rgb8> colors;
+        size_t n = 0;
+    };
+    constexpr size_t kLiveChunks = 2;  // one parsed while the other is stored
+    std::vector<Chunk> chunks(kLiveChunks);
+    tbb::concurrent_queue<Chunk*> free_chunks;
+    for (Chunk& c : chunks) free_chunks.push(&c);
     uint64_t v = 0;
-    for (;;) {
-        positions.clear();
-        normals.clear();
-        colors.clear();
-        size_t n = in_.read_vertices(kChunk, positions, &normals, &colors);
-        if (n == 0) break;
+    auto parse = [&](tbb::flow_control& flow) -> Chunk* {
+        Chunk* chunk = nullptr;
+        if (!free_chunks.try_pop(chunk)) fail("internal error: no free chunk in the vertex pipeline");
+        chunk->positions.clear();
+        chunk->normals.clear();
+        chunk->colors.clear();
+        chunk->n = in_.read_vertices(kChunk, chunk->positions, &chunk->normals, &chunk->colors);
+        if (chunk->n == 0) {
+            free_chunks.push(chunk);
+            flow.stop();
+            return nullptr;
+        }
+        return chunk;
+    };
+    auto store = [&](Chunk* chunk) {
+        const size_t n = chunk->n;
         progress_->add(n);
         for (size_t i = 0; i < n; ++i, ++v) {
             if (v >= count) fail("'%s': more vertices than declared", in_.name().c_str());
             VertexRecord& r = vertices_->at_for_write(v);
-            r.position = positions[i];
-            r.normal = normals.empty() ? Vec3f{0, 0, 1} : normals[i];
-            r.color = colors.empty() ? default_color_ : colors[i];
-            bounds_.add(positions[i]);
-            if (v % stride == 0) sample_.push_back(positions[i]);
+            r.position = chunk->positions[i];
+            r.normal = chunk->normals.empty() ? Vec3f{0, 0, 1} : chunk->normals[i];
+            r.color = chunk->colors.empty() ? default_color_ : chunk->colors[i];
+            bounds_.add(chunk->positions[i]);
+            if (v % stride == 0) sample_.push_back(chunk->positions[i]);
         }
-    }
+        free_chunks.push(chunk);
+    };
+    tbb::parallel_pipeline(kLiveChunks, tbb::make_filter<void, Chunk*>(tbb::filter_mode::serial_in_order, parse) &
+                                            tbb::make_filter<Chunk*, void>(tbb::filter_mode::serial_in_order, store));
     if (v != count) fail("'%s': %llu vertices read, %llu declared", in_.name().c_str(), (unsigned long long)v, (unsigned long long)count);
 }
 
@@ -673,6 +697,8 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     std::vector<std::vector<LeafHit>> chunk_hits;
     LeafGroups groups;
     tbb::enumerable_thread_specific<SourceVertexMap> source_maps;  // reused: see SourceVertexMap::clear
+    // The welders' position tables, reused likewise (a leaf's welder waits on no task).
+    tbb::enumerable_thread_specific<std::vector<uint32_t>> weld_tables;
     for (size_t b : order) {
         const size_t count = load_block(bins, b, records);
         BlockCube block = BlockCube::from_key(levels_.block_octave, bins.block_key(b));
@@ -698,7 +724,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
             const SlotKey key = groups.key(g);
             std::vector<ClipPlane> planes = tetrahedron_clip_planes(slot_tetrahedron(key), 0xf);
             WorkFragment fragment;
-            FragmentWelder welder(fragment);
+            FragmentWelder welder(fragment, weld_tables.local());
             // A mesh has about half as many vertices as triangles; clipping adds a few of each.
             const size_t triangles = size_t(groups.end(g) - groups.begin(g));
             welder.reserve(triangles * 5 / 8 + 64, triangles * 9 / 8 + 16);
@@ -745,14 +771,23 @@ double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<co
 // (lattice units): see DiamondError.
 double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
                              double unquantized_error, double children_stored, bool leaf) {
-    DiamondFragments node;
-    size_t triangles = 0, vertices = 0;
-    std::vector<QuantizedSlot> quantized;
-    quantized.reserve(8);
+    // The node and its slots' traces are kept by each thread from node to node (write_node
+    // waits on no task, so no other node's write_node runs on this thread meanwhile): made
+    // fresh, their arrays were a few dozen allocations per node from a heap that holds the
+    // whole level's fragments, where malloc's search of its free chunks was 2.5% of the 10M
+    // scan's build. Slots outside the node's mask are left as they were, unread.
+    struct Scratch {
+        DiamondFragments node;
+        std::array<QuantizedSlot, 8> quantized;
+    };
+    thread_local Scratch scratch;
+    DiamondFragments& node = scratch.node;
+    node.slot_mask = 0;
+    size_t triangles = 0, vertices = 0, slot_count = 0;
     for (int s = 0; s < 8; ++s) {
         if (!slots[s] || slots[s]->indices.empty()) continue;
         Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, s));
-        QuantizedSlot& q = quantized.emplace_back();
+        QuantizedSlot& q = scratch.quantized[slot_count++];
         q.in = slots[s];
         q.out = &node.slots[s];
         q.corners = t;
@@ -772,7 +807,7 @@ double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::a
     // hard case). Coarser levels excuse nothing: there every neighbour may lose the same thin
     // geometry (Slivers' coarse levels draw nothing at all).
     const double excuse = leaf ? std::min(4 * mean_edge_, step * layout_.grid / 4) : 0.0;
-    QuantizationLoss loss = quantization_loss(quantized, step / 4, step, excuse, leaf);
+    QuantizationLoss loss = quantization_loss(scratch.quantized.data(), slot_count, step / 4, step, excuse, leaf);
     const double lost = loss.nothing_drawn ? bounds_.diagonal() / place_.cell : loss.error;
     const double stored = std::max(unquantized_error + std::max(step, lost), children_stored);
     std::vector<uint32_t> slot_bytes;
@@ -869,6 +904,7 @@ void CatpBuild::coarsen_level() {
     // set in use and works in arrays of its own.
     struct Scratch {
         WorkFragment gathered, child;
+        std::vector<uint32_t> weld_table;  // the gathering welder's
         bool in_use = false;
     };
     tbb::enumerable_thread_specific<Scratch> scratches;
@@ -895,7 +931,7 @@ void CatpBuild::coarsen_level() {
         WorkFragment &gathered = scratch.gathered, &child = scratch.child;
         clear_keeping_capacity(gathered);
         {
-            FragmentWelder welder(gathered);
+            FragmentWelder welder(gathered, scratch.weld_table);
             size_t vertices = 0, triangles = 0;
             for (size_t k = runs[i].first; k < runs[i].second; ++k) {
                 vertices += refs[k].vertices;

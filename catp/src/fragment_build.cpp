@@ -6,6 +6,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <span>
 #if defined(__SSE__)
 #include <xmmintrin.h>
 #endif
@@ -30,11 +31,22 @@ size_t PositionHash::operator()(const Vec3d& p) const {
     return size_t(h);
 }
 
-FragmentWelder::FragmentWelder(WorkFragment& fragment) : f_(fragment) {
+FragmentWelder::FragmentWelder(WorkFragment& fragment) : FragmentWelder(fragment, own_table_) {}
+
+FragmentWelder::FragmentWelder(WorkFragment& fragment, std::vector<uint32_t>& table) : f_(fragment), table_(&table) {
     size_t capacity = 64;
     while (capacity < fragment.positions.size() * 2 + 16) capacity *= 2;
     rehash(capacity);
 }
+
+FragmentWelder::FragmentWelder(FragmentWelder&& other) noexcept
+    : f_(other.f_),
+      polygon_(std::move(other.polygon_)),
+      pieces_(std::move(other.pieces_)),
+      remap_(std::move(other.remap_)),
+      own_table_(std::move(other.own_table_)),
+      table_(other.table_ == &other.own_table_ ? &own_table_ : other.table_),
+      mask_(other.mask_) {}
 
 void FragmentWelder::reserve(size_t vertices, size_t triangles) {
     const size_t v = f_.positions.size() + vertices;
@@ -42,36 +54,36 @@ void FragmentWelder::reserve(size_t vertices, size_t triangles) {
     f_.normals.reserve(v);
     f_.colors.reserve(v);
     f_.indices.reserve(f_.indices.size() + 3 * triangles);
-    size_t capacity = table_.size();
+    size_t capacity = table_->size();
     while (capacity < 2 * v) capacity *= 2;
-    if (capacity > table_.size()) rehash(capacity);
+    if (capacity > table_->size()) rehash(capacity);
 }
 
-void FragmentWelder::grow() { rehash(table_.size() * 2); }
+void FragmentWelder::grow() { rehash(table_->size() * 2); }
 
 void FragmentWelder::rehash(size_t capacity) {
-    table_.assign(capacity, 0);
+    table_->assign(capacity, 0);
     mask_ = capacity - 1;
     for (uint32_t i = 0; i < f_.positions.size(); ++i) {
         size_t h = PositionHash()(f_.positions[i]) & mask_;
-        while (table_[h] != 0) h = (h + 1) & mask_;
-        table_[h] = i + 1;
+        while ((*table_)[h] != 0) h = (h + 1) & mask_;
+        (*table_)[h] = i + 1;
     }
 }
 
 uint32_t FragmentWelder::find_or_insert(const Vec3d& p, bool& inserted) {
-    if ((f_.positions.size() + 1) * 2 > table_.size()) grow();
+    if ((f_.positions.size() + 1) * 2 > table_->size()) grow();
     size_t h = PositionHash()(p) & mask_;
-    while (table_[h] != 0) {
-        const Vec3d& q = f_.positions[table_[h] - 1];
+    while ((*table_)[h] != 0) {
+        const Vec3d& q = f_.positions[(*table_)[h] - 1];
         if (q[0] == p[0] && q[1] == p[1] && q[2] == p[2]) {
             inserted = false;
-            return table_[h] - 1;
+            return (*table_)[h] - 1;
         }
         h = (h + 1) & mask_;
     }
     uint32_t index = uint32_t(f_.positions.size());
-    table_[h] = index + 1;
+    (*table_)[h] = index + 1;
     inserted = true;
     return index;
 }
@@ -320,11 +332,21 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, const
     // quantize_fragment's own time in perf. Alone in a short loop, with prefetching, the
     // misses overlap.
     const size_t n = in.positions.size();
-    std::vector<uint64_t> key(n);
+    // Arrays kept by each thread from call to call (quantize_fragment makes no nested call):
+    // fresh ones for every slot of every node cost an allocation, a zero fill and page faults.
+    struct Scratch {
+        std::vector<uint64_t> key;
+        std::vector<uint32_t> remap, first_of;
+        std::vector<std::pair<uint64_t, uint32_t>> by_position;
+    };
+    thread_local Scratch scratch;
+    std::vector<uint64_t>& key = scratch.key;
+    key.resize(n);
     if (trace) trace->weights.resize(n);
     quantize_positions(in, corners, layout, key.data(), trace ? trace->weights.data() : nullptr);
-    // Each input vertex's vertex in `out`.
-    std::vector<uint32_t> remap(n);
+    // Each input vertex's vertex in `out` (the trace's own array when there is one).
+    std::vector<uint32_t>& remap = trace ? trace->vertex_of : scratch.remap;
+    remap.resize(n);
 
     // Vertices closer than a grid step quantize to the same position: merge them (keeping the
     // first one's normal and colour) and drop the triangles that collapse.
@@ -334,13 +356,15 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, const
     while (capacity < n * 2) capacity *= 2;
     const size_t mask = capacity - 1;
     constexpr uint64_t kEmpty = UINT64_MAX;  // no position key (they have at most 48 bits)
-    std::vector<std::pair<uint64_t, uint32_t>> by_position(capacity, {kEmpty, 0});  // key, vertex
+    std::vector<std::pair<uint64_t, uint32_t>>& by_position = scratch.by_position;  // key, vertex
+    by_position.assign(capacity, {kEmpty, 0});
     auto slot_of = [mask](uint64_t k) {
         k *= 0x9E3779B97F4A7C15ull;
         return size_t(k ^ (k >> 32)) & mask;
     };
     constexpr size_t kPrefetchAhead = 8;
-    std::vector<uint32_t> first_of;  // the input vertex of each output vertex
+    std::vector<uint32_t>& first_of = scratch.first_of;  // the input vertex of each output vertex
+    first_of.clear();
     first_of.reserve(n);
     for (size_t v = 0; v < n; ++v) {
         if (v + kPrefetchAhead < n) __builtin_prefetch(&by_position[slot_of(key[v + kPrefetchAhead])]);
@@ -379,7 +403,6 @@ void quantize_fragment(const WorkFragment& in, const Tetrahedron& corners, const
         }
         out.indices.insert(out.indices.end(), {a, b, d});
     }
-    if (trace) trace->vertex_of = std::move(remap);
 }
 
 // Closest point on triangle (a, b, c) to p (Ericson, Real-Time Collision Detection 5.1.5);
@@ -485,9 +508,10 @@ struct CellRange {
     uint8_t first[3], last[3];
 };
 
-// (cell, triangle): one cell that a triangle's box overlaps.
+// (cell, triangle): one cell that a triangle's box overlaps, and its rank among the cell's
+// entries (the triangles before it filed under the same cell).
 struct CellEntry {
-    uint32_t cell, triangle;
+    uint32_t cell, triangle, rank;
 };
 
 // The arrays of a GridDistance. Each thread keeps one set from grid to grid, up to kKeepBytes:
@@ -633,9 +657,9 @@ private:
         // probe, sphere and range of cells: its divisions and roots overlap from triangle to
         // triangle, where in one pass with the filing below, whose loop exits mispredict, they
         // stalled it. The second files an entry per cell that the triangle's box overlaps,
-        // counted per cell (for a counting sort of the entries by cell). The entries are kept,
-        // so that the fill below is one flat loop (nested loops over the ranges mispredicted
-        // their exits).
+        // counted per cell (for a counting sort of the entries by cell), with its rank in the
+        // cell. The entries are kept, so that the fill below is one flat loop (nested loops over
+        // the ranges mispredicted their exits).
         CellRange* ranges = GridArrays::at_least(arrays_->ranges, triangles_);
         for (size_t t = 0; t < triangles_; t += 4) prepare(t, std::min<size_t>(4, triangles_ - t), float(extent), ranges);
         for (size_t t = 0; t < triangles_; ++t) {
@@ -644,16 +668,22 @@ private:
                 for (int y = r.first[1]; y <= r.last[1]; ++y)
                     for (int x = r.first[0]; x <= r.last[0]; ++x) {
                         const uint32_t cell = uint32_t(cell_index(x, y, z));
-                        start_[cell]++;
-                        entries.push_back({cell, uint32_t(t)});
+                        entries.push_back({cell, uint32_t(t), start_[cell]++});
                     }
         }
-        // Inclusive prefix sums: start_[c] is the end of cell c until the fill below.
-        for (size_t c = 1; c < cells; ++c) start_[c] += start_[c - 1];
-        start_[cells] = start_[cells - 1];
+        // Exclusive prefix sums: start_[c] is the start of cell c.
+        uint32_t sum = 0;
+        for (size_t c = 0; c < cells; ++c) {
+            const uint32_t count = start_[c];
+            start_[c] = sum;
+            sum += count;
+        }
+        start_[cells] = sum;
         items_ = GridArrays::at_least(arrays_->items, entries.size());
-        // Fill back to front, decrementing the end of each cell: the ends become the starts.
-        for (size_t k = entries.size(); k-- > 0;) items_[--start_[entries[k].cell]] = entries[k].triangle;
+        // Each entry goes to its cell's start plus its rank: a cell's triangles in increasing
+        // order, as before. (Filling by decrementing each cell's end chained every entry to the
+        // previous one's store to the same counter: a fifth of the grid's construction in perf.)
+        for (const CellEntry& e : entries) items_[start_[e.cell] + e.rank] = e.triangle;
     }
 
     // The first pass of build() for triangles t to t + count - 1 (count <= 4), one triangle per
@@ -873,7 +903,9 @@ private:
 
 // Largest distance from the vertices that the simplification removed to the simplified surface.
 double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& simplified, const Box& box) {
-    std::vector<uint8_t> kept(pos.size(), 0);
+    // Kept by each thread (this waits on no task: no other call runs on the thread meanwhile).
+    thread_local std::vector<uint8_t> kept;
+    kept.assign(pos.size(), 0);
     for (uint32_t v : simplified) kept[v] = 1;
     GridDistance to_simplified(pos, simplified, box);
     double error = 0;
@@ -911,8 +943,17 @@ double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<
     // Without branches on which edges changed: that pattern is random, and the branches
     // mispredicted (a skipped edge adds 0 to its count and is stored past the end).
     const size_t triangles = simplified.size() / 3;
-    std::vector<uint8_t> changed_edges(triangles);
-    std::vector<uint32_t> first(pos.size() + 1, 0);
+    // Arrays kept by each thread from diamond to diamond (this waits on no task, so no other
+    // call runs on the thread meanwhile): fresh ones cost allocations from a crowded heap.
+    struct Scratch {
+        std::vector<uint8_t> changed_edges;
+        std::vector<uint32_t> first, other, fill;
+    };
+    thread_local Scratch scratch;
+    std::vector<uint8_t>& changed_edges = scratch.changed_edges;
+    changed_edges.resize(triangles);
+    std::vector<uint32_t>& first = scratch.first;
+    first.assign(pos.size() + 1, 0);
     size_t edges = 0;
     for (size_t t = 0; t < triangles; ++t) {
         const unsigned bits = changed(t);
@@ -925,9 +966,11 @@ double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<
     }
     if (edges == 0) return 0.0;
     for (size_t v = 1; v < first.size(); ++v) first[v] += first[v - 1];
-    std::vector<uint32_t> other(edges + 1);
+    std::vector<uint32_t>& other = scratch.other;
+    other.resize(edges + 1);
     {
-        std::vector<uint32_t> fill(first.begin(), first.end() - 1);
+        std::vector<uint32_t>& fill = scratch.fill;
+        fill.assign(first.begin(), first.end() - 1);
         for (size_t t = 0; t < triangles; ++t)
             for (unsigned k = 0; k < 3; ++k) {
                 const unsigned counted = changed_edges[t] >> k & 1;
@@ -1010,7 +1053,8 @@ public:
         // Per vertex, bit k of `inside` / `outside`: the vertex is strictly inside / strictly
         // outside slot plane k. Vertices of no triangle keep 0, unread.
         sides_.assign(positions.size(), Sides{0, 0});
-        std::vector<uint8_t> seen(positions.size(), 0);
+        thread_local std::vector<uint8_t> seen;  // see thread_sides()
+        seen.assign(positions.size(), 0);
         int side[16];
         for (uint32_t v : indices) {
             if (seen[v]) continue;
@@ -1055,8 +1099,16 @@ private:
     struct Sides {
         uint16_t inside, outside;
     };
+    // The calling thread's array, kept from diamond to diamond (fresh arrays cost allocations
+    // from a crowded heap). One SlotSides at a time per thread: clip_into_slots, which makes
+    // them, waits on no task, so no other call runs on its thread meanwhile.
+    static std::vector<Sides>& thread_sides() {
+        thread_local std::vector<Sides> sides;
+        return sides;
+    }
+
     std::array<unsigned, 8> slot_bits_{};  // the bits of each slot's planes
-    std::vector<Sides> sides_;
+    std::vector<Sides>& sides_ = thread_sides();
 };
 
 }  // namespace
@@ -1067,9 +1119,12 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     const int n = d.ring_size;
     // Clip by the interior faces into the slots.
     std::vector<std::vector<ClipPlane>> slot_planes(n);
+    // The welders' position tables are kept by each thread from diamond to diamond (this waits
+    // on no task): fresh, they were eight allocations and zero fills per diamond.
+    thread_local std::array<std::vector<uint32_t>, 8> weld_tables;
     std::vector<FragmentWelder> welders;
     welders.reserve(8);
-    for (int s = 0; s < 8; ++s) welders.emplace_back(out[s]);
+    for (int s = 0; s < 8; ++s) welders.emplace_back(out[s], weld_tables[size_t(s)]);
     for (int s = 0; s < n; ++s) {
         if (!(slots & (1 << s))) continue;
         Tetrahedron t = diamond_tetrahedron(d, s);
@@ -1084,12 +1139,16 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     // Per slot, the fragment vertex each gathered vertex became: a vertex is shared by about six
     // triangles, and only the first of them welds it by position.
     const size_t vertex_count = gathered.positions.size();
-    std::vector<uint32_t> welded(size_t(n) * vertex_count, FragmentWelder::kNotWelded);
+    // This array and the fates are kept by each thread from diamond to diamond (see
+    // SlotSides::thread_sides).
+    thread_local std::vector<uint32_t> welded;
+    welded.assign(size_t(n) * vertex_count, FragmentWelder::kNotWelded);
     // Every triangle's fate in every slot first, so that each slot's arrays are allocated once
     // at about their final size (grown push by push, they were copied and faulted in anew at
     // each doubling, and kept up to twice the memory they needed in the spill).
     const size_t triangles = simplified.size() / 3;
-    std::vector<uint8_t> fates(triangles * size_t(n));
+    thread_local std::vector<uint8_t> fates;
+    fates.resize(triangles * size_t(n));
     std::array<size_t, 8> whole{}, cut{};
     for (size_t t = 0; t < triangles; ++t) {
         const SlotSides::TriangleSides corners = sides.triangle_sides(&simplified[3 * t]);
@@ -1141,9 +1200,28 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
         if (!(slots & (1 << ((s + 1) % n)))) outer.push_back(make_plane(d.spine_a, d.spine_b, r1));
     }
     size_t vertex_count = gathered.positions.size();
-    std::vector<uint8_t> locked(vertex_count, 0);
+    // Kept by each thread from diamond to diamond. Only read until simplify_mesh returns, before
+    // this call waits on tasks below (while it waits, its thread may coarsen another diamond,
+    // which reuses the array).
+    thread_local std::vector<uint8_t> locked;
+    locked.assign(vertex_count, 0);
+    // The planes as arrays, so that the first test below, the smallest |n.p - d| over every
+    // plane, is one loop without exits that the compiler vectorizes: nearly every vertex is far
+    // from all of them (they bound the diamond) and needs nothing else.
+    const size_t planes = outer.size();
+    std::vector<double> nx(planes), ny(planes), nz(planes), nd(planes);
+    for (size_t k = 0; k < planes; ++k) {
+        nx[k] = outer[k].n[0];
+        ny[k] = outer[k].n[1];
+        nz[k] = outer[k].n[2];
+        nd[k] = double(outer[k].d);
+    }
     for (size_t v = 0; v < vertex_count; ++v) {
         const Vec3d& p = gathered.positions[v];
+        double nearest = 1e300;
+        for (size_t k = 0; k < planes; ++k)
+            nearest = std::min(nearest, std::fabs(nx[k] * p[0] + ny[k] * p[1] + nz[k] * p[2] - nd[k]));
+        if (!(nearest < 1e-3)) continue;
         for (const LatticePlane& plane : outer) {
             double value = plane.n[0] * p[0] + plane.n[1] * p[1] + plane.n[2] * p[2] - double(plane.d);
             if (std::fabs(value) < 1e-3 && plane_side(plane, p) == 0) {
@@ -1264,7 +1342,7 @@ double face_distance(const Vec3d& p, const Tetrahedron& t) {
 // On a 1M-triangle scan 69k triangles are lost over all levels, 25 of them in 15 nodes need the
 // grid, and every node's bound stays the grid step (the same bytes); the converter's task-clock
 // was 1.92-2.17 s against 1.85-2.17 s without this bookkeeping.
-QuantizationLoss quantization_loss(const std::vector<QuantizedSlot>& slots, double spacing, double settled,
+QuantizationLoss quantization_loss(const QuantizedSlot* slots, size_t slot_count, double spacing, double settled,
                                    double excuse_length, bool measure_area) {
     QuantizationLoss loss;
     bool drawn_anything = false;
@@ -1280,7 +1358,7 @@ QuantizationLoss quantization_loss(const std::vector<QuantizedSlot>& slots, doub
     thread_local Scratch scratch;
     auto& [kept, on_surface, involved, out_drawn, lost, first_incident, incident, wanted, found, samples] = scratch;
     auto edge_key = [](uint32_t a, uint32_t b) { return uint64_t(std::min(a, b)) << 32 | std::max(a, b); };
-    for (size_t si = 0; si < slots.size(); ++si) {
+    for (size_t si = 0; si < slot_count; ++si) {
         const QuantizedSlot& slot = slots[si];
         const WorkFragment& in = *slot.in;
         const FragmentMesh& out = *slot.out;
@@ -1394,7 +1472,7 @@ QuantizationLoss quantization_loss(const std::vector<QuantizedSlot>& slots, doub
     // closest to the neighbour's surface), sample points along the unsettled triangles' edges.
     std::vector<Vec3d> drawn_positions;
     std::vector<uint32_t> drawn;
-    for (const QuantizedSlot& slot : slots) {
+    for (const QuantizedSlot& slot : std::span(slots, slot_count)) {
         const uint32_t base = uint32_t(drawn_positions.size());
         for (const PackedVertex& v : slot.out->vertices) {
             BaryWeights w;
