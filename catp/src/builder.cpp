@@ -697,8 +697,6 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     std::vector<std::vector<LeafHit>> chunk_hits;
     LeafGroups groups;
     tbb::enumerable_thread_specific<SourceVertexMap> source_maps;  // reused: see SourceVertexMap::clear
-    // The welders' position tables, reused likewise (a leaf's welder waits on no task).
-    tbb::enumerable_thread_specific<std::vector<uint32_t>> weld_tables;
     for (size_t b : order) {
         const size_t count = load_block(bins, b, records);
         BlockCube block = BlockCube::from_key(levels_.block_octave, bins.block_key(b));
@@ -724,7 +722,7 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
             const SlotKey key = groups.key(g);
             std::vector<ClipPlane> planes = tetrahedron_clip_planes(slot_tetrahedron(key), 0xf);
             WorkFragment fragment;
-            FragmentWelder welder(fragment, weld_tables.local());
+            FragmentWelder welder(fragment);
             // A mesh has about half as many vertices as triangles; clipping adds a few of each.
             const size_t triangles = size_t(groups.end(g) - groups.begin(g));
             welder.reserve(triangles * 5 / 8 + 64, triangles * 9 / 8 + 16);
@@ -904,7 +902,6 @@ void CatpBuild::coarsen_level() {
     // set in use and works in arrays of its own.
     struct Scratch {
         WorkFragment gathered, child;
-        std::vector<uint32_t> weld_table;  // the gathering welder's
         bool in_use = false;
     };
     tbb::enumerable_thread_specific<Scratch> scratches;
@@ -931,7 +928,7 @@ void CatpBuild::coarsen_level() {
         WorkFragment &gathered = scratch.gathered, &child = scratch.child;
         clear_keeping_capacity(gathered);
         {
-            FragmentWelder welder(gathered, scratch.weld_table);
+            FragmentWelder welder(gathered);
             size_t vertices = 0, triangles = 0;
             for (size_t k = runs[i].first; k < runs[i].second; ++k) {
                 vertices += refs[k].vertices;

@@ -31,22 +31,11 @@ size_t PositionHash::operator()(const Vec3d& p) const {
     return size_t(h);
 }
 
-FragmentWelder::FragmentWelder(WorkFragment& fragment) : FragmentWelder(fragment, own_table_) {}
-
-FragmentWelder::FragmentWelder(WorkFragment& fragment, std::vector<uint32_t>& table) : f_(fragment), table_(&table) {
+FragmentWelder::FragmentWelder(WorkFragment& fragment) : f_(fragment) {
     size_t capacity = 64;
     while (capacity < fragment.positions.size() * 2 + 16) capacity *= 2;
     rehash(capacity);
 }
-
-FragmentWelder::FragmentWelder(FragmentWelder&& other) noexcept
-    : f_(other.f_),
-      polygon_(std::move(other.polygon_)),
-      pieces_(std::move(other.pieces_)),
-      remap_(std::move(other.remap_)),
-      own_table_(std::move(other.own_table_)),
-      table_(other.table_ == &other.own_table_ ? &own_table_ : other.table_),
-      mask_(other.mask_) {}
 
 void FragmentWelder::reserve(size_t vertices, size_t triangles) {
     const size_t v = f_.positions.size() + vertices;
@@ -54,36 +43,36 @@ void FragmentWelder::reserve(size_t vertices, size_t triangles) {
     f_.normals.reserve(v);
     f_.colors.reserve(v);
     f_.indices.reserve(f_.indices.size() + 3 * triangles);
-    size_t capacity = table_->size();
+    size_t capacity = table_.size();
     while (capacity < 2 * v) capacity *= 2;
-    if (capacity > table_->size()) rehash(capacity);
+    if (capacity > table_.size()) rehash(capacity);
 }
 
-void FragmentWelder::grow() { rehash(table_->size() * 2); }
+void FragmentWelder::grow() { rehash(table_.size() * 2); }
 
 void FragmentWelder::rehash(size_t capacity) {
-    table_->assign(capacity, 0);
+    table_.assign(capacity, 0);
     mask_ = capacity - 1;
     for (uint32_t i = 0; i < f_.positions.size(); ++i) {
         size_t h = PositionHash()(f_.positions[i]) & mask_;
-        while ((*table_)[h] != 0) h = (h + 1) & mask_;
-        (*table_)[h] = i + 1;
+        while (table_[h] != 0) h = (h + 1) & mask_;
+        table_[h] = i + 1;
     }
 }
 
 uint32_t FragmentWelder::find_or_insert(const Vec3d& p, bool& inserted) {
-    if ((f_.positions.size() + 1) * 2 > table_->size()) grow();
+    if ((f_.positions.size() + 1) * 2 > table_.size()) grow();
     size_t h = PositionHash()(p) & mask_;
-    while ((*table_)[h] != 0) {
-        const Vec3d& q = f_.positions[(*table_)[h] - 1];
+    while (table_[h] != 0) {
+        const Vec3d& q = f_.positions[table_[h] - 1];
         if (q[0] == p[0] && q[1] == p[1] && q[2] == p[2]) {
             inserted = false;
-            return (*table_)[h] - 1;
+            return table_[h] - 1;
         }
         h = (h + 1) & mask_;
     }
     uint32_t index = uint32_t(f_.positions.size());
-    (*table_)[h] = index + 1;
+    table_[h] = index + 1;
     inserted = true;
     return index;
 }
@@ -1119,12 +1108,9 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     const int n = d.ring_size;
     // Clip by the interior faces into the slots.
     std::vector<std::vector<ClipPlane>> slot_planes(n);
-    // The welders' position tables are kept by each thread from diamond to diamond (this waits
-    // on no task): fresh, they were eight allocations and zero fills per diamond.
-    thread_local std::array<std::vector<uint32_t>, 8> weld_tables;
     std::vector<FragmentWelder> welders;
     welders.reserve(8);
-    for (int s = 0; s < 8; ++s) welders.emplace_back(out[s], weld_tables[size_t(s)]);
+    for (int s = 0; s < 8; ++s) welders.emplace_back(out[s]);
     for (int s = 0; s < n; ++s) {
         if (!(slots & (1 << s))) continue;
         Tetrahedron t = diamond_tetrahedron(d, s);

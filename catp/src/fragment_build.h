@@ -55,13 +55,6 @@ private:
 class FragmentWelder {
 public:
     explicit FragmentWelder(WorkFragment& fragment);
-    // The same with the position table kept in `table` (its contents are replaced), so that a
-    // caller welding many fragments one after another reuses one array instead of allocating
-    // one per fragment. `table` must outlive the welder.
-    FragmentWelder(WorkFragment& fragment, std::vector<uint32_t>& table);
-    FragmentWelder(FragmentWelder&& other) noexcept;
-    FragmentWelder(const FragmentWelder&) = delete;
-    FragmentWelder& operator=(const FragmentWelder&) = delete;
     // Makes room for about this many more vertices and triangles (growing the arrays and the
     // table step by step copies them and touches fresh memory each time).
     void reserve(size_t vertices, size_t triangles);
@@ -119,8 +112,7 @@ private:
     std::vector<ClipVertex> polygon_;  // scratch for add_clipped
     std::vector<std::array<int, 3>> pieces_;
     std::vector<uint32_t> remap_;  // scratch for append
-    std::vector<uint32_t> own_table_;
-    std::vector<uint32_t>* table_;  // own_table_ or the caller's: vertex index + 1, 0 = empty
+    std::vector<uint32_t> table_;  // vertex index + 1, 0 = empty
     size_t mask_ = 0;
 };
 
