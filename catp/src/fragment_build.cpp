@@ -892,9 +892,7 @@ private:
 
 // Largest distance from the vertices that the simplification removed to the simplified surface.
 double removed_vertices_error(const std::vector<Vec3d>& pos, const std::vector<uint32_t>& simplified, const Box& box) {
-    // Kept by each thread (this waits on no task: no other call runs on the thread meanwhile).
-    thread_local std::vector<uint8_t> kept;
-    kept.assign(pos.size(), 0);
+    std::vector<uint8_t> kept(pos.size(), 0);
     for (uint32_t v : simplified) kept[v] = 1;
     GridDistance to_simplified(pos, simplified, box);
     double error = 0;
@@ -932,17 +930,8 @@ double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<
     // Without branches on which edges changed: that pattern is random, and the branches
     // mispredicted (a skipped edge adds 0 to its count and is stored past the end).
     const size_t triangles = simplified.size() / 3;
-    // Arrays kept by each thread from diamond to diamond (this waits on no task, so no other
-    // call runs on the thread meanwhile): fresh ones cost allocations from a crowded heap.
-    struct Scratch {
-        std::vector<uint8_t> changed_edges;
-        std::vector<uint32_t> first, other, fill;
-    };
-    thread_local Scratch scratch;
-    std::vector<uint8_t>& changed_edges = scratch.changed_edges;
-    changed_edges.resize(triangles);
-    std::vector<uint32_t>& first = scratch.first;
-    first.assign(pos.size() + 1, 0);
+    std::vector<uint8_t> changed_edges(triangles);
+    std::vector<uint32_t> first(pos.size() + 1, 0);
     size_t edges = 0;
     for (size_t t = 0; t < triangles; ++t) {
         const unsigned bits = changed(t);
@@ -955,11 +944,9 @@ double simplified_points_error(const std::vector<Vec3d>& pos, const std::vector<
     }
     if (edges == 0) return 0.0;
     for (size_t v = 1; v < first.size(); ++v) first[v] += first[v - 1];
-    std::vector<uint32_t>& other = scratch.other;
-    other.resize(edges + 1);
+    std::vector<uint32_t> other(edges + 1);
     {
-        std::vector<uint32_t>& fill = scratch.fill;
-        fill.assign(first.begin(), first.end() - 1);
+        std::vector<uint32_t> fill(first.begin(), first.end() - 1);
         for (size_t t = 0; t < triangles; ++t)
             for (unsigned k = 0; k < 3; ++k) {
                 const unsigned counted = changed_edges[t] >> k & 1;
@@ -1042,8 +1029,7 @@ public:
         // Per vertex, bit k of `inside` / `outside`: the vertex is strictly inside / strictly
         // outside slot plane k. Vertices of no triangle keep 0, unread.
         sides_.assign(positions.size(), Sides{0, 0});
-        thread_local std::vector<uint8_t> seen;  // see thread_sides()
-        seen.assign(positions.size(), 0);
+        std::vector<uint8_t> seen(positions.size(), 0);
         int side[16];
         for (uint32_t v : indices) {
             if (seen[v]) continue;
@@ -1088,16 +1074,8 @@ private:
     struct Sides {
         uint16_t inside, outside;
     };
-    // The calling thread's array, kept from diamond to diamond (fresh arrays cost allocations
-    // from a crowded heap). One SlotSides at a time per thread: clip_into_slots, which makes
-    // them, waits on no task, so no other call runs on its thread meanwhile.
-    static std::vector<Sides>& thread_sides() {
-        thread_local std::vector<Sides> sides;
-        return sides;
-    }
-
     std::array<unsigned, 8> slot_bits_{};  // the bits of each slot's planes
-    std::vector<Sides>& sides_ = thread_sides();
+    std::vector<Sides> sides_;
 };
 
 }  // namespace
@@ -1125,16 +1103,12 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     // Per slot, the fragment vertex each gathered vertex became: a vertex is shared by about six
     // triangles, and only the first of them welds it by position.
     const size_t vertex_count = gathered.positions.size();
-    // This array and the fates are kept by each thread from diamond to diamond (see
-    // SlotSides::thread_sides).
-    thread_local std::vector<uint32_t> welded;
-    welded.assign(size_t(n) * vertex_count, FragmentWelder::kNotWelded);
+    std::vector<uint32_t> welded(size_t(n) * vertex_count, FragmentWelder::kNotWelded);
     // Every triangle's fate in every slot first, so that each slot's arrays are allocated once
     // at about their final size (grown push by push, they were copied and faulted in anew at
     // each doubling, and kept up to twice the memory they needed in the spill).
     const size_t triangles = simplified.size() / 3;
-    thread_local std::vector<uint8_t> fates;
-    fates.resize(triangles * size_t(n));
+    std::vector<uint8_t> fates(triangles * size_t(n));
     std::array<size_t, 8> whole{}, cut{};
     for (size_t t = 0; t < triangles; ++t) {
         const SlotSides::TriangleSides corners = sides.triangle_sides(&simplified[3 * t]);
@@ -1186,11 +1160,7 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
         if (!(slots & (1 << ((s + 1) % n)))) outer.push_back(make_plane(d.spine_a, d.spine_b, r1));
     }
     size_t vertex_count = gathered.positions.size();
-    // Kept by each thread from diamond to diamond. Only read until simplify_mesh returns, before
-    // this call waits on tasks below (while it waits, its thread may coarsen another diamond,
-    // which reuses the array).
-    thread_local std::vector<uint8_t> locked;
-    locked.assign(vertex_count, 0);
+    std::vector<uint8_t> locked(vertex_count, 0);
     // The planes as arrays, so that the first test below, the smallest |n.p - d| over every
     // plane, is one loop without exits that the compiler vectorizes: nearly every vertex is far
     // from all of them (they bound the diamond) and needs nothing else.
