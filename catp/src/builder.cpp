@@ -769,23 +769,14 @@ double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<co
 // (lattice units): see DiamondError.
 double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
                              double unquantized_error, double children_stored, bool leaf) {
-    // The node and its slots' traces are kept by each thread from node to node (write_node
-    // waits on no task, so no other node's write_node runs on this thread meanwhile): made
-    // fresh, their arrays were a few dozen allocations per node from a heap that holds the
-    // whole level's fragments, where malloc's search of its free chunks was 2.5% of the 10M
-    // scan's build. Slots outside the node's mask are left as they were, unread.
-    struct Scratch {
-        DiamondFragments node;
-        std::array<QuantizedSlot, 8> quantized;
-    };
-    thread_local Scratch scratch;
-    DiamondFragments& node = scratch.node;
-    node.slot_mask = 0;
-    size_t triangles = 0, vertices = 0, slot_count = 0;
+    DiamondFragments node;
+    size_t triangles = 0, vertices = 0;
+    std::vector<QuantizedSlot> quantized;
+    quantized.reserve(8);
     for (int s = 0; s < 8; ++s) {
         if (!slots[s] || slots[s]->indices.empty()) continue;
         Tetrahedron t = canonical_tetrahedron(diamond_tetrahedron(info, s));
-        QuantizedSlot& q = scratch.quantized[slot_count++];
+        QuantizedSlot& q = quantized.emplace_back();
         q.in = slots[s];
         q.out = &node.slots[s];
         q.corners = t;
@@ -805,7 +796,7 @@ double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::a
     // hard case). Coarser levels excuse nothing: there every neighbour may lose the same thin
     // geometry (Slivers' coarse levels draw nothing at all).
     const double excuse = leaf ? std::min(4 * mean_edge_, step * layout_.grid / 4) : 0.0;
-    QuantizationLoss loss = quantization_loss(scratch.quantized.data(), slot_count, step / 4, step, excuse, leaf);
+    QuantizationLoss loss = quantization_loss(quantized, step / 4, step, excuse, leaf);
     const double lost = loss.nothing_drawn ? bounds_.diagonal() / place_.cell : loss.error;
     const double stored = std::max(unquantized_error + std::max(step, lost), children_stored);
     std::vector<uint32_t> slot_bytes;

@@ -6,7 +6,6 @@
 #include <cstring>
 #include <limits>
 #include <memory>
-#include <span>
 #if defined(__SSE__)
 #include <xmmintrin.h>
 #endif
@@ -1298,7 +1297,7 @@ double face_distance(const Vec3d& p, const Tetrahedron& t) {
 // On a 1M-triangle scan 69k triangles are lost over all levels, 25 of them in 15 nodes need the
 // grid, and every node's bound stays the grid step (the same bytes); the converter's task-clock
 // was 1.92-2.17 s against 1.85-2.17 s without this bookkeeping.
-QuantizationLoss quantization_loss(const QuantizedSlot* slots, size_t slot_count, double spacing, double settled,
+QuantizationLoss quantization_loss(const std::vector<QuantizedSlot>& slots, double spacing, double settled,
                                    double excuse_length, bool measure_area) {
     QuantizationLoss loss;
     bool drawn_anything = false;
@@ -1314,7 +1313,7 @@ QuantizationLoss quantization_loss(const QuantizedSlot* slots, size_t slot_count
     thread_local Scratch scratch;
     auto& [kept, on_surface, involved, out_drawn, lost, first_incident, incident, wanted, found, samples] = scratch;
     auto edge_key = [](uint32_t a, uint32_t b) { return uint64_t(std::min(a, b)) << 32 | std::max(a, b); };
-    for (size_t si = 0; si < slot_count; ++si) {
+    for (size_t si = 0; si < slots.size(); ++si) {
         const QuantizedSlot& slot = slots[si];
         const WorkFragment& in = *slot.in;
         const FragmentMesh& out = *slot.out;
@@ -1428,7 +1427,7 @@ QuantizationLoss quantization_loss(const QuantizedSlot* slots, size_t slot_count
     // closest to the neighbour's surface), sample points along the unsettled triangles' edges.
     std::vector<Vec3d> drawn_positions;
     std::vector<uint32_t> drawn;
-    for (const QuantizedSlot& slot : std::span(slots, slot_count)) {
+    for (const QuantizedSlot& slot : slots) {
         const uint32_t base = uint32_t(drawn_positions.size());
         for (const PackedVertex& v : slot.out->vertices) {
             BaryWeights w;

@@ -157,10 +157,10 @@ struct QuantizationLoss {
     double error = 0;
     bool nothing_drawn = false;
 };
-// slots: slot_count of them. excuse_length: pieces up to this long (lattice units) that lie along a face of their
+// excuse_length: pieces up to this long (lattice units) that lie along a face of their
 // tetrahedron count as covered by the neighbour across it (see the definition). measure_area:
 // fill `area` (else 0).
-QuantizationLoss quantization_loss(const QuantizedSlot* slots, size_t slot_count, double spacing, double settled,
+QuantizationLoss quantization_loss(const std::vector<QuantizedSlot>& slots, double spacing, double settled,
                                    double excuse_length, bool measure_area);
 
 // point_triangle_distance2: catp/distance.h.
