@@ -1,6 +1,8 @@
 // Reading AQP datasets (aqp/dataset.h).
 #include "aqp/dataset.h"
 
+#include <tbb/parallel_for.h>
+
 #include "base/error.h"
 
 namespace catpaq::aqp {
@@ -78,6 +80,23 @@ PatchGrid AqpDataset::decode(uint32_t patch, int level, const PatchGrid& coarser
     } catch (const Error& e) {
         fail("patch %u level %d: %s", patch, level, e.what());
     }
+}
+
+std::vector<PatchGrid> AqpDataset::decode_level(int level) const {
+    if (level < 0 || level > finest_level()) fail("'%s' has no level %d", path_.c_str(), level);
+    std::vector<PatchGrid> grids;  // every patch at level l - 1, then l
+    for (int l = 0; l <= level; ++l) {
+        std::vector<PatchGrid> next(patch_count());
+        tbb::parallel_for(uint32_t(0), meta_.tile_count(l), [&](uint32_t tile) {
+            const uint32_t first = meta_.first_patch(tile, l), count = meta_.tile_patches(tile, l);
+            std::vector<const PatchGrid*> coarser;
+            for (uint32_t p = first; l > 0 && p < first + count; ++p) coarser.push_back(&grids[p]);
+            std::vector<PatchGrid> decoded = decode_tile(tile, l, coarser);
+            for (uint32_t q = 0; q < count; ++q) next[first + q] = std::move(decoded[q]);
+        });
+        grids.swap(next);
+    }
+    return grids;
 }
 
 std::vector<PatchGrid> AqpDataset::decode_levels(uint32_t patch, int level) const {

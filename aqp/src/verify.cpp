@@ -125,8 +125,9 @@ Mesh aqp_level_mesh(const AqpDataset& d, int level, bool weld) {
     Mesh mesh;
     std::map<std::array<uint64_t, 3>, uint32_t> welded;
     const bool colors = d.meta().has_colors();
+    const std::vector<PatchGrid> grids = d.decode_level(level);
     for (uint32_t p = 0; p < d.patch_count(); ++p) {
-        const PatchGrid g = d.decode(p, level);  // (decodes the coarser levels first)
+        const PatchGrid& g = grids[p];
         std::vector<uint32_t> vertex(g.position.size());
         for (size_t s = 0; s < g.position.size(); ++s) {
             const std::array<uint64_t, 3> key = d.grid_position(g, s);

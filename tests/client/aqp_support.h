@@ -114,16 +114,6 @@ inline std::vector<std::shared_ptr<const DecodedNode>> decode_all(const OpenedAq
     return out;
 }
 
-// The box of a patch's samples (world).
-inline Aabb patch_box(const aqp::AqpMeta& meta, uint32_t patch) {
-    Aabb box;
-    for (int a = 0; a < 3; ++a) {
-        box.min[size_t(a)] = meta.world(patch, a, 0);
-        box.max[size_t(a)] = meta.world(patch, a, meta.patches[patch].extent[size_t(a)]);
-    }
-    return box;
-}
-
 // The node (tile) holding a patch at a level.
 inline uint32_t patch_node(const OpenedAqp& o, uint32_t patch, int level) {
     const aqp::AqpMeta& meta = o.format->meta();

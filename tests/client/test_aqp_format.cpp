@@ -360,13 +360,13 @@ void expect_random_cuts_are_crack_free(AqpModel m) {
                                                          std::uniform_real_distribution<double>(-1.0, 2.0)(rng);
         const std::set<std::array<double, 3>> border = surface_border_positions(o, dataset, eye);
         const uint32_t focus = uint32_t(rng() % patches);
-        const Aabb fbox = test::patch_box(dataset.meta(), focus);
+        const Aabb fbox = aqp_patch_box(dataset.meta(), focus);
         std::vector<DecodedPart> parts;
         std::set<int> levels;
         for (uint32_t p = 0; p < patches; ++p) {
             int level = int(rng() % uint64_t(k + 1));
             if (trial % 2 == 1) {  // finer near the focus
-                const Aabb box = test::patch_box(dataset.meta(), p);
+                const Aabb box = aqp_patch_box(dataset.meta(), p);
                 double d = 0;
                 for (int a = 0; a < 3; ++a) d = std::max(d, std::abs((box.min[size_t(a)] + box.max[size_t(a)]) - (fbox.min[size_t(a)] + fbox.max[size_t(a)])) / 2);
                 const double diag = bounds.max[0] - bounds.min[0];
@@ -444,7 +444,7 @@ TEST(AqpFormat, DataDistanceBoundsTheDistanceToTheStitchedTrianglesFromBelow) {
         for (const aqp::PatchLink& link : meta.patches[p].link)
             if (link.patch < meta.patches.size()) add(link.patch, int(rng() % uint64_t(level + 1)));
         // An eye near the patch (inside its box sometimes) or anywhere around the model.
-        const Aabb box = test::patch_box(meta, p);
+        const Aabb box = aqp_patch_box(meta, p);
         std::array<double, 3> eye;
         for (int a = 0; a < 3; ++a) {
             const Aabb& around = trial % 2 ? box : bounds;

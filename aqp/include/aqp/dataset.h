@@ -40,6 +40,10 @@ public:
     // first_patch + q; empty at level 0; a null pointer skips that patch, left empty). Throws
     // Error naming the tile on a checksum or format problem. Thread-safe.
     std::vector<PatchGrid> decode_tile(uint32_t tile, int level, const std::vector<const PatchGrid*>& coarser) const;
+    // Every patch at `level` (index = patch), decoding each level's tiles once, coarse to fine,
+    // on all cores (per patch, decode() would inflate a coarse tile once for each of its
+    // patches). Throws Error as decode_tile.
+    std::vector<PatchGrid> decode_level(int level) const;
     // Decodes levels 0..level of a patch, coarse to fine (what a client streams in order).
     std::vector<PatchGrid> decode_levels(uint32_t patch, int level) const;
     // Decodes one level (through all the coarser ones).

@@ -27,16 +27,6 @@ std::array<uint64_t, 3> grid_extent(const AqpMeta& meta) {
     return out;
 }
 
-Aabb patch_box(const AqpMeta& meta, uint32_t patch) {
-    Aabb box;
-    const aqp::AqpPatchInfo& p = meta.patches[patch];
-    for (int a = 0; a < 3; ++a) {
-        box.min[size_t(a)] = meta.world(patch, a, 0);
-        box.max[size_t(a)] = meta.world(patch, a, p.extent[size_t(a)]);
-    }
-    return box;
-}
-
 // The squared distance from p to triangle abc (Ericson, Real-Time Collision Detection 5.1.5).
 double point_triangle_distance2(const Vec3d& p, const Vec3d& a, const Vec3d& b, const Vec3d& c) {
     auto sub = [](const Vec3d& x, const Vec3d& y) { return Vec3d{x[0] - y[0], x[1] - y[1], x[2] - y[2]}; };
@@ -85,7 +75,7 @@ Hierarchy build_aqp_hierarchy(const AqpMeta& meta, const std::vector<ArchiveEntr
         if (error < 0) fail("index entry %zu has a bad error bound", e);
         const uint32_t first = meta.first_patch(tile, level), count = meta.tile_patches(tile, level);
         Aabb box;
-        for (uint32_t p = first; p < first + count; ++p) box.extend(patch_box(meta, p));
+        for (uint32_t p = first; p < first + count; ++p) box.extend(aqp_patch_box(meta, p));
         const uint32_t n = h.add_node(entry.key, uint16_t(level), error, box, true);
         HierarchyNode& node = h.mutable_node(n);
         node.entry = uint32_t(e);
@@ -107,6 +97,16 @@ Hierarchy build_aqp_hierarchy(const AqpMeta& meta, const std::vector<ArchiveEntr
     }
     h.finalize();
     return h;
+}
+
+Aabb aqp_patch_box(const AqpMeta& meta, uint32_t patch) {
+    Aabb box;
+    const aqp::AqpPatchInfo& p = meta.patches[patch];
+    for (int a = 0; a < 3; ++a) {
+        box.min[size_t(a)] = meta.world(patch, a, 0);
+        box.max[size_t(a)] = meta.world(patch, a, p.extent[size_t(a)]);
+    }
+    return box;
 }
 
 const std::vector<PatchGrid>& aqp_grids(const DecodedNode& node) {

@@ -31,6 +31,9 @@ namespace catpaq {
 // 2 (n - 1)^2 grid triangles each.
 Hierarchy build_aqp_hierarchy(const aqp::AqpMeta& meta, const std::vector<ArchiveEntry>& entries);
 
+// A patch's box at every level, world coordinates (origin + step * (patch origin + [0, extent])).
+Aabb aqp_patch_box(const aqp::AqpMeta& meta, uint32_t patch);
+
 // A decoded (tile, level) node: its patches' grids, in patch order. DecodedNode's fields: bytes
 // cpu = the grids' samples (position, normal and colour arrays); gpu = what the renderer uploads
 // (aqp_gpu_bytes per patch); part_primitives = the grids' triangles; data_bounds = the box of
