@@ -397,7 +397,8 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
                 }
                 tile_error = std::max(tile_error, error[order[first + i]][size_t(l)]);
             }
-            const std::vector<uint8_t> node = encode_tile_node(grid_ptrs, coarser_ptrs, colors, o.png_compression);
+            const std::vector<uint8_t> node =
+                encode_tile_node(grid_ptrs, coarser_ptrs, colors, o.png_compression, l == 0 ? meta.tile_patch_info(tile, 0) : TilePatches{});
             ArchiveEntry entry;
             entry.key = aqp_node_key(tile, l);
             entry.level = uint16_t(l);

@@ -59,7 +59,8 @@ std::vector<PatchGrid> AqpDataset::decode_tile(uint32_t tile, int level, const s
     if (!bytes) fail("'%s' tile %u level %d: %s", path_.c_str(), tile, level, error.c_str());
     std::vector<PatchGrid> grids;
     if (std::string e = decode_tile_node(bytes, archive_->entries()[index].size, meta_.first_patch(tile, level),
-                                         meta_.tile_patches(tile, level), level, meta_.node_layout(), coarser, grids);
+                                         meta_.tile_patches(tile, level), level, meta_.node_layout(), coarser, grids,
+                                         level == 0 ? meta_.tile_patch_info(tile, 0) : TilePatches{});
         !e.empty())
         fail("'%s' tile %u level %d: %s", path_.c_str(), tile, level, e.c_str());
     return grids;

@@ -5,6 +5,11 @@
 #include <cassert>
 #include <cmath>
 #include <cstring>
+#include <tuple>
+#include <unordered_map>
+#include <utility>
+
+#include <zlib.h>
 
 #include "aqp/png_codec.h"
 #include "base/bytes.h"
@@ -12,10 +17,141 @@
 
 namespace catpaq::aqp {
 
-std::vector<uint8_t> encode_aqp_meta(const AqpMeta& m) {
+namespace {
+
+uint64_t zigzag64(int64_t v) { return (uint64_t(v) << 1) ^ uint64_t(v >> 63); }
+int64_t unzigzag64(uint64_t z) { return int64_t(z >> 1) ^ -int64_t(z & 1); }
+
+// The most bytes a version-5 patch table inflates to: every field a varint of at most 5 bytes
+// (an extent at most 3).
+size_t max_patch_table_bytes(size_t patches) { return patches * (7 * 5 + 3 * 3); }
+
+// Version 5's patch table before deflate: every field a varint, column by column (corner 0 of
+// every patch, then corner 1, ..., origin x, y, z, extent x, y, z), corners and origins as
+// zigzag differences from the previous patch's. Patches follow a Morton curve, so consecutive
+// ones share corners and lie close: the differences are small and alike, which deflate then
+// takes further. Links are left out (derive_patch_links finds them from the corners).
+std::vector<uint8_t> patch_table(const std::vector<AqpPatchInfo>& patches) {
+    ByteWriter w;
+    for (int c = 0; c < 4; ++c) {
+        int64_t previous = 0;
+        for (const AqpPatchInfo& p : patches) w.varint(zigzag64(int64_t(p.corner[c]) - std::exchange(previous, p.corner[c])));
+    }
+    for (int a = 0; a < 3; ++a) {
+        int64_t previous = 0;
+        for (const AqpPatchInfo& p : patches) w.varint(zigzag64(int64_t(p.origin[a]) - std::exchange(previous, p.origin[a])));
+    }
+    for (int a = 0; a < 3; ++a)
+        for (const AqpPatchInfo& p : patches) w.varint(p.extent[a]);
+    return std::move(w.bytes());
+}
+
+// The inverse of patch_table for `patches` (sized); an empty string, or what is wrong.
+std::string read_patch_table(const uint8_t* data, size_t size, std::vector<AqpPatchInfo>& patches) {
+    ByteReader r(data, size);
+    for (int c = 0; c < 4; ++c) {
+        int64_t value = 0;
+        for (AqpPatchInfo& p : patches) {
+            value += unzigzag64(r.varint());
+            if (value < 0 || value > int64_t(UINT32_MAX)) return "AQP metadata has a patch corner out of range";
+            p.corner[c] = uint32_t(value);
+        }
+    }
+    for (int a = 0; a < 3; ++a) {
+        int64_t value = 0;
+        for (AqpPatchInfo& p : patches) {
+            value += unzigzag64(r.varint());
+            if (value < 0 || value > int64_t(UINT32_MAX)) return "AQP metadata has a patch origin out of range";
+            p.origin[a] = uint32_t(value);
+        }
+    }
+    for (int a = 0; a < 3; ++a)
+        for (AqpPatchInfo& p : patches) {
+            const uint64_t e = r.varint();
+            if (e > UINT16_MAX) return "AQP metadata has a patch extent out of range";
+            p.extent[a] = uint16_t(e);
+        }
+    if (!r.ok()) return "AQP metadata's patch table is truncated";
+    if (r.remaining() != 0) return "AQP metadata's patch table has bytes left over";
+    return "";
+}
+
+std::vector<uint8_t> deflate_bytes(const std::vector<uint8_t>& in) {
+    uLongf size = compressBound(uLong(in.size()));
+    std::vector<uint8_t> out(size);
+    if (compress2(out.data(), &size, in.data(), uLong(in.size()), Z_BEST_COMPRESSION) != Z_OK)
+        fail("cannot deflate the AQP patch table");
+    out.resize(size);
+    return out;
+}
+
+// Inflates exactly `size` bytes of one zlib stream into at most `limit` bytes (a corrupt or
+// forged stream cannot make it allocate more); false when the stream is broken or larger.
+bool inflate_bytes(const uint8_t* data, size_t size, size_t limit, std::vector<uint8_t>& out) {
+    out.resize(limit + 1);
+    uLongf produced = uLongf(out.size());
+    uLong consumed = uLong(size);
+    if (uncompress2(out.data(), &produced, data, &consumed) != Z_OK || consumed != size || produced > limit) return false;
+    out.resize(produced);
+    return true;
+}
+
+void write_patch_records(ByteWriter& w, const std::vector<AqpPatchInfo>& patches) {
+    for (const AqpPatchInfo& p : patches) {
+        for (uint32_t c : p.corner) w.u32(c);
+        for (const PatchLink& l : p.link) {
+            w.u32(l.patch);
+            w.u8(l.edge);
+            w.u8(l.reversed ? 1 : 0);
+        }
+        for (uint32_t o : p.origin) w.u32(o);
+        for (uint16_t e : p.extent) w.u16(e);
+    }
+}
+
+}  // namespace
+
+std::string derive_patch_links(std::vector<AqpPatchInfo>& patches) {
+    // Every patch edge as (smaller corner, larger corner, patch, edge), sorted: the edges between
+    // the same two quad vertices end up next to each other.
+    struct EdgeUse {
+        uint32_t lo, hi, patch;
+        uint8_t edge;
+    };
+    std::vector<EdgeUse> uses;
+    uses.reserve(patches.size() * 4);
+    for (uint32_t p = 0; p < patches.size(); ++p)
+        for (uint8_t e = 0; e < 4; ++e) {
+            const uint32_t a = patches[p].corner[e], b = patches[p].corner[(e + 1) % 4];
+            if (a == b) return strprintf("AQP metadata: patch %u has a repeated corner", p);
+            uses.push_back({std::min(a, b), std::max(a, b), p, e});
+            patches[p].link[e] = PatchLink{};
+        }
+    std::sort(uses.begin(), uses.end(), [](const EdgeUse& x, const EdgeUse& y) {
+        return std::tie(x.lo, x.hi, x.patch, x.edge) < std::tie(y.lo, y.hi, y.patch, y.edge);
+    });
+    for (size_t i = 0; i < uses.size();) {
+        size_t j = i + 1;
+        while (j < uses.size() && uses[j].lo == uses[i].lo && uses[j].hi == uses[i].hi) ++j;
+        if (j - i > 2)
+            return strprintf("AQP metadata: the edge between quad vertices %u and %u belongs to %zu patch edges (at most 2)",
+                             uses[i].lo, uses[i].hi, j - i);
+        if (j - i == 2) {
+            const EdgeUse &x = uses[i], &y = uses[i + 1];
+            const bool reversed = patches[x.patch].corner[x.edge] != patches[y.patch].corner[y.edge];
+            patches[x.patch].link[x.edge] = {y.patch, y.edge, reversed};
+            patches[y.patch].link[y.edge] = {x.patch, x.edge, reversed};
+        }
+        i = j;
+    }
+    return "";
+}
+
+std::vector<uint8_t> encode_aqp_meta(const AqpMeta& m, uint32_t version) {
+    if (version < 4 || version > kAqpMetaVersion) fail("cannot write AQP metadata version %u", version);
     ByteWriter w;
     w.raw("AQPMETA\0", 8);
-    w.u32(kAqpMetaVersion);
+    w.u32(version);
     w.u32(m.patch_level);
     w.u32(uint32_t(m.patches.size()));
     w.u32(m.base_vertices);
@@ -33,16 +169,21 @@ std::vector<uint8_t> encode_aqp_meta(const AqpMeta& m) {
     w.u32(m.atlas_columns);
     w.u32(m.up_axis);
     for (uint32_t l = 0; l <= m.patch_level; ++l) w.u8(l < m.tile_shift.size() ? m.tile_shift[l] : 0);  // none: one patch per tile
-    for (const AqpPatchInfo& p : m.patches) {
-        for (uint32_t c : p.corner) w.u32(c);
-        for (const PatchLink& l : p.link) {
-            w.u32(l.patch);
-            w.u8(l.edge);
-            w.u8(l.reversed ? 1 : 0);
-        }
-        for (uint32_t o : p.origin) w.u32(o);
-        for (uint16_t e : p.extent) w.u16(e);
+    if (version == 4) {
+        write_patch_records(w, m.patches);
+        return std::move(w.bytes());
     }
+    // Version 5 stores no links: a reader derives them, so they must be what the corners say.
+    std::vector<AqpPatchInfo> derived = m.patches;
+    if (std::string e = derive_patch_links(derived); !e.empty()) fail("cannot write AQP metadata: %s", e.c_str());
+    for (size_t p = 0; p < derived.size(); ++p)
+        for (int e = 0; e < 4; ++e) {
+            const PatchLink &a = derived[p].link[size_t(e)], &b = m.patches[p].link[size_t(e)];
+            if (a.patch != b.patch || a.edge != b.edge || a.reversed != b.reversed)
+                fail("cannot write AQP metadata: patch %zu edge %d links other than its corners say", p, e);
+        }
+    const std::vector<uint8_t> packed = deflate_bytes(patch_table(m.patches));
+    w.raw(packed.data(), packed.size());
     return std::move(w.bytes());
 }
 
@@ -83,11 +224,11 @@ std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
         // One patch per tile everywhere is how older versions read.
         if (std::all_of(m.tile_shift.begin(), m.tile_shift.end(), [](uint8_t x) { return x == 0; })) m.tile_shift.clear();
     }
-    constexpr size_t kPatchBytes = 16 + 4 * 6 + 12 + 6;
-    if (r.remaining() != size_t(patch_count) * kPatchBytes)
+    if (patch_count == 0) return "AQP metadata has no patches";
+    constexpr size_t kPatchBytes = 16 + 4 * 6 + 12 + 6;  // a version 1-4 patch record
+    if (version <= 4 && r.remaining() != size_t(patch_count) * kPatchBytes)
         return strprintf("AQP metadata holds %zu bytes of patches, %u patches need %zu", r.remaining(), patch_count,
                          size_t(patch_count) * kPatchBytes);
-    if (patch_count == 0) return "AQP metadata has no patches";
     if (!(m.step > 0) || !std::isfinite(m.step)) return "AQP metadata has an invalid quantization step";
     for (int i = 0; i < 3; ++i)
         if (!std::isfinite(m.origin[i]) || !std::isfinite(m.bounds_min[i]) || !std::isfinite(m.bounds_max[i]))
@@ -96,7 +237,22 @@ std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
         return "AQP metadata has an invalid precision or mean edge";
     if (m.atlas_columns == 0 || m.atlas_columns > patch_count) return "AQP metadata has an invalid atlas width";
     const uint64_t quad_vertices = uint64_t(m.base_vertices) + m.base_triangles + m.border_edges;
+    // Version 5: the patch table, deflated; a patch count no table could hold is refused before
+    // anything is allocated for it (a varint is at least a byte, and deflate packs at most
+    // about 1000 to 1).
+    if (version >= 5 && uint64_t(patch_count) * 10 > uint64_t(r.remaining()) * 1032 + 64)
+        return strprintf("AQP metadata's patch table is too short for %u patches", patch_count);
     m.patches.assign(patch_count, {});
+    if (version >= 5) {
+        std::vector<uint8_t> table;
+        if (!inflate_bytes(r.cursor(), r.remaining(), max_patch_table_bytes(patch_count), table))
+            return "AQP metadata's patch table is not a valid deflate stream of the expected size";
+        if (std::string e = read_patch_table(table.data(), table.size(), m.patches); !e.empty()) return e;
+        for (const AqpPatchInfo& p : m.patches)
+            for (uint32_t c : p.corner)
+                if (c >= quad_vertices) return "AQP metadata has a patch corner out of range";
+        return derive_patch_links(m.patches);
+    }
     for (AqpPatchInfo& p : m.patches) {
         for (uint32_t& c : p.corner) c = r.u32();
         for (PatchLink& l : p.link) {
@@ -216,6 +372,80 @@ void put_byte_planes(const std::vector<uint32_t>& v, int side, int channels, con
 
 // Planes per sample: two per 16-bit channel, one per 8-bit one.
 int plane_count(int channels) { return channels + 3; }
+
+// A level-0 grid's samples in grid order, (0,0), (1,0), (0,1), (1,1), are corners 0, 1, 3, 2.
+constexpr int kCornerOfSample[4] = {0, 1, 3, 2};
+
+// A level-0 tile's samples with shared corners (version 5): walking its patches in order, each
+// patch's four samples in grid order, the (patch, sample) where each quad vertex first appears,
+// and for every (patch, sample) the index of its quad vertex's stored sample. A patch's own
+// corners are distinct, so a tile of one stores its four samples as versions 3-4 do. A stored
+// position is local to the patch it is stored for; another patch showing it moves it by the
+// difference of their origins (the world grid position is the same: the converter computes each
+// sample once). Why: a quad vertex is a corner of 3 to about 8 patches, and byte planes keep
+// deflate from finding the repeats; on the 2M-triangle scan-like mesh level 0 went from 42,759
+// to 17,917 bytes.
+struct SharedCorners {
+    std::vector<std::pair<uint32_t, int>> stored;  // (patch in the tile, sample)
+    std::vector<std::array<uint32_t, 4>> index;    // per patch and sample: position in `stored`
+};
+
+SharedCorners shared_corners(const TilePatches& patches) {
+    SharedCorners out;
+    std::unordered_map<uint32_t, uint32_t> at;
+    for (uint32_t q = 0; q < patches.size(); ++q) {
+        std::array<uint32_t, 4>& index = out.index.emplace_back();
+        for (int s = 0; s < 4; ++s) {
+            auto [it, first] = at.emplace(patches[q].corner[size_t(kCornerOfSample[s])], uint32_t(out.stored.size()));
+            if (first) out.stored.emplace_back(q, s);
+            index[size_t(s)] = it->second;
+        }
+    }
+    return out;
+}
+
+// Moves the position of sample s in level-0 values (node_values: channels x 4) from the frame of
+// patch `from` to that of patch `to`; false when it falls outside 16 bits there.
+bool move_position(std::vector<uint32_t>& v, int s, const AqpPatchInfo& from, const AqpPatchInfo& to) {
+    for (int a = 0; a < 3; ++a) {
+        uint32_t& x = v[size_t(a) * 4 + size_t(s)];
+        const int64_t moved = int64_t(x) + int64_t(from.origin[size_t(a)]) - int64_t(to.origin[size_t(a)]);
+        if (moved < 0 || moved > 0xffff) return false;
+        x = uint32_t(moved);
+    }
+    return true;
+}
+
+// Writes sample s of a level-0 grid's values (node_values) into column k of the byte planes.
+void put_corner(const std::vector<uint32_t>& v, int channels, int s, size_t k, PngImage& im) {
+    const size_t width = size_t(im.width);
+    size_t row = 0;
+    for (int c = 0; c < channels; ++c) {
+        const uint32_t value = v[size_t(c) * 4 + size_t(s)];
+        if (channel_bits(c) == 16) {
+            im.values[row * width + k] = uint16_t(value >> 8);
+            im.values[(row + 1) * width + k] = uint16_t(value & 0xff);
+            row += 2;
+        } else {
+            im.values[row++ * width + k] = uint16_t(value);
+        }
+    }
+}
+
+// The inverse: column k of the byte planes into sample s of a level-0 grid's values.
+void get_corner(const PngImage& im, int channels, size_t k, int s, std::vector<uint32_t>& v) {
+    const size_t width = size_t(im.width);
+    size_t row = 0;
+    for (int c = 0; c < channels; ++c) {
+        uint32_t& value = v[size_t(c) * 4 + size_t(s)];
+        if (channel_bits(c) == 16) {
+            value = uint32_t(im.values[row * width + k]) << 8 | im.values[(row + 1) * width + k];
+            row += 2;
+        } else {
+            value = im.values[row++ * width + k];
+        }
+    }
+}
 
 // Versions 1-2: RGB 16-bit, positions on the left half, normals and colours on the right.
 PngImage rgb16_pixels(const std::vector<uint32_t>& v, int side, int channels) {
@@ -370,10 +600,34 @@ bool usable_coarser(const PatchGrid* coarser, int level, bool colors) {
 }  // namespace
 
 std::vector<uint8_t> encode_tile_node(const std::vector<const PatchGrid*>& grids, const std::vector<const PatchGrid*>& coarser,
-                                      bool colors, int compression) {
+                                      bool colors, int compression, const TilePatches& patches) {
     assert(!grids.empty() && (coarser.empty() || coarser.size() == grids.size()));
-    const NodeLayout layout{colors, true};
+    const NodeLayout layout{colors, true, !patches.empty()};
     const int side = grids[0]->size, channels = channel_count(layout);
+    if (grids[0]->level == 0 && layout.shared_corners && grids.size() > 1) {
+        assert(patches.size() == grids.size() && coarser.empty());
+        const SharedCorners shared = shared_corners(patches);
+        PngImage im{int(shared.stored.size()), plane_count(channels), 1, 8, {}};
+        im.values.resize(im.value_count());
+        std::vector<std::vector<uint32_t>> values(grids.size());
+        for (size_t q = 0; q < grids.size(); ++q) values[q] = checked_node_values(*grids[q], nullptr, layout);
+        for (size_t k = 0; k < shared.stored.size(); ++k) put_corner(values[shared.stored[k].first], channels, shared.stored[k].second, k, im);
+        // Every patch showing a quad vertex must hold the same sample (the converter computes
+        // each once): a difference could not be stored.
+        for (size_t q = 0; q < grids.size(); ++q)
+            for (int s = 0; s < 4; ++s) {
+                const auto [first_q, first_s] = shared.stored[shared.index[q][size_t(s)]];
+                std::vector<uint32_t> mine = values[q];
+                const bool moved = move_position(mine, s, patches[q], patches[first_q]);
+                bool same = moved;
+                for (int c = 0; same && c < channels; ++c)
+                    same = mine[size_t(c) * 4 + size_t(s)] == values[first_q][size_t(c) * 4 + size_t(first_s)];
+                if (!same)
+                    fail("patches %u and %u differ at their shared corner (quad vertex %u)", grids[q]->patch,
+                         grids[first_q]->patch, patches[q].corner[size_t(kCornerOfSample[s])]);
+            }
+        return png_encode(im, compression, false);
+    }
     const std::vector<uint32_t> stored = stored_samples(side, !coarser.empty());
     const size_t width = stored.size() * grids.size();
     if (width > size_t(1) << 30) fail("a tile of %zu patches at level %d is too wide for one image", grids.size(), grids[0]->level);
@@ -398,7 +652,8 @@ std::vector<uint8_t> encode_patch_node(const PatchGrid& g, const PatchGrid* coar
 }
 
 std::string decode_tile_node(const uint8_t* data, size_t size, uint32_t first_patch, uint32_t count, int level,
-                             NodeLayout layout, const std::vector<const PatchGrid*>& coarser, std::vector<PatchGrid>& out) {
+                             NodeLayout layout, const std::vector<const PatchGrid*>& coarser, std::vector<PatchGrid>& out,
+                             const TilePatches& patches) {
     if (level < 0 || level > kMaxPatchLevel) return strprintf("patch level %d out of range", level);
     if (count == 0) return "a tile of no patches";
     if (!layout.byte_planes && count != 1) return "a node of this dataset's version holds one patch";
@@ -416,6 +671,27 @@ std::string decode_tile_node(const uint8_t* data, size_t size, uint32_t first_pa
     }
     if (!any) return "no patch of the tile asked for";
     const int channels = channel_count(layout);
+    // (A tile of one patch stores its four samples either way.)
+    if (level == 0 && layout.byte_planes && layout.shared_corners && count > 1) {
+        if (patches.size() != count) return "decoding a level-0 tile needs its patches' records";
+        const SharedCorners shared = shared_corners(patches);
+        PngImage image;
+        if (const std::string e = png_decode(data, size, int(shared.stored.size()), plane_count(channels), 1, 8, image); !e.empty())
+            return "AQP node image: " + e;
+        out.assign(count, PatchGrid{});
+        std::vector<uint32_t> v(size_t(channels) * 4);
+        for (uint32_t q = 0; q < count; ++q) {
+            for (int s = 0; s < 4; ++s) {
+                const uint32_t k = shared.index[q][size_t(s)];
+                get_corner(image, channels, k, s, v);
+                if (!move_position(v, s, patches[shared.stored[k].first], patches[q]))
+                    return strprintf("AQP level-0 tile: the corner of patch %u at sample %d lies outside the patch's frame",
+                                     first_patch + q, s);
+            }
+            values_to_grid(v, first_patch + q, 0, colors, channels, nullptr, out[q]);
+        }
+        return "";
+    }
     const std::vector<uint32_t> stored = stored_samples(side, level > 0);
     const uint64_t width = uint64_t(stored.size()) * count;
     if (width > uint64_t(1) << 30) return strprintf("a tile of %u patches at level %d is too wide", count, level);

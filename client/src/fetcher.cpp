@@ -654,7 +654,7 @@ void Fetcher::decode_loop() {
         d.node.attempts = job.attempts;
         const std::vector<uint8_t>& bytes = *job.bytes;
         const bool whole = job.request.part == kWholeNode;
-        if (bytes.size() != job.request.size || (whole && checksum64(bytes.data(), bytes.size()) != job.request.checksum)) {
+        if (bytes.size() != job.request.size || (whole && !archive_checksum_matches(job.request.checksum, bytes.data(), bytes.size()))) {
             d.corrupt = true;
             d.checksum_failed = true;
             d.node.error = whole ? strprintf("node %llu: %zu bytes that do not match the index checksum",

@@ -9,6 +9,9 @@
 #include <sys/mman.h>
 #include <sys/stat.h>
 #include <unistd.h>
+#include <utility>
+
+#include <zlib.h>
 
 #include "base/atomic_file.h"
 #include "base/bytes.h"
@@ -24,6 +27,16 @@ const char* archive_kind_name(ArchiveKind kind) {
         case ArchiveKind::Points: return "points";
     }
     return "unknown";
+}
+
+uint64_t archive_node_checksum(uint32_t version, const uint8_t* data, size_t size) {
+    const uint64_t h = checksum64(data, size);
+    return version >= 2 ? h & 0xffffffffu : h;
+}
+
+bool archive_checksum_matches(uint64_t stored, const uint8_t* data, size_t size) {
+    const uint64_t h = checksum64(data, size);
+    return stored == h || (stored >> 32 == 0 && stored == (h & 0xffffffffu));
 }
 
 static void write_header(ByteWriter& w, const ArchiveHeader& h) {
@@ -43,15 +56,87 @@ static void write_header(ByteWriter& w, const ArchiveHeader& h) {
     w.u64(checksum64(w.bytes().data(), w.size()));
 }
 
-static void write_entry(ByteWriter& w, const ArchiveEntry& e) {
-    w.u64(e.key);
-    w.u64(e.offset);
-    w.u32(e.size);
-    w.u16(e.level);
-    w.u16(e.flags);
-    w.u32(e.count);
-    w.f32(e.error);
-    w.u64(e.checksum);
+// Version 2's index before deflate: column by column, every entry's level (as a difference from
+// the previous entry's), key (zigzag difference from the previous entry's, wrapping), size,
+// flags and count as varints; then the errors as four byte planes (low bytes of every error
+// first) and the checksums, 4 bytes each (archive_node_checksum). Offsets are not stored: payloads follow the index in
+// index order without gaps. In columns deflate finds alike values together: on a 2M-triangle
+// AQP dataset (2982 nodes) the index went from 119,280 bytes (version 1's 40 a node) to
+// 26,778, of which the checksums (4 bytes a node, which do not compress) are 11,928.
+static std::vector<uint8_t> packed_index(const std::vector<ArchiveEntry>& entries) {
+    ByteWriter w;
+    uint64_t previous_level = 0, previous_key = 0;
+    for (const ArchiveEntry& e : entries) w.varint(e.level - std::exchange(previous_level, e.level));
+    for (const ArchiveEntry& e : entries) {
+        const int64_t d = int64_t(e.key - std::exchange(previous_key, e.key));
+        w.varint((uint64_t(d) << 1) ^ uint64_t(d >> 63));
+    }
+    for (const ArchiveEntry& e : entries) w.varint(e.size);
+    for (const ArchiveEntry& e : entries) w.varint(e.flags);
+    for (const ArchiveEntry& e : entries) w.varint(e.count);
+    for (int b = 0; b < 4; ++b)
+        for (const ArchiveEntry& e : entries) {
+            uint32_t bits;
+            std::memcpy(&bits, &e.error, 4);
+            w.u8(uint8_t(bits >> (8 * b)));
+        }
+    for (const ArchiveEntry& e : entries) w.u32(uint32_t(e.checksum));
+    uLongf size = compressBound(uLong(w.size()));
+    std::vector<uint8_t> out(size);
+    if (compress2(out.data(), &size, w.bytes().data(), uLong(w.size()), Z_BEST_COMPRESSION) != Z_OK)
+        fail("archive: cannot deflate the index");
+    out.resize(size);
+    return out;
+}
+
+// The inverse of packed_index for `count` entries; offsets from `payload_start` on. An empty
+// string, or what is wrong.
+static std::string read_packed_index(const uint8_t* data, size_t size, uint32_t count, uint64_t payload_start,
+                                     std::vector<ArchiveEntry>& out) {
+    const size_t limit = size_t(count) * kMaxPackedEntryBytes;
+    std::vector<uint8_t> raw(limit + 1);
+    uLongf produced = uLongf(raw.size());
+    uLong consumed = uLong(size);
+    if (uncompress2(raw.data(), &produced, data, &consumed) != Z_OK || consumed != size || produced > limit)
+        return "index is not a valid deflate stream of the expected size (corrupt dataset)";
+    ByteReader r(raw.data(), produced);
+    out.assign(count, ArchiveEntry{});
+    uint64_t level = 0, key = 0, offset = payload_start;
+    for (ArchiveEntry& e : out) {
+        level += r.varint();
+        if (level > UINT16_MAX) return "index has a level out of range";
+        e.level = uint16_t(level);
+    }
+    for (ArchiveEntry& e : out) {
+        const uint64_t z = r.varint();
+        key += uint64_t(int64_t(z >> 1) ^ -int64_t(z & 1));
+        e.key = key;
+    }
+    for (ArchiveEntry& e : out) {
+        const uint64_t v = r.varint();
+        if (v > UINT32_MAX) return "index has a node size out of range";
+        e.size = uint32_t(v);
+        e.offset = offset;
+        offset += v;
+    }
+    for (ArchiveEntry& e : out) {
+        const uint64_t v = r.varint();
+        if (v > UINT16_MAX) return "index has node flags out of range";
+        e.flags = uint16_t(v);
+    }
+    for (ArchiveEntry& e : out) {
+        const uint64_t v = r.varint();
+        if (v > UINT32_MAX) return "index has a node count out of range";
+        e.count = uint32_t(v);
+    }
+    std::vector<uint32_t> bits(count, 0);
+    for (int b = 0; b < 4; ++b)
+        for (uint32_t& x : bits) x |= uint32_t(r.u8()) << (8 * b);
+    for (uint32_t i = 0; i < count; ++i) std::memcpy(&out[i].error, &bits[i], 4);
+    for (ArchiveEntry& e : out) e.checksum = r.u32();
+    if (!r.ok()) return "index truncated";
+    if (r.remaining() != 0) return "index has bytes left over";
+    return "";
 }
 
 static bool entry_less(const ArchiveEntry& a, const ArchiveEntry& b) {
@@ -63,8 +148,8 @@ std::string parse_archive_header(const uint8_t* data, size_t size, ArchiveHeader
     if (std::memcmp(data, kArchiveMagic, 8) != 0) return "not a catpaq dataset (bad magic)";
     ByteReader r(data + 8, kArchiveHeaderSize - 8);
     h.version = r.u32();
-    if (h.version != kArchiveVersion)
-        return strprintf("unsupported dataset version %u (this build reads version %u)", h.version, kArchiveVersion);
+    if (h.version < 1 || h.version > kArchiveVersion)
+        return strprintf("unsupported dataset version %u (this build reads versions 1 to %u)", h.version, kArchiveVersion);
     uint32_t kind = r.u32();
     h.file_size = r.u64();
     h.meta_offset = r.u64();
@@ -82,7 +167,13 @@ std::string parse_archive_header(const uint8_t* data, size_t size, ArchiveHeader
     h.kind = ArchiveKind(kind);
     if (h.meta_offset != kArchiveHeaderSize) return "bad meta offset";
     if (h.index_offset != h.meta_offset + h.meta_size) return "bad index offset";
-    if (h.index_size != uint64_t(h.node_count) * kArchiveEntrySize) return "index size does not match node count";
+    if (h.version == 1 && h.index_size != uint64_t(h.node_count) * kArchiveEntrySize)
+        return "index size does not match node count";
+    // Version 2: a node count no index of this size could hold is refused before anything is
+    // allocated for it (an entry is at least kMinPackedEntryBytes before deflate, which packs at
+    // most about 1032 to 1).
+    if (h.version >= 2 && uint64_t(h.node_count) * kMinPackedEntryBytes > h.index_size * 1032 + 64)
+        return "index too short for its node count";
     if (h.index_offset + h.index_size > h.file_size) return "index extends past the end of the file";
     return "";
 }
@@ -90,25 +181,32 @@ std::string parse_archive_header(const uint8_t* data, size_t size, ArchiveHeader
 std::string parse_archive_index(const ArchiveHeader& h, const uint8_t* data, size_t size, std::vector<ArchiveEntry>& out) {
     if (size != h.index_size) return "index has the wrong size";
     if (checksum64(data, size) != h.index_checksum) return "index checksum mismatch (corrupt dataset)";
-    ByteReader r(data, size);
-    out.resize(h.node_count);
-    uint64_t payload_start = h.index_offset + h.index_size;
+    const uint64_t payload_start = h.index_offset + h.index_size;
+    if (h.version >= 2) {
+        if (std::string e = read_packed_index(data, size, h.node_count, payload_start, out); !e.empty()) return e;
+    } else {
+        ByteReader r(data, size);
+        out.resize(h.node_count);
+        for (ArchiveEntry& e : out) {
+            e.key = r.u64();
+            e.offset = r.u64();
+            e.size = r.u32();
+            e.level = r.u16();
+            e.flags = r.u16();
+            e.count = r.u32();
+            e.error = r.f32();
+            e.checksum = r.u64();
+        }
+        if (!r.ok()) return "index truncated";
+    }
     for (uint32_t i = 0; i < h.node_count; ++i) {
-        ArchiveEntry& e = out[i];
-        e.key = r.u64();
-        e.offset = r.u64();
-        e.size = r.u32();
-        e.level = r.u16();
-        e.flags = r.u16();
-        e.count = r.u32();
-        e.error = r.f32();
-        e.checksum = r.u64();
+        const ArchiveEntry& e = out[i];
         if (e.size > 0 && (e.offset < payload_start || e.offset + e.size > h.file_size))
             return strprintf("node %u lies outside the file", i);
         if (!(e.error >= 0.0f) || !std::isfinite(e.error)) return strprintf("node %u has an invalid error", i);
         if (i > 0 && !entry_less(out[i - 1], e)) return "index is not sorted by (level, key) or has duplicates";
     }
-    return r.ok() ? "" : "index truncated";
+    return "";
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -139,7 +237,7 @@ ArchiveWriter::~ArchiveWriter() {
 
 void ArchiveWriter::add_node(ArchiveEntry entry, const uint8_t* data, size_t size) {
     entry.size = uint32_t(size);
-    entry.checksum = checksum64(data, size);
+    entry.checksum = archive_node_checksum(kArchiveVersion, data, size);
     std::lock_guard lock(impl_->mutex);
     entry.offset = impl_->spill_size;
     if (size && std::fwrite(data, 1, size, impl_->spill) != size)
@@ -162,7 +260,9 @@ uint64_t ArchiveWriter::finish(const std::vector<uint8_t>& meta) {
     h.meta_size = uint32_t(meta.size());
     h.node_count = uint32_t(m.entries.size());
     h.index_offset = h.meta_offset + h.meta_size;
-    h.index_size = uint64_t(h.node_count) * kArchiveEntrySize;
+    // The index's size depends on the sizes only (offsets are implied), so it is packed first.
+    const std::vector<uint8_t> index = packed_index(m.entries);
+    h.index_size = index.size();
     uint64_t offset = h.index_offset + h.index_size;
     std::vector<uint64_t> spill_offsets(m.entries.size());
     for (size_t i = 0; i < m.entries.size(); ++i) {
@@ -171,10 +271,8 @@ uint64_t ArchiveWriter::finish(const std::vector<uint8_t>& meta) {
         offset += m.entries[i].size;
     }
     h.file_size = offset;
-    ByteWriter index;
-    for (const ArchiveEntry& e : m.entries) write_entry(index, e);
     h.meta_checksum = checksum64(meta.data(), meta.size());
-    h.index_checksum = checksum64(index.bytes().data(), index.size());
+    h.index_checksum = checksum64(index.data(), index.size());
     ByteWriter header;
     write_header(header, h);
 
@@ -182,7 +280,7 @@ uint64_t ArchiveWriter::finish(const std::vector<uint8_t>& meta) {
     AtomicFile out(m.path);
     out.write(header.bytes().data(), header.size());
     out.write(meta.data(), meta.size());
-    out.write(index.bytes().data(), index.size());
+    out.write(index.data(), index.size());
     std::vector<uint8_t> buffer;
     for (size_t i = 0; i < m.entries.size(); ++i) {
         buffer.resize(m.entries[i].size);
@@ -282,7 +380,7 @@ int64_t ArchiveReader::find(uint64_t key) const {
 const uint8_t* ArchiveReader::node(size_t i, std::string* error) const {
     const ArchiveEntry& e = impl_->entries.at(i);
     const uint8_t* p = impl_->map + e.offset;
-    if (checksum64(p, e.size) != e.checksum) {
+    if (!archive_checksum_matches(e.checksum, p, e.size)) {
         if (error) *error = strprintf("'%s': node %llu checksum mismatch (corrupt dataset)", impl_->path.c_str(),
                                       (unsigned long long)e.key);
         return nullptr;

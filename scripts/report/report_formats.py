@@ -283,3 +283,19 @@ def stream_section(raw, paths, stream_triangles, w):
     w(md_table(["view", "format", "bytes fetched", "of its dataset", "requests", "drawn", "GPU bytes",
                 "wall ms", "tolerance met"], rows))
     w("")
+    # The first frame: what a client fetches before it draws the whole model (catpaq info).
+    first_rows = []
+    for ds in ("scan", "scanaqp", "scanaqp1", "scanpts"):
+        text = read(os.path.join(raw, "info_%s.txt" % ds))
+        size = re.search(r"of which (\d+) of header, metadata and index", text)
+        first = re.search(r"first frame: (\d+) bytes \(the prefix, and level 0: (\d+)\)", text)
+        need(size and first, "catpaq info's prefix and first frame for %s" % ds)
+        total = int(first.group(1))
+        first_rows.append([names[ds], f"{int(size.group(1)):,}", f"{int(first.group(2)):,}", f"{total:,}",
+                           "yes" if total <= 65536 else "no"])
+    w("*First frame*: what a client fetches before it draws the whole model, coarsely (`catpaq info`): "
+      "the prefix (header, metadata and node index) and level 0 (CATP's root diamond, AQP's level-0 "
+      "tiles, the point tree's root). The mission's bound is 64 KiB.")
+    w("")
+    w(md_table(["format", "prefix bytes", "level 0 bytes", "first frame bytes", "within 64 KiB"], first_rows))
+    w("")

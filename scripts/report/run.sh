@@ -223,6 +223,10 @@ required "convert scan points" "$RAW/convert_scan_points.json" "$CATPAQ" convert
     --format points --json --quiet
 e=$(date +%s%N)
 echo "$(( (e - s) / 1000000 ))" > "$RAW/convert_scan_points_ms.txt"
+# What each needs before it draws the whole model (section 8's first frame).
+for d in scan scanaqp scanaqp1 scanpts; do
+    required "info $d" "$RAW/info_$d.txt" "$CATPAQ" info "$WORK/root/$d.cpq"
+done
 
 log "serve"
 "$CATPAQ" serve --root "$WORK/root" --port 0 --log-level warn > "$WORK/serve.log" 2>&1 &

@@ -50,7 +50,7 @@ const Built& sphere_untiled_dataset() {
 // (which follow the up axis, at byte 156: format.h), and the version number.
 std::vector<uint8_t> meta_as_version(const AqpMeta& m, uint32_t version) {
     EXPECT_TRUE(m.tile_shift.empty());
-    std::vector<uint8_t> bytes = encode_aqp_meta(m);
+    std::vector<uint8_t> bytes = encode_aqp_meta(m, 4);  // 58-byte patch records, as versions 1-4
     constexpr size_t kTileShiftOffset = 156;
     bytes.erase(bytes.begin() + kTileShiftOffset, bytes.begin() + kTileShiftOffset + m.patch_level + 1);
     bytes[8] = uint8_t(version);
@@ -84,7 +84,9 @@ void rewrite_with_edit(const std::string& from, const std::string& to, uint32_t 
             EXPECT_EQ(count, 1u);
             node = encode_patch_node(*grids[0], l > 0 ? coarser[0] : nullptr, NodeLayout{meta.has_colors(), false});
         } else {
-            node = encode_tile_node(grids, coarser, meta.has_colors());
+            node = encode_tile_node(grids, coarser, meta.has_colors(), 6,
+                                    l == 0 && meta.node_layout().shared_corners ? meta.tile_patch_info(aqp_key_tile(entries[i].key), 0)
+                                                                                : TilePatches{});
         }
         w.add_node(entries[i], node.data(), node.size());
     }

@@ -3,6 +3,7 @@
 #include <map>
 #include <nlohmann/json.hpp>
 
+#include "common_codec/archive.h"
 #include "base/checksum.h"
 #include "support.h"
 
@@ -211,7 +212,7 @@ TEST_F(Routes, CorruptNodeGives500AndALogLineWhileTheOtherNodesStillServe) {
 TEST_F(Routes, NodeETagIsItsChecksumAndIfNoneMatchGives304) {
     RawClient client(port());
     const BuiltNode& node = alpha_node(fixture->alpha[3].key);
-    std::string etag = "\"" + hex64(checksum64(node.bytes.data(), node.bytes.size())) + "\"";
+    std::string etag = "\"" + hex64(archive_node_checksum(kArchiveVersion, node.bytes.data(), node.bytes.size())) + "\"";
     HttpResponse r = client.get(node_path("alpha", node.key));
     EXPECT_EQ(r.header("ETag"), etag);
     EXPECT_EQ(r.header("Cache-Control"), "public, max-age=31536000, immutable");

@@ -14,9 +14,13 @@
 //   u8 tile shift[k + 1] (version 4; older versions have none and read as 0): level l's tile t
 //       holds patches t * 4^s .. (t + 1) * 4^s - 1 (s = shift[l], the last tile fewer),
 //       shifts non-increasing with the level, so a tile lies in one tile of each coarser level
-//   per patch: u32 corner[4] (quad vertex ids)
-//              4 x (u32 neighbour patch or 0xFFFFFFFF, u8 its edge, u8 reversed)
-//              u32 origin[3] (quantization grid) | u16 extent[3] (largest local coordinate)
+//   the patches (version 5): one zlib stream of varints, column by column: corner c of every
+//       patch in turn (c = 0..3, quad vertex ids), then origin axis a (quantization grid), both
+//       as zigzag differences from the previous patch's, then extent axis a (largest local
+//       coordinate). No links: patch edge e runs from corner e to corner (e + 1) % 4, and the
+//       two patch edges between the same quad vertices are linked (derive_patch_links).
+//   (versions 1-4: per patch u32 corner[4] | 4 x (u32 neighbour patch or 0xFFFFFFFF, u8 its
+//       edge, u8 reversed) | u32 origin[3] | u16 extent[3], 58 bytes)
 //
 // Node (key = tile << 8 | level, level = level, count = samples of its patches' grids, error =
 // bound in world units, the largest of its patches'): the bytes of one PNG file (nothing else:
@@ -47,7 +51,8 @@
 
 namespace catpaq::aqp {
 
-constexpr uint32_t kAqpMetaVersion = 4;  // 1 (no up axis), 2 (RGB16 nodes) and 3 (no tiles) still read
+// 1 (no up axis), 2 (RGB16 nodes), 3 (no tiles) and 4 (58-byte patch records) still read.
+constexpr uint32_t kAqpMetaVersion = 5;
 constexpr int kMaxPatchLevel = 10;
 constexpr uint32_t kAqpColorFlag = 1;
 constexpr int kMaxTileShift = 15;  // 4^15 patches: above any patch count the metadata allows
@@ -63,7 +68,15 @@ struct AqpPatchInfo {
 struct NodeLayout {
     bool colors = false;
     bool byte_planes = true;  // version 3: 8-bit grey byte planes; versions 1-2: RGB16 pixels
+    // Version 5: a level-0 tile stores each quad vertex its patches' corners share once
+    // (TilePatches); versions 3-4 store every patch's four.
+    bool shared_corners = true;
 };
+
+// A tile's patches' records, in order: what a level-0 node with shared corners needs (the corner
+// ids say which stored sample each patch has, the origins move a position from the frame of the
+// patch it is stored for to another's).
+using TilePatches = std::vector<AqpPatchInfo>;
 
 struct AqpMeta {
     uint32_t version = kAqpMetaVersion;  // as read; encode_aqp_meta always writes the current one
@@ -82,7 +95,7 @@ struct AqpMeta {
     std::vector<AqpPatchInfo> patches;
 
     bool has_colors() const { return flags & kAqpColorFlag; }
-    NodeLayout node_layout() const { return {has_colors(), version >= 3}; }
+    NodeLayout node_layout() const { return {has_colors(), version >= 3, version >= 5}; }
     // Tiles: level l's tile t holds patches first_patch(t, l) .. + tile_patches(t, l) - 1.
     int shift(int level) const { return tile_shift.empty() ? 0 : tile_shift[size_t(level)]; }
     uint32_t tile_count(int level) const {
@@ -95,16 +108,28 @@ struct AqpMeta {
         const uint64_t first = uint64_t(tile) << (2 * shift(level)), size = uint64_t(1) << (2 * shift(level));
         return uint32_t(std::min<uint64_t>(size, patches.size() - first));
     }
+    TilePatches tile_patch_info(uint32_t tile, int level) const {
+        const auto first = patches.begin() + first_patch(tile, level);
+        return TilePatches(first, first + tile_patches(tile, level));
+    }
     // World coordinate `axis` of local coordinate `local` of patch p.
     double world(uint32_t p, int axis, uint32_t local) const {
         return origin[axis] + step * double(uint64_t(patches[p].origin[axis]) + local);
     }
 };
 
-std::vector<uint8_t> encode_aqp_meta(const AqpMeta& meta);
+// Writes the current version (or version 4, for tests of older readers). Throws Error when the
+// patches' links are not those their corners imply (version 5 stores none).
+std::vector<uint8_t> encode_aqp_meta(const AqpMeta& meta, uint32_t version = kAqpMetaVersion);
 // Empty string on success, else what is wrong. Checks every field a reader relies on (levels,
 // counts, links pointing at patches that link back).
 std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& out);
+
+// Sets every patch's links from the corners: patch edge e runs from corner e to corner
+// (e + 1) % 4; two patch edges between the same two quad vertices are linked, reversed when they
+// run it in opposite directions; an edge of one patch is on the border. An empty string, or
+// what is wrong (a patch with a repeated corner, an edge of more than two patches).
+std::string derive_patch_links(std::vector<AqpPatchInfo>& patches);
 
 // A node's key: its tile at its level (with one patch per tile, the tile is the patch).
 inline uint64_t aqp_node_key(uint32_t tile, int level) { return (uint64_t(tile) << 8) | uint64_t(level); }
@@ -132,18 +157,22 @@ int predict_from_coarser(const PatchGrid& coarser, int channel, int i, int j);
 
 // The node payload of a tile: `grids` (consecutive patches, one level; PNG at zlib level
 // `compression`) in the version-3 layout; `coarser` holds the same patches one level down
-// (empty at level 0). Throws Error when a grid does not nest in its coarser level (it could not
-// store the difference).
+// (empty at level 0). At level 0, with `patches` (the grids' records, TilePatches), each quad
+// vertex the corners share is stored once (version 5; without, every patch's four).
+// Throws Error when a grid does not nest in its coarser level (it could not store the
+// difference), or shared corners differ.
 std::vector<uint8_t> encode_tile_node(const std::vector<const PatchGrid*>& grids, const std::vector<const PatchGrid*>& coarser,
-                                      bool colors, int compression = 6);
+                                      bool colors, int compression = 6, const TilePatches& patches = {});
 // Decodes a tile node of `count` patches from `first_patch` at `level` (0 <= level <=
 // kMaxPatchLevel) laid out as `layout` (colours exactly when layout.colors; byte planes: RGB16
 // nodes hold one patch). Above level 0, `coarser` gives each patch's decoded coarser level
 // (count pointers); a patch whose pointer is null is skipped (left empty in `out`: a reader
-// after one patch of a tile need not have the others). Safe on untrusted bytes: empty string on
-// success, else what is wrong.
+// after one patch of a tile need not have the others). At level 0 with layout.shared_corners,
+// `patches` gives the tile's patch records (count of them). Safe on untrusted bytes: empty
+// string on success, else what is wrong.
 std::string decode_tile_node(const uint8_t* data, size_t size, uint32_t first_patch, uint32_t count, int level,
-                             NodeLayout layout, const std::vector<const PatchGrid*>& coarser, std::vector<PatchGrid>& out);
+                             NodeLayout layout, const std::vector<const PatchGrid*>& coarser, std::vector<PatchGrid>& out,
+                             const TilePatches& patches = {});
 
 // One patch as a node of its own (a tile of one): `layout` may be the older RGB16 one, kept for
 // tests of old datasets.

@@ -164,7 +164,7 @@ std::string AqpFormat::decode(uint32_t node, const uint8_t* data, size_t size, s
                          level - 1);
     auto decoded = std::make_shared<AqpNode>();
     if (std::string e = aqp::decode_tile_node(data, size, meta_.first_patch(tile, 0), meta_.tile_patches(tile, 0), 0,
-                                              meta_.node_layout(), {}, decoded->grids);
+                                              meta_.node_layout(), {}, decoded->grids, meta_.tile_patch_info(tile, 0));
         !e.empty())
         return e;
     account(*decoded);

@@ -7,7 +7,9 @@
 //
 //   offset 0   Header (96 bytes, below)
 //   meta       format-specific metadata (catp/format.h documents CATP's), meta_size bytes
-//   index      node_count entries of 40 bytes, sorted by (level, key)
+//   index      node_count entries sorted by (level, key): version 2 one deflate stream of their
+//              fields column by column (no offsets: payloads follow in index order), version 1
+//              40 bytes an entry
 //   payload    node bytes, in index order
 //
 // Every part carries an XXH3-64 checksum; readers reject unknown magic and versions.
@@ -20,9 +22,13 @@
 namespace catpaq {
 
 constexpr char kArchiveMagic[8] = {'C', 'P', 'Q', 'A', 'R', 'C', 'H', '\x1a'};
-constexpr uint32_t kArchiveVersion = 1;
+constexpr uint32_t kArchiveVersion = 2;  // version 1 (40-byte index entries) still reads
 constexpr size_t kArchiveHeaderSize = 96;
-constexpr size_t kArchiveEntrySize = 40;
+constexpr size_t kArchiveEntrySize = 40;  // version 1
+// Version 2's entries before deflate: at least a byte per varint (level, key, size, flags,
+// count), 4 of error and 4 of checksum; at most 10 per 64-bit varint, 5 per 32-bit, 3 per 16-bit.
+constexpr size_t kMinPackedEntryBytes = 5 + 4 + 4;
+constexpr size_t kMaxPackedEntryBytes = 3 + 10 + 5 + 3 + 5 + 4 + 4;
 
 enum class ArchiveKind : uint32_t { Catp = 1, Aqp = 2, Points = 3 };
 const char* archive_kind_name(ArchiveKind kind);
@@ -51,8 +57,17 @@ struct ArchiveEntry {
     uint16_t flags = 0;
     uint32_t count = 0;
     float error = 0.0f;
-    uint64_t checksum = 0;  // XXH3-64 of the node's bytes
+    uint64_t checksum = 0;  // of the node's bytes: archive_node_checksum
 };
+
+// The checksum an index entry keeps of a node's bytes: XXH3-64 in version 1, its low 32 bits in
+// version 2. 32 bits still catch a corrupt or misplaced range (but for one in 4 billion), the
+// formats' payloads carry checks of their own, and 8 bytes a node were most of a packed index.
+uint64_t archive_node_checksum(uint32_t version, const uint8_t* data, size_t size);
+// Whether `data` matches an entry's checksum of either version: a version-2 checksum has no
+// high bits, and is compared with XXH3-64's low 32 (so is a version-1 checksum that happens to
+// have none, one in 4 billion).
+bool archive_checksum_matches(uint64_t stored, const uint8_t* data, size_t size);
 
 // Parses and validates a header from the first bytes of a file. Returns an empty string on
 // success, else a message saying what is wrong (bad magic, unsupported version, checksum, sizes).
