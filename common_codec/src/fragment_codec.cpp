@@ -1446,6 +1446,10 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
     // bound check. The edits are Front's.
     std::vector<DecEdge>& store = ws.edges;
     uint32_t size = 0, head = 0, seen = 0;  // size and head: byte offsets
+    // Whether edge `head` is consumed, known before the step that precedes its pop has stored
+    // anything (see the fast path): popping it no longer waits for that step's stores (measured:
+    // 2-3% less decoding CPU on the 1M scan's CATP dataset).
+    bool head_dead = false;
     const uint8_t* next = sym;
     uint32_t* const tri_end = tri + 3 * size_t(R);
     while (tri != tri_end) {
@@ -1459,8 +1463,7 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
         E(size).prev = 0;
         for (uint32_t* const stop = tri + 3 * size_t(block); tri != stop;) {
             // One consumed edge skipped without a branch (the common case), longer runs by one.
-            uint32_t i = head;
-            i += kEdgeBytes & (0u - uint32_t(E(i).prev == kDead));
+            uint32_t i = head + (kEdgeBytes & (0u - uint32_t(head_dead)));
             while (E(i).prev == kDead) [[unlikely]]
                 i += kEdgeBytes;
             if (i == size) [[unlikely]] {
@@ -1489,6 +1492,7 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
                 size = i2 + kEdgeBytes;
                 E(size).prev = 0;
                 head = i;
+                head_dead = false;
                 tri[0] = c[0], tri[1] = c[1], tri[2] = c[2];
                 tri += 3;
                 continue;
@@ -1503,6 +1507,10 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
                 // B = (v -> v1) at f + 1 (NEW; a spare slot for LEFT) or at f over A (RIGHT).
                 const uint32_t p = ei.prev, n = ei.next;
                 const uint32_t vl = E(n).v1, nn = E(n).next, vr = E(p).v0, pp = E(p).prev;
+                // The next head's state, loaded before this step's stores and updated below by
+                // comparing offsets: loaded after them, the next pop waited for the stores
+                // (that edge is often this step's `n`, whose prev it rewrites).
+                const bool head_was_dead = E(head).prev == kDead;
                 v = select_if<kNew>(s, seen, select_if<kLeft>(s, vl, vr));
                 // (v0, v1) of the prediction and (v1, v0) of the triangle as 8-byte stores from
                 // one 8-byte load (the loop is bound by its stores as much as by anything).
@@ -1523,9 +1531,14 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
                 E(left_anchor).next = f;
                 E(right_anchor).prev = last;
                 // Edge i itself is not marked: it is behind head, and no link points to it now.
-                E(select_if<kLeft>(s, n, select_if<kRight>(s, p, i))).prev = kDead;
+                const uint32_t consumed = select_if<kLeft>(s, n, select_if<kRight>(s, p, i));
+                E(consumed).prev = kDead;
                 size = last + kEdgeBytes;
                 E(size).prev = 0;
+                // The stores above that can change edge head's prev (head <= f: at f it was
+                // the live slot past the last edge, and the new edge written there is live too;
+                // live edges link only to live edges, so a consumed head is no anchor).
+                head_dead = (head == consumed) | (head_was_dead & (head != right_anchor));
                 const uint64_t v10 = (v01 >> 32) | (v01 << 32);
                 std::memcpy(tri, &v10, 8);
                 tri[2] = v;
@@ -1534,6 +1547,7 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
             }
             switch (s) {
                 case kBoundary:  // the edge stays in its loop (a neighbour's LEFT or RIGHT may use it)
+                    head_dead = E(head).prev == kDead;
                     continue;
                 case kEnd: {
                     v = E(ei.next).v1;
@@ -1567,6 +1581,7 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
                 default:
                     return FragmentStatus::Corrupt;
             }
+            head_dead = E(head).prev == kDead;
             tri[0] = ei.v1, tri[1] = ei.v0, tri[2] = v;
             tri += 3;
         }
