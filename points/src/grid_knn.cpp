@@ -126,6 +126,30 @@ inline void GridKnn::scan(uint32_t first_cell, uint32_t last_cell, const float q
     }
 }
 
+// The positions of the `want` smallest of d2_bits[0, n) (n >= want), smallest first, ties by
+// position: what sorting (value, position) pairs gives. Few candidates: each one's rank counted
+// against all (n^2 comparisons in a loop without branches, which vectorizes), where
+// nth_element and a sort mispredicted most of their branches. Pads d2_bits past n.
+void GridKnn::select_nearest(int32_t* d2_bits, size_t n, size_t want, uint32_t* chosen) {
+    if (n > kRankSelect) {
+        uint64_t* keys = keys_.data();
+        for (size_t i = 0; i < n; ++i) keys[i] = uint64_t(uint32_t(d2_bits[i])) << 32 | uint64_t(i);
+        if (n > want) std::nth_element(keys, keys + (want - 1), keys + n);
+        std::sort(keys, keys + want);
+        for (size_t i = 0; i < want; ++i) chosen[i] = uint32_t(keys[i]);
+        return;
+    }
+    const int32_t* __restrict d = d2_bits;
+    const int padded = int((n + 7) & ~size_t(7));
+    for (int j = int(n); j < padded; ++j) d2_bits[j] = INT32_MAX;  // above every distance's bits
+    for (int i = 0; i < int(n); ++i) {
+        const int32_t v = d[i];
+        int32_t rank = 0;
+        for (int j = 0; j < padded; ++j) rank += int32_t(d[j] < v) + int32_t(d[j] == v && j < i);
+        chosen[std::min(size_t(rank), want)] = uint32_t(i);  // chosen[want]: not among them
+    }
+}
+
 size_t GridKnn::nearest(const float q[3], size_t k, uint32_t* index, float* distance2) const {
     assert(k >= 1 && k <= kMaxK);
     if (points_.empty()) return 0;
