@@ -126,10 +126,27 @@ inline void GridKnn::scan(uint32_t first_cell, uint32_t last_cell, const float q
     }
 }
 
+namespace {
+
+// How many of d[0, padded) are below each of d[0, n): the ranks of the values, but for ties,
+// which share the lowest of their ranks. A loop without branches that vectorizes; compiled for
+// AVX2 too (eight lanes) and chosen at run time (GCC's target_clones).
+__attribute__((target_clones("avx2", "default")))
+void count_below(const int32_t* __restrict d, int n, int padded, int32_t* __restrict below) {
+    for (int i = 0; i < n; ++i) {
+        const int32_t v = d[i];
+        int32_t count = 0;
+        for (int j = 0; j < padded; ++j) count += int32_t(d[j] < v);
+        below[i] = count;
+    }
+}
+
+}  // namespace
+
 // The positions of the `want` smallest of d2_bits[0, n) (n >= want), smallest first, ties by
 // position: what sorting (value, position) pairs gives. Few candidates: each one's rank counted
-// against all (n^2 comparisons in a loop without branches, which vectorizes), where
-// nth_element and a sort mispredicted most of their branches. Pads d2_bits past n.
+// against all (n^2 comparisons), where nth_element and a sort mispredicted most of their
+// branches. Pads d2_bits past n.
 void GridKnn::select_nearest(int32_t* d2_bits, size_t n, size_t want, uint32_t* chosen) {
     if (n > kRankSelect) {
         uint64_t* keys = keys_.data();
@@ -139,14 +156,17 @@ void GridKnn::select_nearest(int32_t* d2_bits, size_t n, size_t want, uint32_t* 
         for (size_t i = 0; i < want; ++i) chosen[i] = uint32_t(keys[i]);
         return;
     }
-    const int32_t* __restrict d = d2_bits;
     const int padded = int((n + 7) & ~size_t(7));
     for (int j = int(n); j < padded; ++j) d2_bits[j] = INT32_MAX;  // above every distance's bits
-    for (int i = 0; i < int(n); ++i) {
-        const int32_t v = d[i];
-        int32_t rank = 0;
-        for (int j = 0; j < padded; ++j) rank += int32_t(d[j] < v) + int32_t(d[j] == v && j < i);
-        chosen[std::min(size_t(rank), want)] = uint32_t(i);  // chosen[want]: not among them
+    int32_t below[kRankSelect];
+    count_below(d2_bits, int(n), padded, below);
+    // t equal values all count the same r below them, and no other value counts r + 1 ..
+    // r + t - 1: in position order, each takes the first free place from r on.
+    std::fill(chosen, chosen + want, UINT32_MAX);
+    for (size_t i = 0; i < n; ++i) {
+        size_t rank = size_t(below[i]);
+        while (rank < want && chosen[rank] != UINT32_MAX) ++rank;
+        if (rank < want) chosen[rank] = uint32_t(i);
     }
 }
 
