@@ -160,8 +160,13 @@ void GridKnn::select_nearest(int32_t* d2_bits, size_t n, size_t want, uint32_t* 
     for (int j = int(n); j < padded; ++j) d2_bits[j] = INT32_MAX;  // above every distance's bits
     int32_t below[kRankSelect];
     count_below(d2_bits, int(n), padded, below);
-    // t equal values all count the same r below them, and no other value counts r + 1 ..
-    // r + t - 1: in position order, each takes the first free place from r on.
+    // Distinct values: their counts are their ranks, each place below `want` taken once (from
+    // the last candidate back, without a branch: a branch per candidate mispredicted).
+    std::fill(chosen, chosen + want, UINT32_MAX);
+    for (size_t i = n; i-- > 0;) chosen[std::min(size_t(below[i]), want)] = uint32_t(i);
+    if (std::find(chosen, chosen + want, UINT32_MAX) == chosen + want) return;
+    // Ties (rare): t equal values all count the same r below them, and no other value counts
+    // r + 1 .. r + t - 1: in position order, each takes the first free place from r on.
     std::fill(chosen, chosen + want, UINT32_MAX);
     for (size_t i = 0; i < n; ++i) {
         size_t rank = size_t(below[i]);

@@ -184,7 +184,7 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                 found += d2[j] <= bound2;
             }
             if (found >= want) {
-                uint32_t chosen[kMaxK + 1];
+                uint32_t chosen[kMaxK + 1];  // [want]: a place for the others
                 select_nearest(near_d2, found, want, chosen);
                 for (size_t j = 0; j < want; ++j) {
                     const uint32_t at = near_at[chosen[j]];
