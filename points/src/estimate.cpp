@@ -11,6 +11,7 @@
 // this only matters for back-face culling.
 #include "estimate.h"
 #include "grid_knn.h"
+#include "std_order_heap.h"
 
 #include <algorithm>
 #include <cmath>
@@ -86,63 +87,12 @@ struct Step {
     uint32_t from, to;  // leaf-local
 };
 
-// The max-heap of std::priority_queue<Step> (by agreement), moving its elements exactly as
-// libstdc++'s push_heap and pop_heap do, so that steps of equal agreement (many: |dot| of
-// nearly parallel normals rounds to 1) pop in the same order. The one difference: the larger
-// child is chosen without a branch. Its half-and-half branch mispredicted on every level of
-// every pop, which made the heap 5% of the conversion's time.
-class StepHeap {
-public:
-    bool empty() const { return heap_.empty(); }
-    void clear() { heap_.clear(); }
-
-    // push_heap: the new step rises while its parent is weaker.
-    void push(const Step& step) {
-        heap_.push_back(step);
-        rise(heap_.size() - 1, 0, step);
-    }
-
-    // pop_heap then pop_back: the last step fills the hole left by the top after the hole sinks
-    // to the bottom along the stronger children (the right one on ties).
-    Step pop() {
-        Step* h = heap_.data();
-        const Step top = h[0];
-        const size_t len = heap_.size() - 1;  // without the last, which is re-placed
-        if (len > 0) {
-            const Step value = h[len];
-            size_t hole = 0, child = 0;
-            while (child < (len - 1) / 2) {
-                child = 2 * (child + 1);
-                child -= size_t(h[child].agreement < h[child - 1].agreement);
-                h[hole] = h[child];
-                hole = child;
-            }
-            if ((len & 1) == 0 && child == (len - 2) / 2) {
-                child = 2 * (child + 1);
-                h[hole] = h[child - 1];
-                hole = child - 1;
-            }
-            rise(hole, 0, value);
-        }
-        heap_.pop_back();
-        return top;
-    }
-
-private:
-    // __push_heap: moves parents down while they are weaker than `value`, then places it.
-    void rise(size_t hole, size_t top, const Step& value) {
-        Step* h = heap_.data();
-        size_t parent = (hole - 1) / 2;
-        while (hole > top && h[parent].agreement < value.agreement) {
-            h[hole] = h[parent];
-            hole = parent;
-            parent = (hole - 1) / 2;
-        }
-        h[hole] = value;
-    }
-
-    std::vector<Step> heap_;
+// Steps by agreement, strongest first; steps of equal agreement (many: |dot| of nearly parallel
+// normals rounds to 1) pop in the order std::priority_queue<Step> gives them.
+struct WeakerStep {
+    bool operator()(const Step& a, const Step& b) const { return a.agreement < b.agreement; }
 };
+using StepHeap = StdOrderHeap<Step, WeakerStep>;
 
 // Makes the orientation of normals[begin, end) consistent along the neighbour graph and votes
 // each connected piece's sign (see the file comment).
