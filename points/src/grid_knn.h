@@ -61,6 +61,7 @@ private:
         uint32_t id;
     };
     void scan(uint32_t first_cell, uint32_t last_cell, const float q[3], struct KnnList& list) const;
+    static size_t keep_within(const float* d2, size_t m, float bound2, int32_t* near_d2, uint32_t* near_at);
     void select_nearest(int32_t* d2_bits, size_t n, size_t want, uint32_t* chosen);
 
     std::vector<Point> points_;         // by cell
@@ -72,7 +73,7 @@ private:
     std::vector<float> block_[3];       // all_nearest's scratch: a block's points by axis,
     std::vector<float> block_d2_;       // their distances to a query,
     std::vector<uint32_t> block_at_;    // their positions in points_,
-    std::vector<int32_t> near_d2_;      // the selection's candidates: distance bits (8 spare),
+    std::vector<int32_t> near_d2_;      // the selection's candidates (8 spare each): distance bits,
     std::vector<uint32_t> near_at_;     // positions in the block
     std::vector<uint64_t> keys_;        // and keys (as big as the largest block yet)
     float lo_[3] = {0, 0, 0};
@@ -124,7 +125,7 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
             block_d2_.resize(m);
             block_at_.resize(m);
             near_d2_.resize(m + 8);
-            near_at_.resize(m);
+            near_at_.resize(m + 8);
             keys_.resize(m);
             for (auto& b : block_) b.resize(m);
         }
@@ -175,14 +176,7 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
             const size_t want = std::min(k, points_.size());
             int32_t* __restrict near_d2 = near_d2_.data();
             uint32_t* __restrict near_at = near_at_.data();
-            size_t found = 0;
-            for (size_t j = 0; j < m; ++j) {
-                int32_t bits;
-                std::memcpy(&bits, &d2[j], 4);
-                near_d2[found] = bits;
-                near_at[found] = uint32_t(j);
-                found += d2[j] <= bound2;
-            }
+            size_t found = keep_within(d2, m, bound2, near_d2, near_at);
             if (found >= want) {
                 uint32_t chosen[kMaxK + 1];  // [want]: a place for the others
                 select_nearest(near_d2, found, want, chosen);
