@@ -81,10 +81,14 @@ float coverage_radius(const float* distance2, size_t found, size_t radius_k) {
 
 float dot(const Vec3f& a, const Vec3f& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
-// A step of the orientation's propagation: from a point whose sign is settled to a neighbour.
+// A step of the orientation's propagation: from a point whose sign is settled to a neighbour,
+// `to` (leaf-local), whose normal is flipped if the step settles it and the two disagree. That
+// is known when the step is queued (the sign of the dot product whose magnitude is the
+// agreement: the same products; neither normal changes while the step waits), so a step is 8
+// bytes, not 12 with its origin, and the heap moves less.
 struct Step {
     float agreement;
-    uint32_t from, to;  // leaf-local
+    uint32_t to_flip;  // to << 1 | flip
 };
 
 // Steps by agreement, strongest first; steps of equal agreement (many: |dot| of nearly parallel
@@ -106,25 +110,27 @@ void orient_leaf(const EstimateInput& in, size_t begin, size_t end, const std::v
     for (size_t seed = 0; seed < n; ++seed) {
         if (done[seed]) continue;
         piece.clear();
-        queue.push({2.0f, uint32_t(seed), uint32_t(seed)});
+        queue.push({2.0f, uint32_t(seed) << 1});
         while (!queue.empty()) {
             const Step step = queue.pop();
-            if (done[step.to]) continue;
-            done[step.to] = 1;
-            piece.push_back(step.to);
-            Vec3f& normal = normals[begin + step.to];
-            if (step.from != step.to && dot(normal, normals[begin + step.from]) < 0)
+            const uint32_t to = step.to_flip >> 1;
+            if (done[to]) continue;
+            done[to] = 1;
+            piece.push_back(to);
+            Vec3f& normal = normals[begin + to];
+            if (step.to_flip & 1)
                 for (float& v : normal) v = -v;
             for (size_t j = 0; j < k; ++j) {
-                uint32_t other = neighbours[step.to * k + j];
+                uint32_t other = neighbours[to * k + j];
                 if (other == UINT32_MAX || done[other]) continue;
                 // A step weaker than one already queued to the same point would pop after it,
                 // when that point is done: it is not queued (the heap was 7% of the conversion's
                 // time; equal ones still are, so ties resolve as before).
-                const float agreement = std::fabs(dot(normal, normals[begin + other]));
+                const float product = dot(normal, normals[begin + other]);
+                const float agreement = std::fabs(product);
                 if (agreement < best[other]) continue;
                 best[other] = agreement;
-                queue.push({agreement, step.to, other});
+                queue.push({agreement, other << 1 | uint32_t(product < 0)});
             }
         }
         double vote = 0;
