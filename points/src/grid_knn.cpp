@@ -4,7 +4,13 @@
 #include <cassert>
 #include <cmath>
 
+// AVX2 kernels compiled alongside the baseline ones and chosen at run time (as codec.cpp's).
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define CATPAQ_KNN_AVX2 1
 #include <immintrin.h>
+#else
+#define CATPAQ_KNN_AVX2 0
+#endif
 
 namespace catpaq::points_detail {
 
@@ -157,6 +163,7 @@ size_t keep_within_from(const float* d2, size_t j, size_t m, float bound2, int32
     return found;
 }
 
+#if CATPAQ_KNN_AVX2
 // keep_within eight at a time: the lanes within the bound packed to the front by a permutation
 // from a table (AVX2 has no compress instruction) and stored whole.
 __attribute__((target("avx2,popcnt")))
@@ -179,11 +186,14 @@ size_t keep_within_avx2(const float* d2, size_t m, float bound2, int32_t* near_d
 
 // (__builtin_cpu_init first: this runs among the static constructors, maybe before libgcc's.)
 const bool g_avx2 = (__builtin_cpu_init(), __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt"));
+#endif
 
 // How many of d[0, padded) are below each of d[0, n): the ranks of the values, but for ties,
 // which share the lowest of their ranks. A loop without branches that vectorizes; compiled for
 // AVX2 too (eight lanes) and chosen at run time (GCC's target_clones).
+#if CATPAQ_KNN_AVX2
 __attribute__((target_clones("avx2", "default")))
+#endif
 void count_below(const int32_t* __restrict d, int n, int padded, int32_t* __restrict below) {
     for (int i = 0; i < n; ++i) {
         const int32_t v = d[i];
@@ -199,7 +209,10 @@ void count_below(const int32_t* __restrict d, int n, int padded, int32_t* __rest
 // selects from. (A loop storing every value and counting the kept, every store waiting for the
 // previous count, was about 4% of the 1M scan's samples; eight at a time with AVX2, 1.9%.)
 size_t GridKnn::keep_within(const float* d2, size_t m, float bound2, int32_t* near_d2, uint32_t* near_at) {
-    return g_avx2 ? keep_within_avx2(d2, m, bound2, near_d2, near_at) : keep_within_from(d2, 0, m, bound2, near_d2, near_at, 0);
+#if CATPAQ_KNN_AVX2
+    if (g_avx2) return keep_within_avx2(d2, m, bound2, near_d2, near_at);
+#endif
+    return keep_within_from(d2, 0, m, bound2, near_d2, near_at, 0);
 }
 
 // The positions of the `want` smallest of d2_bits[0, n) (n >= want), smallest first, ties by
