@@ -209,15 +209,22 @@ void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, StreamBuff
         const uint32_t k = choose_k(values.data() + first, end - first, previous);
         put_parameter(s.parameters, previous, k);
         previous = k;
+        // The unary codes gathered in a local word and handed to the writer 32 bits at a time:
+        // a put per value kept the writer's state in memory (most of the stream's time).
+        uint64_t word = 0;
+        uint32_t bits = 0;  // below 32 between values
         for (size_t i = first; i < end; ++i) {
-            const uint32_t q = values[i] >> k;
-            if (q >= kRiceEscape) {
-                s.unary.put(uint64_t(1) << kRiceEscape, kRiceEscape + 1);
-                put_escape(s.exceptions, q - kRiceEscape);
-            } else {
-                s.unary.put(uint64_t(1) << q, q + 1);
+            const uint32_t q = values[i] >> k, capped = std::min(q, kRiceEscape);
+            word |= (uint64_t(1) << capped) << bits;
+            bits += capped + 1;
+            if (bits >= 32) {
+                s.unary.put(word, 32);
+                word >>= 32;
+                bits -= 32;
             }
+            if (q >= kRiceEscape) put_escape(s.exceptions, q - kRiceEscape);
         }
+        s.unary.put(word, bits);
         if (end - first == kRiceBlock) put_vertical_block(s.low, values.data() + first, k);
         else
             for (size_t i = first; i < end; ++i) s.partial.put(values[i], k);

@@ -24,9 +24,9 @@ namespace catpaq::points_detail {
 class GridKnn {
 public:
     static constexpr size_t kMaxK = 64;
-    // all_nearest selects up to this many by insertion, more by nth_element (measured on the
-    // simplifier's k = 5 and the estimates' k = 16).
-    static constexpr size_t kInsertionK = 8;
+    // all_nearest selects among up to this many candidates by counting ranks, among more by
+    // nth_element.
+    static constexpr size_t kRankSelect = 48;
     // Every cell costs a few passes at build time (zeroing, prefix sums): on the scan, 64 cells
     // a point made that a fifth of the simplifier's instructions.
     static constexpr double kMaxCellsPerPoint = 16;
@@ -61,6 +61,8 @@ private:
         uint32_t id;
     };
     void scan(uint32_t first_cell, uint32_t last_cell, const float q[3], struct KnnList& list) const;
+    static size_t keep_within(const float* d2, size_t m, float bound2, int32_t* near_d2, uint32_t* near_at);
+    void select_nearest(int32_t* d2_bits, size_t n, size_t want, uint32_t* chosen);
 
     std::vector<Point> points_;         // by cell
     std::vector<uint32_t> cell_start_;  // points_ of cell c: [cell_start_[c], cell_start_[c + 1])
@@ -71,7 +73,9 @@ private:
     std::vector<float> block_[3];       // all_nearest's scratch: a block's points by axis,
     std::vector<float> block_d2_;       // their distances to a query,
     std::vector<uint32_t> block_at_;    // their positions in points_,
-    std::vector<uint64_t> keys_;        // and the selection's keys (as big as the largest block yet)
+    std::vector<int32_t> near_d2_;      // the selection's candidates (8 spare each): distance bits,
+    std::vector<uint32_t> near_at_;     // positions in the block
+    std::vector<uint64_t> keys_;        // and keys (as big as the largest block yet)
     float lo_[3] = {0, 0, 0};
     float h_ = 1, inv_h_ = 1;
     int dims_[3] = {1, 1, 1};
@@ -120,6 +124,8 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
         if (block_d2_.size() < m) {
             block_d2_.resize(m);
             block_at_.resize(m);
+            near_d2_.resize(m + 8);
+            near_at_.resize(m + 8);
             keys_.resize(m);
             for (auto& b : block_) b.resize(m);
         }
@@ -163,39 +169,23 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                 const float dx = x[j] - qx, dyy = y[j] - qy, dzz = z[j] - qz;
                 d2[j] = dx * dx + dyy * dyy + dzz * dzz;
             }
+            // Those certain to be nearer than anything outside the block, as the bits of their
+            // distances (a non-negative float's bits order as it does, also as int32) and
+            // their positions in the block; the nearest of them by rank (ties: the earlier in
+            // the block).
             const size_t want = std::min(k, points_.size());
-            size_t found = 0;
-            if (want <= kInsertionK) {
-                // Few wanted: most candidates fail one comparison with the worst kept.
-                float worst = bound2;
-                for (size_t j = 0; j < m; ++j) {
-                    const float d = d2[j];
-                    if (!(d <= worst)) continue;
-                    if (found == want && d == worst) continue;  // ties: the earlier in the block
-                    knn_insert(index, distance2, want, found, worst, uint32_t(j), d);
+            int32_t* __restrict near_d2 = near_d2_.data();
+            uint32_t* __restrict near_at = near_at_.data();
+            size_t found = keep_within(d2, m, bound2, near_d2, near_at);
+            if (found >= want) {
+                uint32_t chosen[kMaxK + 1];  // [want]: a place for the others
+                select_nearest(near_d2, found, want, chosen);
+                for (size_t j = 0; j < want; ++j) {
+                    const uint32_t at = near_at[chosen[j]];
+                    index[j] = points_[at_point[at]].id;
+                    distance2[j] = d2[at];
                 }
-                for (size_t j = 0; j < found; ++j) index[j] = points_[at_point[index[j]]].id;
-            } else {
-                // Those certain to be nearer than anything outside the block, as keys
-                // that sort by distance, then by position in the block (a float's bits
-                // order as the float does, for non-negative floats).
-                uint64_t* keys = keys_.data();
-                for (size_t j = 0; j < m; ++j) {
-                    uint32_t bits;
-                    std::memcpy(&bits, &d2[j], 4);
-                    keys[found] = (uint64_t(bits) << 32) | uint64_t(j);
-                    found += d2[j] <= bound2;
-                }
-                if (found >= want) {
-                    if (found > want) std::nth_element(keys, keys + (want - 1), keys + found);
-                    std::sort(keys, keys + want);
-                    found = want;
-                    for (size_t j = 0; j < want; ++j) {
-                        const uint32_t at = uint32_t(keys[j]);
-                        index[j] = points_[at_point[at]].id;
-                        distance2[j] = d2[at];
-                    }
-                }
+                found = want;
             }
             if (found < want) found = nearest(q, k, index, distance2);  // the block does not settle it: search rings
             std::copy(q, q + 3, previous);

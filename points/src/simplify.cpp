@@ -11,6 +11,7 @@
 
 #include "grid_knn.h"
 #include "splat.h"
+#include "std_order_heap.h"
 
 namespace catpaq::points_detail {
 namespace {
@@ -46,6 +47,20 @@ struct Edge {
         if (cost != o.cost) return cost > o.cost;
         if (a != o.a) return a > o.a;
         return b > o.b;
+    }
+};
+
+// Edge::operator< for the heap, without its branches: (cost, a) as one key (a positive float's
+// bits order as it does), b on ties.
+struct CostlierEdge {
+    static uint64_t key(const Edge& e) {
+        uint32_t bits;
+        std::memcpy(&bits, &e.cost, 4);
+        return uint64_t(bits) << 32 | e.a;
+    }
+    bool operator()(const Edge& x, const Edge& y) const {
+        const uint64_t kx = key(x), ky = key(y);
+        return kx > ky || (kx == ky && x.b > y.b);
     }
 };
 
@@ -133,7 +148,7 @@ struct Simplifier {
     std::vector<uint32_t> parent, generation;
     std::vector<Edge> sorted;  // cheapest first; sorted[next] is the next one not taken
     size_t next = 0;
-    std::vector<Edge> heap;    // re-priced edges
+    StdOrderHeap<Edge, CostlierEdge> heap;  // re-priced edges
     std::vector<Edge> scratch;  // sort_edges's
     std::vector<uint64_t> keys, key_scratch;  // sort_keys's
     size_t alive;
@@ -151,8 +166,7 @@ struct Simplifier {
     }
 
     void push(uint32_t a, uint32_t b) {
-        heap.push_back({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
-        std::push_heap(heap.begin(), heap.end());
+        heap.push({merge_cost(splats[a], splats[b]), a, b, generation[a], generation[b]});
     }
 
     // Builds the proximity graph of the splats still alive.
@@ -218,14 +232,12 @@ struct Simplifier {
 
     // The cheapest edge of either front, or false when both are empty.
     bool take(Edge& e) {
-        if (next < sorted.size() && (heap.empty() || !(sorted[next] < heap.front()))) {
+        if (next < sorted.size() && (heap.empty() || !(sorted[next] < heap.top()))) {
             e = sorted[next++];
             return true;
         }
         if (heap.empty()) return false;
-        std::pop_heap(heap.begin(), heap.end());
-        e = heap.back();
-        heap.pop_back();
+        e = heap.pop();
         return true;
     }
 
