@@ -9,18 +9,14 @@
 #include <unordered_map>
 #include <utility>
 
-#include <zlib.h>
-
 #include "aqp/png_codec.h"
 #include "base/bytes.h"
 #include "base/error.h"
+#include "common_codec/deflate.h"
 
 namespace catpaq::aqp {
 
 namespace {
-
-uint64_t zigzag64(int64_t v) { return (uint64_t(v) << 1) ^ uint64_t(v >> 63); }
-int64_t unzigzag64(uint64_t z) { return int64_t(z >> 1) ^ -int64_t(z & 1); }
 
 // The most bytes a version-5 patch table inflates to: every field a varint of at most 5 bytes
 // (an extent at most 3).
@@ -33,15 +29,14 @@ size_t max_patch_table_bytes(size_t patches) { return patches * (7 * 5 + 3 * 3);
 // takes further. Links are left out (derive_patch_links finds them from the corners).
 std::vector<uint8_t> patch_table(const std::vector<AqpPatchInfo>& patches) {
     ByteWriter w;
-    for (int c = 0; c < 4; ++c) {
+    // One column: a field of every patch as zigzag differences from the previous patch's.
+    auto differences = [&](auto field) {
         int64_t previous = 0;
-        for (const AqpPatchInfo& p : patches) w.varint(zigzag64(int64_t(p.corner[c]) - std::exchange(previous, p.corner[c])));
-    }
-    for (int a = 0; a < 3; ++a) {
-        int64_t previous = 0;
-        for (const AqpPatchInfo& p : patches) w.varint(zigzag64(int64_t(p.origin[a]) - std::exchange(previous, p.origin[a])));
-    }
-    for (int a = 0; a < 3; ++a)
+        for (const AqpPatchInfo& p : patches) w.varint(zigzag64(int64_t(field(p)) - std::exchange(previous, field(p))));
+    };
+    for (size_t c = 0; c < 4; ++c) differences([c](const AqpPatchInfo& p) { return p.corner[c]; });
+    for (size_t a = 0; a < 3; ++a) differences([a](const AqpPatchInfo& p) { return p.origin[a]; });
+    for (size_t a = 0; a < 3; ++a)
         for (const AqpPatchInfo& p : patches) w.varint(p.extent[a]);
     return std::move(w.bytes());
 }
@@ -49,22 +44,21 @@ std::vector<uint8_t> patch_table(const std::vector<AqpPatchInfo>& patches) {
 // The inverse of patch_table for `patches` (sized); an empty string, or what is wrong.
 std::string read_patch_table(const uint8_t* data, size_t size, std::vector<AqpPatchInfo>& patches) {
     ByteReader r(data, size);
-    for (int c = 0; c < 4; ++c) {
+    // One column of differences (patch_table) into a u32 field of every patch; false when a value
+    // leaves u32.
+    auto differences = [&](auto field) {
         int64_t value = 0;
         for (AqpPatchInfo& p : patches) {
             value += unzigzag64(r.varint());
-            if (value < 0 || value > int64_t(UINT32_MAX)) return "AQP metadata has a patch corner out of range";
-            p.corner[c] = uint32_t(value);
+            if (value < 0 || value > int64_t(UINT32_MAX)) return false;
+            field(p) = uint32_t(value);
         }
-    }
-    for (int a = 0; a < 3; ++a) {
-        int64_t value = 0;
-        for (AqpPatchInfo& p : patches) {
-            value += unzigzag64(r.varint());
-            if (value < 0 || value > int64_t(UINT32_MAX)) return "AQP metadata has a patch origin out of range";
-            p.origin[a] = uint32_t(value);
-        }
-    }
+        return true;
+    };
+    for (size_t c = 0; c < 4; ++c)
+        if (!differences([c](AqpPatchInfo& p) -> uint32_t& { return p.corner[c]; })) return "AQP metadata has a patch corner out of range";
+    for (size_t a = 0; a < 3; ++a)
+        if (!differences([a](AqpPatchInfo& p) -> uint32_t& { return p.origin[a]; })) return "AQP metadata has a patch origin out of range";
     for (int a = 0; a < 3; ++a)
         for (AqpPatchInfo& p : patches) {
             const uint64_t e = r.varint();
@@ -74,26 +68,6 @@ std::string read_patch_table(const uint8_t* data, size_t size, std::vector<AqpPa
     if (!r.ok()) return "AQP metadata's patch table is truncated";
     if (r.remaining() != 0) return "AQP metadata's patch table has bytes left over";
     return "";
-}
-
-std::vector<uint8_t> deflate_bytes(const std::vector<uint8_t>& in) {
-    uLongf size = compressBound(uLong(in.size()));
-    std::vector<uint8_t> out(size);
-    if (compress2(out.data(), &size, in.data(), uLong(in.size()), Z_BEST_COMPRESSION) != Z_OK)
-        fail("cannot deflate the AQP patch table");
-    out.resize(size);
-    return out;
-}
-
-// Inflates exactly `size` bytes of one zlib stream into at most `limit` bytes (a corrupt or
-// forged stream cannot make it allocate more); false when the stream is broken or larger.
-bool inflate_bytes(const uint8_t* data, size_t size, size_t limit, std::vector<uint8_t>& out) {
-    out.resize(limit + 1);
-    uLongf produced = uLongf(out.size());
-    uLong consumed = uLong(size);
-    if (uncompress2(out.data(), &produced, data, &consumed) != Z_OK || consumed != size || produced > limit) return false;
-    out.resize(produced);
-    return true;
 }
 
 void write_patch_records(ByteWriter& w, const std::vector<AqpPatchInfo>& patches) {

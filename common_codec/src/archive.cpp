@@ -11,12 +11,11 @@
 #include <unistd.h>
 #include <utility>
 
-#include <zlib.h>
-
 #include "base/atomic_file.h"
 #include "base/bytes.h"
 #include "base/checksum.h"
 #include "base/error.h"
+#include "common_codec/deflate.h"
 
 namespace catpaq {
 
@@ -68,8 +67,7 @@ static std::vector<uint8_t> packed_index(const std::vector<ArchiveEntry>& entrie
     uint64_t previous_level = 0, previous_key = 0;
     for (const ArchiveEntry& e : entries) w.varint(e.level - std::exchange(previous_level, e.level));
     for (const ArchiveEntry& e : entries) {
-        const int64_t d = int64_t(e.key - std::exchange(previous_key, e.key));
-        w.varint((uint64_t(d) << 1) ^ uint64_t(d >> 63));
+        w.varint(zigzag64(int64_t(e.key - std::exchange(previous_key, e.key))));
     }
     for (const ArchiveEntry& e : entries) w.varint(e.size);
     for (const ArchiveEntry& e : entries) w.varint(e.flags);
@@ -81,25 +79,17 @@ static std::vector<uint8_t> packed_index(const std::vector<ArchiveEntry>& entrie
             w.u8(uint8_t(bits >> (8 * b)));
         }
     for (const ArchiveEntry& e : entries) w.u32(uint32_t(e.checksum));
-    uLongf size = compressBound(uLong(w.size()));
-    std::vector<uint8_t> out(size);
-    if (compress2(out.data(), &size, w.bytes().data(), uLong(w.size()), Z_BEST_COMPRESSION) != Z_OK)
-        fail("archive: cannot deflate the index");
-    out.resize(size);
-    return out;
+    return deflate_bytes(w.bytes());
 }
 
 // The inverse of packed_index for `count` entries; offsets from `payload_start` on. An empty
 // string, or what is wrong.
 static std::string read_packed_index(const uint8_t* data, size_t size, uint32_t count, uint64_t payload_start,
                                      std::vector<ArchiveEntry>& out) {
-    const size_t limit = size_t(count) * kMaxPackedEntryBytes;
-    std::vector<uint8_t> raw(limit + 1);
-    uLongf produced = uLongf(raw.size());
-    uLong consumed = uLong(size);
-    if (uncompress2(raw.data(), &produced, data, &consumed) != Z_OK || consumed != size || produced > limit)
+    std::vector<uint8_t> raw;
+    if (!inflate_bytes(data, size, size_t(count) * kMaxPackedEntryBytes, raw))
         return "index is not a valid deflate stream of the expected size (corrupt dataset)";
-    ByteReader r(raw.data(), produced);
+    ByteReader r(raw.data(), raw.size());
     out.assign(count, ArchiveEntry{});
     uint64_t level = 0, key = 0, offset = payload_start;
     for (ArchiveEntry& e : out) {
@@ -108,8 +98,7 @@ static std::string read_packed_index(const uint8_t* data, size_t size, uint32_t 
         e.level = uint16_t(level);
     }
     for (ArchiveEntry& e : out) {
-        const uint64_t z = r.varint();
-        key += uint64_t(int64_t(z >> 1) ^ -int64_t(z & 1));
+        key += uint64_t(unzigzag64(r.varint()));
         e.key = key;
     }
     for (ArchiveEntry& e : out) {

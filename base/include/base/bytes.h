@@ -9,6 +9,10 @@
 
 namespace catpaq {
 
+// Signed values for varints: 0, -1, 1, -2, ... -> 0, 1, 2, 3, ...
+inline uint64_t zigzag64(int64_t v) { return (uint64_t(v) << 1) ^ uint64_t(v >> 63); }
+inline int64_t unzigzag64(uint64_t z) { return int64_t(z >> 1) ^ -int64_t(z & 1); }
+
 class ByteWriter {
 public:
     std::vector<uint8_t>& bytes() { return bytes_; }
