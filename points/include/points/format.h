@@ -9,16 +9,20 @@
 // input point the node stands for lies within `error` of one of the node's splat centres;
 // monotone: a parent's is at least its children's).
 //
-// Meta (little-endian):
-//   char[8] "CPQPOINT" | u32 version (1)
+// Meta (little-endian; version 2 is written, version 1 still reads):
+//   char[8] "CPQPOINT" | u32 version
 //   f64 origin[3]              world = origin + decoded position (decoded positions are floats
 //                              relative to this: the bounds' centre, so 1e7 offsets keep precision)
 //   f64 bounds_min[3], f64 bounds_max[3]   of the input, world units
 //   u64 input_points | u32 node_points (the target per node) | u32 flags (kPointsMeta*)
 //   u8 split rule | u8 colour luma bits | u8 colour chroma bits | u8 up axis (0 unknown, 1-6 =
 //                              +x +y +z -x -y -z: catp/format.h's UpAxis; LAS input +z, else convert --up)
-//   u32 node_count, then per index entry in index order:
-//     u64 key | f32 box_min[3] | f32 box_max[3] | f32 mean_radius
+//   u32 node_count, then the node table:
+//   version 1, per index entry in index order: u64 key | f32 box_min[3] | f32 box_max[3] | f32 mean_radius
+//   version 2, one zlib stream: the tree's shape (a bit per node: inner), the root's box as
+//     f32[6], every other node's box as 16-bit steps of its parent's box rounded outwards
+//     (varints), the radii as four byte planes. Keys follow from the shape, because the index
+//     lists nodes by depth, then id (breadth first). docs/formats/points.md has the layout.
 //   The box (relative to origin) holds the splat balls (centre +- radius) of the node and of all
 //   its descendants: boxes are nested.
 #include <cstdint>
@@ -29,7 +33,7 @@
 
 namespace catpaq {
 
-constexpr uint32_t kPointsMetaVersion = 1;
+constexpr uint32_t kPointsMetaVersion = 2;
 constexpr char kPointsMetaMagic[8] = {'C', 'P', 'Q', 'P', 'O', 'I', 'N', 'T'};
 constexpr uint16_t kPointLeafFlag = 1u << 0;
 constexpr uint32_t kPointsMetaInputNormals = 1u << 0;  // the input had normals (else estimated)
@@ -66,7 +70,11 @@ struct PointsMeta {
     std::vector<PointNodeInfo> nodes;  // in index order
 };
 
-std::vector<uint8_t> encode_points_meta(const PointsMeta& meta);
+// Version 2 rounds each box but the root's outwards to its parent's 16-bit grid (a decoded box
+// still holds its splats, and still nests in its parent's). Throws Error when the nodes are not
+// a tree listed breadth first whose inner nodes have both children, or when boxes do not nest
+// (version 2), or for an unknown version. Version 1 (tests of older readers) stores everything.
+std::vector<uint8_t> encode_points_meta(const PointsMeta& meta, uint32_t version = kPointsMetaVersion);
 // Empty string on success, else what is wrong. Safe on any bytes.
 std::string decode_points_meta(const uint8_t* data, size_t size, PointsMeta& out);
 
