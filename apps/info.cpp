@@ -60,12 +60,9 @@ static void dataset_info(const std::string& location) {
     std::printf("format:    %s (container version %u)\n", archive_kind_name(h.kind), unsigned(h.version));
     std::printf("size:      %llu bytes, of which %llu of header, metadata and index\n", (unsigned long long)h.file_size,
                 (unsigned long long)(h.index_offset + h.index_size));
-    // What a client fetches before it draws the whole model, coarsely: the prefix and level 0
-    // (every format's coarsest level covers the model: CATP's root diamond, AQP's level-0
-    // tiles, the point tree's root).
-    const uint64_t prefix_bytes = h.index_offset + h.index_size, level0 = levels.empty() ? 0 : levels[0].bytes;
-    std::printf("first frame: %llu bytes (the prefix, and level 0: %llu)\n", (unsigned long long)(prefix_bytes + level0),
-                (unsigned long long)level0);
+    const FirstFrame first = archive_first_frame(h, prefix.entries);
+    std::printf("first frame: %llu bytes (the prefix, and level 0: %llu)\n", (unsigned long long)first.bytes(),
+                (unsigned long long)first.level0_bytes);
     std::printf("nodes:     %u %s in %zu levels%s\n", unsigned(h.node_count), summary.node_noun.c_str(), levels.size(),
                 summary.levels_note.empty() ? "" : (" (" + summary.levels_note + ")").c_str());
     if (!module) std::printf("client:    none in this build for %s datasets\n", archive_kind_name(h.kind));

@@ -21,6 +21,7 @@
 #include "base/options.h"
 #include "base/sysinfo.h"
 #include "catp/builder.h"
+#include "common_codec/archive.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
 
@@ -34,6 +35,8 @@ struct Result {
     size_t stored_vertices = 0;
     double phases[6] = {};  // read, bin, clip, leaf nodes, coarsen, write: seconds
     double cpu_seconds = 0;  // user + system time of the build
+    FirstFrame first_frame;  // of the dataset built
+    uint32_t nodes = 0;
 };
 
 static Result run_one(const std::string& input, const std::string& output, uint64_t budget) {
@@ -58,6 +61,11 @@ static Result run_one(const std::string& input, const std::string& output, uint6
     r.leaf_level = report.leaf_level;
     r.block_level = report.block_level;
     r.budget_mib = double(report.memory_budget + own) / (1 << 20);
+    {
+        ArchiveReader archive(output);
+        r.first_frame = archive_first_frame(archive.header(), archive.entries());
+        r.nodes = archive.header().node_count;
+    }
     r.spilled_mib = double(report.bytes_spilled) / (1 << 20);
     // Baseline in the same process (after the build, so it does not count in the build's peak):
     // meshopt_simplify to half, float positions.
@@ -168,6 +176,14 @@ int main(int argc, char** argv) try {
     for (auto& [name, r] : done)
         std::printf("%-12s %8.2f %8.2f %8.2f %8.2f %8.2f %8.2f %10.2f\n", name.c_str(), r.phases[0], r.phases[1],
                     r.phases[2], r.phases[3], r.phases[4], r.phases[5], r.cpu_seconds / r.seconds);
+    // What a client fetches before it draws the whole model (common_codec/archive.h): the
+    // prefix grows with the node count, the mission's bound is 64 KiB.
+    std::printf("\n%-12s %8s %12s %12s %12s %12s\n", "first frame", "nodes", "prefix B", "level 0 B", "total B",
+                "<= 64 KiB");
+    for (auto& [name, r] : done)
+        std::printf("%-12s %8u %12llu %12llu %12llu %12s\n", name.c_str(), r.nodes, (unsigned long long)r.first_frame.prefix_bytes,
+                    (unsigned long long)r.first_frame.level0_bytes, (unsigned long long)r.first_frame.bytes(),
+                    r.first_frame.bytes() <= 65536 ? "yes" : "no");
     if (!keep) fs::remove_all(dir);
     return 0;
 } catch (const std::exception& e) {

@@ -341,6 +341,14 @@ const std::vector<uint8_t>& ArchiveReader::meta() const { return impl_->meta; }
 const std::vector<ArchiveEntry>& ArchiveReader::entries() const { return impl_->entries; }
 const uint8_t* ArchiveReader::data() const { return impl_->map; }
 uint64_t ArchiveReader::size() const { return impl_->size; }
+FirstFrame archive_first_frame(const ArchiveHeader& header, const std::vector<ArchiveEntry>& entries) {
+    FirstFrame f;
+    f.prefix_bytes = header.index_offset + header.index_size;
+    for (const ArchiveEntry& e : entries)
+        if (e.level == 0) f.level0_bytes += e.size;
+    return f;
+}
+
 uint64_t ArchiveReader::prefix_size() const { return impl_->header.index_offset + impl_->header.index_size; }
 
 int64_t ArchiveReader::find(uint64_t key) const {

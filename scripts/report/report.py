@@ -315,6 +315,24 @@ def parse_build_phases(text):
     return rows
 
 
+def parse_build_first_frame(text):
+    """The build bench's third table: the first frame (prefix and level 0) of each dataset built."""
+    rows = []
+    in_table = False
+    for l in text.splitlines():
+        p = l.split()
+        if l.startswith("first frame"):
+            in_table = True
+            continue
+        if in_table and len(p) == 6:
+            try:
+                rows.append(dict(input=p[0], nodes=int(p[1]), prefix=int(p[2]), level0=int(p[3]), total=int(p[4]),
+                                 within=p[5]))
+            except ValueError:
+                pass
+    return rows
+
+
 def parse_memory_budget(text, what):
     """Rows of bench/catp/memory_budget_bench: threads, budget, runs, peak min/max, max/budget, time."""
     rows = []
@@ -1027,6 +1045,16 @@ def write_report(raw, work, docs):
             w("")
             w(md_table(["input", "read", "bin", "clip", "leaf nodes", "coarsen", "write", "cores used"],
                        [[r["input"]] + ["%.2f" % x for x in r["phases"]] + ["%.2f" % r["cores"]] for r in phases]))
+            w("")
+        first = parse_build_first_frame(read(os.path.join(raw, "build_bench.txt")))
+        if first:
+            w("The first frame of each dataset built (what a client fetches before it draws the whole model: "
+              "header, metadata and index, then level 0; `catpaq info`), against the mission's 64 KiB. The "
+              "prefix grows with the number of nodes:")
+            w("")
+            w(md_table(["input", "nodes", "prefix bytes", "level 0 bytes", "first frame bytes", "within 64 KiB"],
+                       [[r["input"], f"{r['nodes']:,}", f"{r['prefix']:,}", f"{r['level0']:,}", f"{r['total']:,}",
+                         r["within"]] for r in first]))
             w("")
         if len(build) >= 2:
             plot_build(build, os.path.join(resdir, "build_speed.png"))

@@ -97,6 +97,16 @@ private:
     std::unique_ptr<Impl> impl_;
 };
 
+// The first frame: what a client fetches before it draws the whole model, coarsely: the prefix
+// (header, metadata, index) and the payloads of level 0 (every format's coarsest level covers
+// the model: CATP's root diamond, AQP's level-0 tiles, the point tree's root). The mission asks
+// for at most 64 KiB.
+struct FirstFrame {
+    uint64_t prefix_bytes = 0, level0_bytes = 0;
+    uint64_t bytes() const { return prefix_bytes + level0_bytes; }
+};
+FirstFrame archive_first_frame(const ArchiveHeader& header, const std::vector<ArchiveEntry>& entries);
+
 // Reads an archive from a local file (memory-mapped). Validates header, meta and index on open;
 // node bytes are checked against their checksum when read.
 class ArchiveReader {
