@@ -40,14 +40,36 @@ struct EdgeUse {
 };
 
 // Every (edge, triangle) use, sorted by edge then triangle: equal keys are one edge's triangles.
+//
+// Made in (face, k) order and sorted stably by key alone, which is the same order. The sort is
+// an LSD radix sort in 16-bit digits (a digit every key shares skipped): std::sort on (key,
+// face, k) was a quarter of the cleaning's time on a 1M-triangle scan (the uses are sorted
+// once per pass over the mesh, five times for a clean input).
 std::vector<EdgeUse> edge_uses(const std::vector<Tri>& tris) {
     std::vector<EdgeUse> uses;
     uses.reserve(tris.size() * 3);
     for (uint32_t f = 0; f < tris.size(); ++f)
         for (uint8_t k = 0; k < 3; ++k) uses.push_back({edge_key(tris[f][k], tris[f][(k + 1) % 3]), f, k});
-    std::sort(uses.begin(), uses.end(), [](const EdgeUse& a, const EdgeUse& b) {
-        return a.key != b.key ? a.key < b.key : a.face != b.face ? a.face < b.face : a.k < b.k;
-    });
+    const size_t n = uses.size();
+    if (n < 4096) {
+        std::stable_sort(uses.begin(), uses.end(), [](const EdgeUse& a, const EdgeUse& b) { return a.key < b.key; });
+        return uses;
+    }
+    std::vector<EdgeUse> scratch(n);
+    std::vector<uint32_t> start(size_t(1) << 16);
+    for (int shift = 0; shift < 64; shift += 16) {
+        std::fill(start.begin(), start.end(), 0u);
+        for (const EdgeUse& u : uses) ++start[(u.key >> shift) & 0xffff];
+        if (start[(uses[0].key >> shift) & 0xffff] == n) continue;
+        uint32_t sum = 0;
+        for (uint32_t& c : start) {
+            const uint32_t count = c;
+            c = sum;
+            sum += count;
+        }
+        for (const EdgeUse& u : uses) scratch[start[(u.key >> shift) & 0xffff]++] = u;
+        uses.swap(scratch);
+    }
     return uses;
 }
 
@@ -134,8 +156,17 @@ size_t remove_extra_triangles(std::vector<Tri>& tris) {
     std::vector<std::pair<EdgeUse, EdgeUse>> pairs;
     joined_pairs(tris, uses, pairs);
     std::vector<uint8_t> keep(tris.size(), 1);
+    // The joined pair of each edge with more than two triangles (usually none: a map of every
+    // pair was a tenth of the cleaning's time on a 1M-triangle scan).
     std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> joined;
-    for (const auto& [a, b] : pairs) joined[a.key] = {a.face, b.face};
+    for_each_edge(uses, [&](size_t i, size_t j) {
+        if (j - i > 2) joined.emplace(uses[i].key, std::pair<uint32_t, uint32_t>{0, 0});
+    });
+    if (joined.empty()) return 0;
+    for (const auto& [a, b] : pairs) {
+        auto it = joined.find(a.key);
+        if (it != joined.end()) it->second = {a.face, b.face};
+    }
     for_each_edge(uses, [&](size_t i, size_t j) {
         if (j - i <= 2) return;
         auto pair = joined[uses[i].key];
