@@ -100,7 +100,9 @@ namespace catpaq {
 namespace {
 
 constexpr uint8_t kMagicBytes[4] = {'C', 'F', 'R', 'G'};
-constexpr uint8_t kVersion = 1;
+// Version 1: geometric normals in double from 64-bit integer sums. Version 2: in float
+// (predict_normals_f). Both decode; the encoder writes kFragmentVersion unless asked otherwise.
+static_assert(kFragmentVersion == 2 && kFragmentOldestVersion == 1);
 constexpr size_t kHeaderBytes = 24;
 constexpr size_t kChecksumOffset = 16;
 constexpr uint8_t kCodingCompressed = 0;
@@ -122,7 +124,9 @@ enum Stream : int {
 };
 
 // rANS lane of each stream (the coordinates of one vertex decode in parallel); connectivity
-// symbols use lane (symbol index & 3).
+// symbols use lane (symbol index & 3). (Putting every part's symbols on the four lanes in turn
+// instead, so that the fourth lane is not idle, made the decoder 4% slower: with four lanes and
+// three tables in one loop the compiler ran out of registers.)
 constexpr int kStreamLane[kStreamCount] = {0, 0, 1, 2, 0, 1, 1, 0, 2};
 
 enum PositionMode { kPosCumulative = 0, kPosWeights = 1, kPosRaw = 2 };
@@ -398,6 +402,140 @@ CATPAQ_RANS_INLINE void geometric_prediction(const NormalSum& n, const std::arra
     }
 }
 
+// ---- Version 2's geometric normals, in float ------------------------------------------------
+// The same predictor as version 1's (area-weighted sum of the triangles' cross products in
+// (a, b, c) space, mapped by M, projected to the octahedral code, rounded half up), evaluated in
+// float, four components per SSE2 register: the cross product and the sum of a corner as one
+// vector each (version 1: three 64-bit integer read-modify-writes per corner), and the
+// projection four vertices at a time (version 1: one vertex, in double). Float rounds
+// differently from the exact integer sums now and then, which moves a prediction by one step
+// at most and costs nothing measurable; encoder and decoder run these same functions, so they
+// agree bit for bit (IEEE single precision, no contraction: -ffp-contract=off).
+
+// Coordinates (a, b, c, 0) or a normal sum (x, y, z, 0).
+using Float4 = std::array<float, 4>;
+
+CATPAQ_RANS_INLINE Float4 to_float4(const Coord& c) { return {float(c[0]), float(c[1]), float(c[2]), 0.0f}; }
+
+// One triangle's cross product (e1 x e2, e1 = s[j] - s[i], e2 = s[k] - s[i]) added to its three
+// corners' sums, in this order.
+CATPAQ_RANS_INLINE void accumulate_triangle_f(const uint32_t* tri, const Float4* s, Float4* acc) {
+    const uint32_t i = tri[0], j = tri[1], k = tri[2];
+#if defined(__SSE2__)
+    const __m128 si = _mm_loadu_ps(s[i].data());
+    const __m128 e1 = _mm_sub_ps(_mm_loadu_ps(s[j].data()), si), e2 = _mm_sub_ps(_mm_loadu_ps(s[k].data()), si);
+    // (e1y e2z - e1z e2y, e1z e2x - e1x e2z, e1x e2y - e1y e2x, 0)
+    const __m128 a = _mm_shuffle_ps(e1, e1, _MM_SHUFFLE(3, 0, 2, 1)), b = _mm_shuffle_ps(e2, e2, _MM_SHUFFLE(3, 1, 0, 2));
+    const __m128 c = _mm_shuffle_ps(e1, e1, _MM_SHUFFLE(3, 1, 0, 2)), d = _mm_shuffle_ps(e2, e2, _MM_SHUFFLE(3, 0, 2, 1));
+    const __m128 n = _mm_sub_ps(_mm_mul_ps(a, b), _mm_mul_ps(c, d));
+    for (uint32_t v : {i, j, k}) _mm_storeu_ps(acc[v].data(), _mm_add_ps(_mm_loadu_ps(acc[v].data()), n));
+#else
+    const Float4 si = s[i], sj = s[j], sk = s[k];
+    const float e1x = sj[0] - si[0], e1y = sj[1] - si[1], e1z = sj[2] - si[2];
+    const float e2x = sk[0] - si[0], e2y = sk[1] - si[1], e2z = sk[2] - si[2];
+    const float nx = e1y * e2z - e1z * e2y, ny = e1z * e2x - e1x * e2z, nz = e1x * e2y - e1y * e2x;
+    for (uint32_t v : {i, j, k}) {
+        acc[v][0] += nx;
+        acc[v][1] += ny;
+        acc[v][2] += nz;
+    }
+#endif
+}
+
+// No prediction (a zero sum): the vertex takes the previous vertex's normal. Never a predicted
+// value, which is clamped to [-127, 127].
+constexpr int8_t kNoPrediction = -128;
+
+// The projection of one sum (the reference the vector form below follows operation by
+// operation): (u, v) or kNoPrediction in both.
+CATPAQ_RANS_INLINE void predict_normal_f(const Float4& n, const std::array<int8_t, 9>& m, int8_t* uv) {
+    const float x = (float(m[0]) * n[0] + float(m[1]) * n[1]) + float(m[2]) * n[2];
+    const float y = (float(m[3]) * n[0] + float(m[4]) * n[1]) + float(m[5]) * n[2];
+    const float z = (float(m[6]) * n[0] + float(m[7]) * n[1]) + float(m[8]) * n[2];
+    const float l1 = (std::fabs(x) + std::fabs(y)) + std::fabs(z);
+    if (!(l1 > 0.0f)) {
+        uv[0] = uv[1] = kNoPrediction;
+        return;
+    }
+    const float sc = 127.0f / l1;
+    float u = x * sc, v = y * sc;
+    if (z < 0.0f) {
+        // Folded, the sign of zero taken as positive (negating is exact).
+        const float fu = u < 0.0f ? -(127.0f - std::fabs(v)) : 127.0f - std::fabs(v);
+        const float fv = v < 0.0f ? -(127.0f - std::fabs(u)) : 127.0f - std::fabs(u);
+        u = fu;
+        v = fv;
+    }
+    // Round half up: |u|, |v| <= 127, so u + 128.5 > 0 and truncation is floor.
+    uv[0] = int8_t(std::clamp(int(u + 128.5f) - 128, -127, 127));
+    uv[1] = int8_t(std::clamp(int(v + 128.5f) - 128, -127, 127));
+}
+
+#if defined(__SSE2__)
+// predict_normal_f of four vertices at once, lane by lane the same operations.
+struct NormalPredictor4 {
+    __m128 m0, m1, m2, m3, m4, m5, m6, m7, m8;
+    explicit NormalPredictor4(const std::array<int8_t, 9>& m)
+        : m0(_mm_set1_ps(m[0])), m1(_mm_set1_ps(m[1])), m2(_mm_set1_ps(m[2])), m3(_mm_set1_ps(m[3])),
+          m4(_mm_set1_ps(m[4])), m5(_mm_set1_ps(m[5])), m6(_mm_set1_ps(m[6])), m7(_mm_set1_ps(m[7])),
+          m8(_mm_set1_ps(m[8])) {}
+    // The predictions of acc[0..3] into uv[0..7].
+    CATPAQ_RANS_INLINE void predict(const Float4* acc, int8_t* uv) const;
+};
+
+CATPAQ_RANS_INLINE void NormalPredictor4::predict(const Float4* acc, int8_t* uv) const {
+    const __m128 sign = _mm_set1_ps(-0.0f), zero = _mm_setzero_ps(), c127 = _mm_set1_ps(127.0f);
+    {
+        __m128 n0 = _mm_loadu_ps(acc[0].data()), n1 = _mm_loadu_ps(acc[1].data());
+        __m128 n2 = _mm_loadu_ps(acc[2].data()), n3 = _mm_loadu_ps(acc[3].data());
+        _MM_TRANSPOSE4_PS(n0, n1, n2, n3);  // n0: the four x, n1: y, n2: z
+        const __m128 x = _mm_add_ps(_mm_add_ps(_mm_mul_ps(m0, n0), _mm_mul_ps(m1, n1)), _mm_mul_ps(m2, n2));
+        const __m128 y = _mm_add_ps(_mm_add_ps(_mm_mul_ps(m3, n0), _mm_mul_ps(m4, n1)), _mm_mul_ps(m5, n2));
+        const __m128 z = _mm_add_ps(_mm_add_ps(_mm_mul_ps(m6, n0), _mm_mul_ps(m7, n1)), _mm_mul_ps(m8, n2));
+        const __m128 l1 = _mm_add_ps(_mm_add_ps(_mm_andnot_ps(sign, x), _mm_andnot_ps(sign, y)), _mm_andnot_ps(sign, z));
+        const __m128 valid = _mm_cmpgt_ps(l1, zero);
+        // Lanes without a valid sum divide by zero (or NaN) harmlessly: they are replaced below.
+        const __m128 sc = _mm_div_ps(c127, l1);
+        const __m128 u = _mm_mul_ps(x, sc), w = _mm_mul_ps(y, sc);
+        const __m128 fu = _mm_xor_ps(_mm_sub_ps(c127, _mm_andnot_ps(sign, w)), _mm_and_ps(_mm_cmplt_ps(u, zero), sign));
+        const __m128 fw = _mm_xor_ps(_mm_sub_ps(c127, _mm_andnot_ps(sign, u)), _mm_and_ps(_mm_cmplt_ps(w, zero), sign));
+        const __m128 fold = _mm_cmplt_ps(z, zero);
+        const __m128 ru = _mm_or_ps(_mm_and_ps(fold, fu), _mm_andnot_ps(fold, u));
+        const __m128 rw = _mm_or_ps(_mm_and_ps(fold, fw), _mm_andnot_ps(fold, w));
+        const __m128 half = _mm_set1_ps(128.5f);
+        // Invalid lanes may hold anything: zeroed before the conversion, marked after.
+        const __m128i iu = _mm_cvttps_epi32(_mm_and_ps(valid, _mm_add_ps(ru, half)));
+        const __m128i iw = _mm_cvttps_epi32(_mm_and_ps(valid, _mm_add_ps(rw, half)));
+        // (u0, v0, u1, v1, ...) - 128, clamped to [-127, 127], kNoPrediction where invalid.
+        __m128i p = _mm_sub_epi16(_mm_packs_epi32(_mm_unpacklo_epi32(iu, iw), _mm_unpackhi_epi32(iu, iw)),
+                                  _mm_set1_epi16(128));
+        p = _mm_min_epi16(_mm_max_epi16(p, _mm_set1_epi16(-127)), _mm_set1_epi16(127));
+        const __m128i ok = _mm_castps_si128(valid);
+        const __m128i ok16 = _mm_packs_epi32(_mm_unpacklo_epi32(ok, ok), _mm_unpackhi_epi32(ok, ok));
+        p = _mm_or_si128(_mm_and_si128(ok16, p), _mm_andnot_si128(ok16, _mm_set1_epi16(kNoPrediction)));
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(uv), _mm_packs_epi16(p, p));
+    }
+}
+#endif
+
+// Predictions of vertices [0, V) into uv (two per vertex), four at a time like the decoder
+// (decode_geometric_normals_f), so that both run the very same code on every target. acc needs V
+// rounded up to a multiple of 4 readable entries.
+void predict_normals_f(const Float4* acc, uint32_t V, const std::array<int8_t, 9>& m, int8_t* uv) {
+#if defined(__SSE2__)
+    const NormalPredictor4 p4(m);
+#endif
+    for (uint32_t v = 0; v < V; v += 4) {
+        int8_t block[8];
+#if defined(__SSE2__)
+        p4.predict(acc + v, block);
+#else
+        for (uint32_t k = 0; k < 4; ++k) predict_normal_f(acc[v + k], m, block + 2 * k);
+#endif
+        std::memcpy(uv + 2 * size_t(v), block, 2 * size_t(std::min(4u, V - v)));
+    }
+}
+
 uint16_t read_u16(const uint8_t* p) { return uint16_t(p[0] | (p[1] << 8)); }
 uint32_t read_u32(const uint8_t* p) {
     return uint32_t(p[0]) | uint32_t(p[1]) << 8 | uint32_t(p[2]) << 16 | uint32_t(p[3]) << 24;
@@ -568,6 +706,7 @@ struct Emitter {
 // The mesh in coding order.
 struct EncoderState {
     VertexLayout layout;
+    int version = kFragmentVersion;
     uint32_t V = 0;
     const PackedVertex* verts = nullptr;  // new order, plus the virtual zero vertex at V
     const Pred* pred = nullptr;           // per new vertex
@@ -596,16 +735,19 @@ inline int normal_u(const PackedVertex& v) { return int8_t(uint8_t(v.word0 >> 24
 inline int normal_v(const PackedVertex& v) { return int8_t(uint8_t(v.word1)); }
 inline uint32_t wrap_residual(int actual, int pred) { return zigzag(int32_t(int8_t(uint8_t(actual - pred)))); }
 
-// Normal residuals under predictor kMode (acc and m: the geometric predictor's inputs).
+// Normal residuals under predictor kMode (geometric: the predictions `guv`, two per vertex,
+// kNoPrediction for the previous vertex's normal).
 template <int kMode, class Out>
-void emit_normals(const EncoderState& st, const NormalSum* acc, const std::array<int8_t, 9>& m, Out& out) {
+void emit_normals(const EncoderState& st, const int8_t* guv, Out& out) {
     const PackedVertex* verts = st.verts;
     for (uint32_t v = 0; v < st.V; ++v) {
         const Pred p = st.pred[v];
         int pu, pv;
         if constexpr (kMode == kNormalGeometric) {
             const PackedVertex& prev = verts[v == 0 ? st.V : v - 1];
-            geometric_prediction(acc[v], m, normal_u(prev), normal_v(prev), pu, pv);
+            const bool none = guv[2 * size_t(v)] == kNoPrediction;
+            pu = none ? normal_u(prev) : guv[2 * size_t(v)];
+            pv = none ? normal_v(prev) : guv[2 * size_t(v) + 1];
         } else if constexpr (kMode == kNormalAverage) {
             pu = (normal_u(verts[p.a]) + normal_u(verts[p.b])) >> 1;
             pv = (normal_v(verts[p.a]) + normal_v(verts[p.b])) >> 1;
@@ -643,13 +785,13 @@ void emit_colors(const EncoderState& st, Out& out) {
 }
 
 template <class Out>
-void emit_normals(const EncoderState& st, int mode, const NormalSum* acc, const std::array<int8_t, 9>& m, Out& out) {
+void emit_normals(const EncoderState& st, int mode, const int8_t* guv, Out& out) {
     if (mode == kNormalGeometric)
-        emit_normals<kNormalGeometric>(st, acc, m, out);
+        emit_normals<kNormalGeometric>(st, guv, out);
     else if (mode == kNormalAverage)
-        emit_normals<kNormalAverage>(st, acc, m, out);
+        emit_normals<kNormalAverage>(st, guv, out);
     else
-        emit_normals<kNormalParallelogram>(st, acc, m, out);
+        emit_normals<kNormalParallelogram>(st, guv, out);
 }
 
 template <class Out>
@@ -662,7 +804,8 @@ void emit_colors(const EncoderState& st, bool parallelogram, bool decorrelate, O
 
 // Fits M (normals ~ M * geometric normal) by least squares over unit vectors; false if
 // degenerate.
-bool fit_normal_matrix(const EncoderState& st, const NormalSum* acc, std::array<int8_t, 9>& m) {
+template <class Sum>
+bool fit_normal_matrix(const EncoderState& st, const Sum* acc, std::array<int8_t, 9>& m) {
     // Sums over the vertices of g[i][j] = n[i] n[j] (upper half; the lower half mirrors it)
     // and h[i][j] = t[i] n[j], t the vertex's decoded normal, in pairs of doubles: each lane
     // does exactly the scalar multiply and add in the same vertex order, so the sums are the
@@ -738,7 +881,9 @@ struct EncoderWorkspace {
     std::vector<Pred> pred;
     std::vector<PackedVertex> verts;
     std::vector<Coord> coords, weights;
-    std::vector<NormalSum> acc;
+    std::vector<NormalSum> acc;  // version 1
+    std::vector<Float4> fcoords, facc;  // version 2
+    std::vector<int8_t> guv;  // geometric predictions
     std::array<Candidate, 2> pos;  // cumulative, weights
     std::array<Candidate, 3> nor;  // by NormalMode
     std::array<Candidate, 4> col;  // bit 0 parallelogram, bit 1 decorrelate
@@ -1018,16 +1163,34 @@ void choose_normals(const EncoderState& st, EncoderWorkspace& ws, AttributeChoic
     const uint32_t V = st.V;
     bool geometric = false;
     if (choice.pos_mode != kPosRaw && V > 0) {
-        ws.acc.assign(V, NormalSum{0, 0, 0, 0});
-        accumulate_normals(ws.indices.data(), ws.indices.size() / 3, ws.coords.data(), ws.acc.data());
-        geometric = fit_normal_matrix(st, ws.acc.data(), choice.matrix);
+        ws.guv.resize(2 * size_t(V));
+        const size_t T = ws.indices.size() / 3;
+        if (st.version >= 2) {
+            ws.fcoords.resize(V);
+            for (uint32_t v = 0; v < V; ++v) ws.fcoords[v] = to_float4(ws.coords[v]);
+            ws.facc.assign((size_t(V) + 3) & ~size_t(3), Float4{});
+            for (size_t t = 0; t < T; ++t) accumulate_triangle_f(ws.indices.data() + 3 * t, ws.fcoords.data(), ws.facc.data());
+            geometric = fit_normal_matrix(st, ws.facc.data(), choice.matrix);
+            if (geometric) predict_normals_f(ws.facc.data(), V, choice.matrix, ws.guv.data());
+        } else {
+            ws.acc.assign(V, NormalSum{0, 0, 0, 0});
+            accumulate_normals(ws.indices.data(), T, ws.coords.data(), ws.acc.data());
+            geometric = fit_normal_matrix(st, ws.acc.data(), choice.matrix);
+            if (geometric)
+                for (uint32_t v = 0; v < V; ++v) {
+                    int pu = kNoPrediction, pv = kNoPrediction;
+                    geometric_prediction(ws.acc[v], choice.matrix, kNoPrediction, kNoPrediction, pu, pv);
+                    ws.guv[2 * size_t(v)] = int8_t(pu);
+                    ws.guv[2 * size_t(v) + 1] = int8_t(pv);
+                }
+        }
     }
     double best = 1e300;
     for (int mode : {kNormalAverage, kNormalParallelogram, kNormalGeometric}) {
         if (mode == kNormalGeometric && !geometric) continue;
         Candidate& c = ws.nor[size_t(mode)];
         c.record(kStreamNormU, 2 * size_t(V),
-                 [&](auto& r) { emit_normals(st, mode, ws.acc.data(), choice.matrix, r); });
+                 [&](auto& r) { emit_normals(st, mode, ws.guv.data(), r); });
         const double bits = c.cost(2) + (mode == kNormalGeometric ? 72 : 0);
         if (bits < best) {
             best = bits;
@@ -1084,7 +1247,7 @@ void choose_colors(const EncoderState& st, EncoderWorkspace& ws, AttributeChoice
 
 // Encodes into `out` (appending); returns the bytes appended.
 size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, FragmentEncodeStats* stats,
-                       EncoderWorkspace& ws) {
+                       int version, EncoderWorkspace& ws) {
     const size_t V_size = mesh.vertices.size(), T_size = mesh.triangle_count();
     assert(mesh.indices.size() % 3 == 0);
     assert(V_size <= kFragmentMaxVertices && T_size <= kFragmentMaxTriangles);
@@ -1097,7 +1260,7 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     ws.verts.resize(size_t(V) + 1);
     for (uint32_t v = 0; v < V; ++v) ws.verts[v] = mesh.vertices[ws.old_of_new[v]];
     ws.verts[V] = PackedVertex{};
-    const EncoderState st{mesh.layout, V, ws.verts.data(), ws.pred.data()};
+    const EncoderState st{mesh.layout, version, V, ws.verts.data(), ws.pred.data()};
 
     AttributeChoice choice;
     choose_positions(st, ws, choice);
@@ -1172,7 +1335,7 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     out.resize(base + kHeaderBytes, 0);
     uint8_t* header = out.data() + base;
     std::memcpy(header, kMagicBytes, 4);
-    header[4] = kVersion;
+    header[4] = uint8_t(version);
     header[5] = uint8_t(mesh.layout.kind);
     const bool legacy_grid = mesh.layout.kind == VertexLayoutKind::Rgb24 && mesh.layout.grid == kBaryGrid;
     const uint16_t grid_field = legacy_grid ? 0 : uint16_t(mesh.layout.grid);
@@ -1242,19 +1405,20 @@ size_t fragment_encode_bound(size_t vertex_count, size_t triangle_count) {
     return kHeaderBytes + 3 + 8 * vertex_count + 12 * triangle_count;
 }
 
-size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, FragmentEncodeStats* stats) {
+size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, FragmentEncodeStats* stats, int version) {
+    assert(version >= kFragmentOldestVersion && version <= kFragmentVersion);
     if (mesh.vertices.size() <= kEncodeKeepVertices) {
         thread_local EncoderWorkspace ws;
-        return encode_fragment(mesh, out, stats, ws);
+        return encode_fragment(mesh, out, stats, version, ws);
     }
     EncoderWorkspace ws;
-    return encode_fragment(mesh, out, stats, ws);
+    return encode_fragment(mesh, out, stats, version, ws);
 }
 
 FragmentStatus fragment_peek(const uint8_t* data, size_t size, uint32_t& vertex_count, uint32_t& triangle_count) {
     if (size < kHeaderBytes) return FragmentStatus::Truncated;
     if (std::memcmp(data, kMagicBytes, 4) != 0) return FragmentStatus::BadMagic;
-    if (data[4] != kVersion || data[5] > uint8_t(VertexLayoutKind::Rgb18)) return FragmentStatus::UnsupportedVersion;
+    if (data[4] < kFragmentOldestVersion || data[4] > kFragmentVersion || data[5] > uint8_t(VertexLayoutKind::Rgb18)) return FragmentStatus::UnsupportedVersion;
     if (!fragment_layout(data).valid()) return FragmentStatus::Corrupt;
     vertex_count = read_u32(data + 8);
     triangle_count = read_u32(data + 12);
@@ -1332,7 +1496,8 @@ struct Workspace {
     std::vector<uint8_t> symbols;
     std::vector<Coord> coords;
     std::vector<int8_t> nu, nv;
-    std::vector<NormalSum> acc;
+    std::vector<NormalSum> acc;  // version 1
+    std::vector<Float4> fcoords, facc;  // version 2
     std::vector<int32_t> residuals;  // of the attribute being decoded (decode_residuals)
     std::vector<uint32_t> rgb;
     std::array<rans::DecodeTable, kStreamCount> tables;
@@ -1594,8 +1759,7 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
 
 // Positions: sets each vertex's position bits (word1 = 0 for Rgb24, which holds no position
 // there) and ws.coords (cumulative coordinates, index V = 0). False on a coordinate out of range.
-bool decode_positions(rans::Decoder& io, Workspace& ws, const VertexLayout& layout, int pos_mode, uint32_t V,
-                      const Pred* pred, PackedVertex* vert) {
+bool decode_positions(rans::Decoder& io, Workspace& ws, const VertexLayout& layout, int pos_mode, uint32_t V, const Pred* pred, PackedVertex* vert) {
     rans::Decoder dec = io;
     const int32_t kGrid = layout.grid;
     const bool wide = layout.kind == VertexLayoutKind::Position48;
@@ -1678,7 +1842,10 @@ CATPAQ_RANS_INLINE void set_normal(PackedVertex& out, int u, int v) {
 // the other's idle slots (about 2% of the decoding time on a scan's CATP dataset, where the
 // geometric predictor is the rule). Their raw bits are read later, in order, by
 // decode_geometric_normals.
-void accumulate_normals_decoding(const uint32_t* indices, uint32_t T, const Coord* s, NormalSum* acc,
+// Sums and coordinates: NormalSum and Coord with accumulate_triangle (version 1), Float4 with
+// accumulate_triangle_f (version 2).
+template <class Sum, class C, void (*kAccumulate)(const uint32_t*, const C*, Sum*)>
+void accumulate_normals_decoding(const uint32_t* indices, uint32_t T, const C* s, Sum* acc,
                                  rans::Decoder& io, const rans::TableView* tables, uint32_t V, uint8_t* syms) {
     rans::Decoder dec = io;
     const rans::TableView tu = tables[0], tv = tables[1];
@@ -1686,7 +1853,7 @@ void accumulate_normals_decoding(const uint32_t* indices, uint32_t T, const Coor
     const uint32_t fast = uint32_t(std::min<size_t>(V, dec.rans_bytes_left() / (2 * rans::Decoder::kMaxBytesPerSymbol)));
     uint32_t v = 0;
     for (uint32_t t = 0; t < T; ++t) {
-        accumulate_triangle(indices + 3 * size_t(t), s, acc);
+        kAccumulate(indices + 3 * size_t(t), s, acc);
         if (v < fast) {
             syms[2 * size_t(v)] = uint8_t(dec.sym<0>(tu));
             syms[2 * size_t(v) + 1] = uint8_t(dec.sym<1>(tv));
@@ -1735,14 +1902,55 @@ void decode_geometric_normals(rans::Decoder& io, const NormalSum* acc, const std
     io = dec;
 }
 
+// Version 2's geometric normals from the sums (predict_normals_f, four vertices at a time into a
+// local block rather than a pass of its own), the bucket symbols (u, v per vertex) and their raw
+// bits. acc needs V rounded up to a multiple of 4 readable entries.
+void decode_geometric_normals_f(rans::Decoder& io, const Float4* acc, const std::array<int8_t, 9>& matrix, uint32_t V,
+                                const uint8_t* syms, PackedVertex* vert) {
+    rans::Decoder dec = io;
+#if defined(__SSE2__)
+    const NormalPredictor4 p4(matrix);
+#endif
+    int prev_u = 0, prev_v = 0;
+    for (uint32_t v = 0; v < V; v += 4) {
+        alignas(8) int8_t uv[8];
+#if defined(__SSE2__)
+        p4.predict(acc + v, uv);
+#else
+        for (uint32_t k = 0; k < 4; ++k) predict_normal_f(acc[v + k], matrix, uv + 2 * k);
+#endif
+        for (uint32_t k = 0; k < std::min(4u, V - v); ++k) {
+            dec.need_bits(2 * kMaxExtraBits);
+            const int32_t ru = bucket_residual(dec, syms[2 * size_t(v + k)]);
+            const int32_t rv = bucket_residual(dec, syms[2 * size_t(v + k) + 1]);
+            const bool none = uv[2 * k] == kNoPrediction;
+            prev_u = int8_t(uint8_t((none ? prev_u : uv[2 * k]) + ru));
+            prev_v = int8_t(uint8_t((none ? prev_v : uv[2 * k + 1]) + rv));
+            set_normal(vert[v + k], prev_u, prev_v);
+        }
+    }
+    io = dec;
+}
+
 // Normals: ORs u into word0 and v into word1 (signed bytes; index V is the virtual zero vertex).
-void decode_normals(rans::Decoder& io, Workspace& ws, int normal_mode, const std::array<int8_t, 9>& matrix, uint32_t V,
-                    uint32_t T, const Pred* pred, const uint32_t* indices, PackedVertex* vert) {
+void decode_normals(rans::Decoder& io, Workspace& ws, int version, int normal_mode, const std::array<int8_t, 9>& matrix,
+                    uint32_t V, uint32_t T, const Pred* pred, const uint32_t* indices, PackedVertex* vert) {
     const rans::TableView tables[2] = {rans::TableView(ws.tables[kStreamNormU]), rans::TableView(ws.tables[kStreamNormV])};
+    if (normal_mode == kNormalGeometric && version >= 2) {
+        grow(ws.fcoords, V);
+        for (uint32_t v = 0; v < V; ++v) ws.fcoords[v] = to_float4(ws.coords[v]);
+        ws.facc.assign((size_t(V) + 3) & ~size_t(3), Float4{});
+        grow(ws.symbols, 2 * size_t(V));
+        accumulate_normals_decoding<Float4, Float4, accumulate_triangle_f>(indices, T, ws.fcoords.data(), ws.facc.data(),
+                                                                           io, tables, V, ws.symbols.data());
+        decode_geometric_normals_f(io, ws.facc.data(), matrix, V, ws.symbols.data(), vert);
+        return;
+    }
     if (normal_mode == kNormalGeometric) {
         ws.acc.assign(V, NormalSum{0, 0, 0, 0});
         grow(ws.symbols, 2 * size_t(V));
-        accumulate_normals_decoding(indices, T, ws.coords.data(), ws.acc.data(), io, tables, V, ws.symbols.data());
+        accumulate_normals_decoding<NormalSum, Coord, accumulate_triangle>(indices, T, ws.coords.data(), ws.acc.data(),
+                                                                           io, tables, V, ws.symbols.data());
         decode_geometric_normals(io, ws.acc.data(), matrix, V, ws.symbols.data(), vert);
         return;
     }
@@ -1820,7 +2028,7 @@ void decode_colors(rans::Decoder& io, Workspace& ws, const VertexLayout& layout,
         decode_colors_with<false>(io, ws, f, decorrelate, V, pred, vert);
 }
 
-FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint32_t T, FragmentMesh& out,
+FragmentStatus decode_compressed(const uint8_t* p, size_t size, int version, uint32_t V, uint32_t T, FragmentMesh& out,
                                  Workspace& ws) {
 
     const bool colors = out.layout.has_color();
@@ -1895,7 +2103,7 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, uint32_t V, uint
     // Positions (index V: the virtual zero vertex).
     grow(ws.coords, size_t(V) + 1);
     if (!decode_positions(dec, ws, out.layout, pos_mode, V, pred, out.vertices.data())) return FragmentStatus::Corrupt;
-    decode_normals(dec, ws, normal_mode, matrix, V, T, pred, out.indices.data(), out.vertices.data());
+    decode_normals(dec, ws, version, normal_mode, matrix, V, T, pred, out.indices.data(), out.vertices.data());
     if (colors) {
         decode_colors(dec, ws, out.layout, color_parallelogram, color_decorrelate, V, pred, out.vertices.data());
     } else if (color_parallelogram || color_decorrelate) {
@@ -1926,10 +2134,10 @@ FragmentStatus decode_fragment(const uint8_t* data, size_t size, FragmentMesh& o
     if (coding != kCodingCompressed) return FragmentStatus::Corrupt;
     if (V <= kWorkspaceKeepVertices) {
         thread_local Workspace ws;
-        return decode_compressed(payload + 3, payload_size - 3, V, T, out, ws);
+        return decode_compressed(payload + 3, payload_size - 3, data[4], V, T, out, ws);
     }
     Workspace ws;
-    return decode_compressed(payload + 3, payload_size - 3, V, T, out, ws);
+    return decode_compressed(payload + 3, payload_size - 3, data[4], V, T, out, ws);
 }
 
 }  // namespace
