@@ -58,13 +58,19 @@ bool compare_versions(const std::string& input, const std::vector<std::vector<ui
     FragmentMesh m, oldest, current;
     size_t bytes_oldest = 0, bytes_current = 0, bytes_stored = 0, differ = 0;
     std::vector<uint8_t> b_oldest, b_current;
+    FragmentEncodeStats st, sum;
     for (const std::vector<uint8_t>& f : fragments) {
         if (fragment_decode(f.data(), f.size(), m) != FragmentStatus::Ok) fail("%s: cannot decode", input.c_str());
         b_oldest.clear();
         b_current.clear();
         bytes_stored += f.size();
         bytes_oldest += fragment_encode(m, b_oldest, nullptr, kFragmentOldestVersion);
-        bytes_current += fragment_encode(m, b_current, nullptr, kFragmentVersion);
+        bytes_current += fragment_encode(m, b_current, &st, kFragmentVersion);
+        sum.header_bytes += st.header_bytes;
+        sum.connectivity_bytes += st.connectivity_bytes;
+        sum.position_bytes += st.position_bytes;
+        sum.normal_bytes += st.normal_bytes;
+        sum.color_bytes += st.color_bytes;
         if (fragment_decode(b_oldest.data(), b_oldest.size(), oldest) != FragmentStatus::Ok ||
             fragment_decode(b_current.data(), b_current.size(), current) != FragmentStatus::Ok)
             fail("%s: a re-encoded fragment does not decode", input.c_str());
@@ -74,6 +80,9 @@ bool compare_versions(const std::string& input, const std::vector<std::vector<ui
                 "decoded arrays differ in %zu fragments\n",
                 input.c_str(), fragments.size(), bytes_stored, kFragmentOldestVersion, bytes_oldest, kFragmentVersion,
                 bytes_current, 100.0 * (double(bytes_current) / double(bytes_oldest) - 1.0), differ);
+    std::printf("  version %d by part: header %zu, connectivity %zu, positions %zu, normals %zu, colours %zu bytes\n",
+                kFragmentVersion, sum.header_bytes, sum.connectivity_bytes, sum.position_bytes, sum.normal_bytes,
+                sum.color_bytes);
     return differ == 0;
 }
 

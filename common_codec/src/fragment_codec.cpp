@@ -2,9 +2,11 @@
 //
 // Bitstream, versions 1 and 2 (all little-endian)
 // -----------------------------------------------
-// Version 2 differs from version 1 only in the arithmetic of the geometric normal predictor
-// (below: single precision instead of double and 64-bit integer sums). The decoder reads both;
-// the encoder writes version 2 unless asked for 1 (fragment_encode's `version`).
+// Version 2 differs from version 1 in two places, both for decoding speed: the arithmetic of the
+// geometric normal predictor (below: single precision instead of double and 64-bit integer sums)
+// and the joint colour coding (modes bit 6). The decoder reads both versions; the encoder writes
+// version 2 unless asked for 1 (fragment_encode's `version`). From the same input both decode to
+// the same vertex and index arrays.
 //
 //   header (24 bytes): u32 magic "CFRG" | u8 version = 1 or 2 | u8 vertex layout (0 = Rgb24,
 //                      1 = Position48, 2 = Rgb18, packed_vertex.h) | u16 grid G (0 stands for 463, and is
@@ -25,7 +27,8 @@
 //                       bits 2-3 normal predictor: 0 = gate average, 1 = parallelogram,
 //                       2 = geometric; bit 4 colour predictor: 0 = gate average,
 //                       1 = parallelogram; bit 5: R and B residuals are coded relative to the
-//                       G residual; bits 6-7 zero
+//                       G residual; bit 6 (version 2, colour layouts only): joint colour
+//                       coding; bit 7 zero (version 1: bits 6-7 zero)
 //     i8 x 9            geometric normal predictor only: row-major 3x3 matrix M mapping a normal
 //                       computed in (a, b, c) space to the frame of the normals (any scale)
 //     varint E          number of degenerate triangles (a repeated index), coded explicitly
@@ -35,7 +38,8 @@
 //                       residuals and explicit indices through the raw bit stream; in decode
 //                       order:
 //       tables          connectivity (6 symbols), 3 position tables (absent for raw positions),
-//                       normal u, v, colour R, G, B: alphabet size, scale and log-domain weights
+//                       normal u, v, colour R, G, B, then with the joint colour coding the joint
+//                       table (at most 28 symbols): alphabet size, scale and log-domain weights
 //                       (rans.h), symbols on lane 0; layouts without colour have no colour
 //                       tables and no colour values
 //       connectivity    N traversal symbols (symbol k on lane k & 3) and, in the bit stream,
@@ -44,7 +48,12 @@
 //                       (48) raw bits
 //       normals         per vertex: u, v residual values (lanes 0, 1), modulo 256
 //       colours         per vertex: G, R, B residual values (lanes 0, 1, 2), modulo 2^bits
-//                       (8 bits per channel for Rgb24, 6 for Rgb18)
+//                       (8 bits per channel for Rgb24, 6 for Rgb18). Joint colour coding: V
+//                       joint symbols (vertex v's on lane v & 3), j = zG + 3 zR + 9 zB when
+//                       the zig-zag mapped values zG, zR, zB of the vertex's three residuals
+//                       (as the separate coding codes them) are all below 3, else 27 (escape);
+//                       then for each escaped vertex, in order, its G, R, B residual values as
+//                       in the separate coding (lanes 0, 1, 2, with the G, R, B tables)
 //     Every byte must be consumed and all rANS states must end at their initial value.
 //
 // Connectivity: a deterministic front traversal in the spirit of the cut-border machine (and of
@@ -139,6 +148,7 @@ enum Stream : int {
     kStreamColR,
     kStreamColG,
     kStreamColB,
+    kStreamColJoint,  // version 2, modes bit 6
     kStreamCount,
 };
 
@@ -146,7 +156,27 @@ enum Stream : int {
 // symbols use lane (symbol index & 3). (Putting every part's symbols on the four lanes in turn
 // instead, so that the fourth lane is not idle, made the decoder 4% slower: with four lanes and
 // three tables in one loop the compiler ran out of registers.)
-constexpr int kStreamLane[kStreamCount] = {0, 0, 1, 2, 0, 1, 1, 0, 2};
+constexpr int kStreamLane[kStreamCount] = {0, 0, 1, 2, 0, 1, 1, 0, 2, 0};
+
+// Version 2's joint colour coding (modes bit 6): a vertex's three coded colour values (G, R, B
+// residuals, zig-zag mapped) as one symbol zg + 3 zr + 9 zb when each is below 3, else the escape
+// and, later, the three values as in the separate coding. Smooth colours (a scan's: 1.4 bits per
+// vertex for all three channels) then cost one rANS symbol per vertex instead of three: the
+// symbols, not the bytes, were the colours' share of the decoding time.
+constexpr uint32_t kJointEscape = 27;
+constexpr int kJointSymbols = 28;
+CATPAQ_RANS_INLINE uint32_t joint_symbol(uint32_t zg, uint32_t zr, uint32_t zb) {
+    return zg < 3 && zr < 3 && zb < 3 ? zg + 3 * zr + 9 * zb : kJointEscape;
+}
+// The residuals (G, R, B) of each joint symbol below the escape.
+struct JointResiduals {
+    std::array<std::array<int32_t, 4>, kJointEscape> rgb{};
+    constexpr JointResiduals() {
+        constexpr int32_t unzig[3] = {0, -1, 1};
+        for (uint32_t j = 0; j < kJointEscape; ++j) rgb[j] = {unzig[j % 3], unzig[j / 3 % 3], unzig[j / 9], 0};
+    }
+};
+constexpr JointResiduals kJointResiduals{};
 
 enum PositionMode { kPosCumulative = 0, kPosWeights = 1, kPosRaw = 2 };
 enum NormalMode { kNormalAverage = 0, kNormalParallelogram = 1, kNormalGeometric = 2 };
@@ -722,6 +752,22 @@ struct Emitter {
     }
 };
 
+// Version 2's joint colour coding of the values z (G, R, B per vertex): V joint symbols (vertex
+// v's on lane v & 3), then the escaped vertices' values on their streams' lanes.
+void put_joint_colors(rans::Encoder& enc, const uint16_t* z, uint32_t V,
+                      const std::array<rans::EncTable, kStreamCount>& tables) {
+    for (uint32_t v = 0; v < V; ++v)
+        enc.put(tables[kStreamColJoint], joint_symbol(z[3 * v], z[3 * v + 1], z[3 * v + 2]), int(v & 3));
+    Emitter escapes{enc, tables};
+    for (uint32_t v = 0; v < V; ++v) {
+        const uint16_t* x = z + 3 * size_t(v);
+        if (joint_symbol(x[0], x[1], x[2]) != kJointEscape) continue;
+        escapes.value(kStreamColG, x[0]);
+        escapes.value(kStreamColR, x[1]);
+        escapes.value(kStreamColB, x[2]);
+    }
+}
+
 // The mesh in coding order.
 struct EncoderState {
     VertexLayout layout;
@@ -906,6 +952,10 @@ struct EncoderWorkspace {
     std::array<Candidate, 2> pos;  // cumulative, weights
     std::array<Candidate, 3> nor;  // by NormalMode
     std::array<Candidate, 4> col;  // bit 0 parallelogram, bit 1 decorrelate
+    Candidate col_escapes;         // joint colour coding: the escaped vertices' values
+    std::vector<uint16_t> col_values;  // the chosen colour candidate's values, G R B per vertex
+    rans::TableDesc joint_desc;
+    rans::FreqTable joint_freqs;
     Front front;
     ConnSymbols conn;
     rans::Encoder enc;
@@ -1146,6 +1196,7 @@ struct AttributeChoice {
     int normal_mode = kNormalAverage;
     std::array<int8_t, 9> matrix{};
     bool color_parallelogram = false, color_decorrelate = false;
+    bool color_joint = false;  // version 2: col holds the escapes' tables, ws.joint_* the joint table
     const Candidate *pos = nullptr, *nor = nullptr, *col = nullptr;
 };
 
@@ -1219,6 +1270,50 @@ void choose_normals(const EncoderState& st, EncoderWorkspace& ws, AttributeChoic
     }
 }
 
+// The values a part's emit function produces, in order.
+struct ValueRecorder {
+    uint16_t* out;
+    CATPAQ_RANS_INLINE void value(int, uint32_t z) { *out++ = uint16_t(z); }
+};
+
+// Version 2: the chosen colour prediction's values coded jointly (kJointEscape) unless that costs
+// more than kJointColourAllowance times the `separate` bits. The allowance buys decoding speed:
+// the 1M-triangle scan's dataset decoded 2% faster with the joint coding where it is the smaller
+// (60% of the vertices) and 4% faster with it everywhere (all of its fragments are within 1.3x,
+// and its colours still took 4% fewer bytes than separately coded). Noisy colours (mostly
+// escapes, and then slower too: four symbols per escaped vertex, the last three on the decoder's
+// checked path) keep the separate coding: the joint one needs at most a quarter of escapes.
+constexpr double kJointColourAllowance = 1.25;
+void choose_joint_colors(const EncoderState& st, EncoderWorkspace& ws, AttributeChoice& choice, double separate) {
+    const uint32_t V = st.V;
+    ws.col_values.resize(3 * size_t(V));
+    ValueRecorder recorder{ws.col_values.data()};
+    emit_colors(st, choice.color_parallelogram, choice.color_decorrelate, recorder);
+    Candidate& esc = ws.col_escapes;
+    esc.clear(kStreamColR);
+    std::array<uint32_t, rans::kMaxAlphabet> joint{};
+    uint32_t escapes = 0;
+    const uint16_t* z = ws.col_values.data();
+    for (uint32_t v = 0; v < V; ++v, z += 3) {
+        const uint32_t j = joint_symbol(z[0], z[1], z[2]);
+        ++joint[j];
+        if (j == kJointEscape) {
+            ++escapes;
+            ++esc.counts[1][bucket_of(z[0]).sym];  // G
+            ++esc.counts[0][bucket_of(z[1]).sym];  // R
+            ++esc.counts[2][bucket_of(z[2]).sym];  // B
+        }
+    }
+    esc.count_raw_bits();
+    double joint_bits = 0;
+    ws.joint_desc = rans::describe_counts(joint.data(), kJointSymbols, &ws.joint_freqs, &joint_bits);
+    const double bits = esc.cost(3) + joint_bits + rans::table_cost_bits(ws.joint_desc);
+    if (4 * uint64_t(escapes) <= V && bits < kJointColourAllowance * separate) {
+        choice.color_joint = true;
+        choice.col = &esc;
+    }
+}
+
 // Colours: the cheapest of {gate average, parallelogram} x {plain, R and B relative to G}
 // (candidate k: bit 0 parallelogram, bit 1 relative). The four are counted in one pass: they
 // share the predictions, and the plain and relative codings share the G residual. The chosen
@@ -1262,6 +1357,7 @@ void choose_colors(const EncoderState& st, EncoderWorkspace& ws, AttributeChoice
             choice.col = &c;
         }
     }
+    if (st.version >= 2) choose_joint_colors(st, ws, choice, best);
 }
 
 // Encodes into `out` (appending); returns the bytes appended.
@@ -1292,12 +1388,13 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     enc.reset();
     std::array<rans::EncTable, kStreamCount> tables;
     const Candidate* parts[4] = {nullptr, choice.pos, choice.nor, choice.col};
-    const int stream_part[kStreamCount] = {0, 1, 1, 1, 2, 2, 3, 3, 3};
+    const int stream_part[kStreamCount] = {0, 1, 1, 1, 2, 2, 3, 3, 3, 3};
     int section_part[8];
     int sections = 0;
     for (int s = 0; s < kStreamCount; ++s) {
         if (stream_part[s] == 1 && choice.pos_mode == kPosRaw) continue;
         if (stream_part[s] == 3 && !colors) continue;
+        if (s == kStreamColJoint && !choice.color_joint) continue;
         if (sections == 0 || section_part[sections - 1] != stream_part[s]) {
             enc.begin_section();
             section_part[sections++] = stream_part[s];
@@ -1309,6 +1406,9 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
             bool ok = rans::build_freqs(d, f);
             assert(ok);
             (void)ok;
+        } else if (s == kStreamColJoint) {
+            d = ws.joint_desc;
+            f = ws.joint_freqs;
         } else {
             // The part's cost() already described and built the table.
             const Candidate& p = *parts[stream_part[s]];
@@ -1345,8 +1445,12 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     if (colors) {
         enc.begin_section();
         section_part[sections++] = 3;
-        Emitter emitter{enc, tables};
-        emit_colors(st, choice.color_parallelogram, choice.color_decorrelate, emitter);
+        if (choice.color_joint) {
+            put_joint_colors(enc, ws.col_values.data(), V, tables);
+        } else {
+            Emitter emitter{enc, tables};
+            emit_colors(st, choice.color_parallelogram, choice.color_decorrelate, emitter);
+        }
     }
 
     // Assemble: header, then the payload straight after it in `out`.
@@ -1368,7 +1472,7 @@ size_t encode_fragment(const FragmentMesh& mesh, std::vector<uint8_t>& out, Frag
     put_u16(out, header_fold(out.data() + base));
     out.push_back(kCodingCompressed);
     out.push_back(uint8_t(choice.pos_mode | (choice.normal_mode << 2) | (choice.color_parallelogram << 4) |
-                          (choice.color_decorrelate << 5)));
+                          (choice.color_decorrelate << 5) | (choice.color_joint << 6)));
     if (choice.normal_mode == kNormalGeometric)
         for (int8_t x : choice.matrix) out.push_back(uint8_t(x));
     put_varint(out, ws.degenerate.size());
@@ -1999,9 +2103,48 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int version, int normal_mo
     }
 }
 
+// Version 2's joint colour coding: the V joint symbols in a tight loop on the four lanes (vertex
+// v's on lane v & 3), then the residuals, G R B per vertex into r, from the symbol or, after an
+// escape, from the stream (lanes 0, 1, 2; t: the G, R and B tables).
+void decode_joint_colour_residuals(rans::Decoder& io, const rans::TableView& joint, const rans::TableView* t,
+                                   uint32_t V, uint8_t* js, int32_t* r) {
+    rans::Decoder dec = io;
+    uint32_t v = 0;
+    while (V - v >= 4 && dec.rans_bytes_left() >= 4 * rans::Decoder::kMaxBytesPerSymbol) {
+        js[v] = uint8_t(dec.sym<0>(joint));
+        js[v + 1] = uint8_t(dec.sym<1>(joint));
+        js[v + 2] = uint8_t(dec.sym<2>(joint));
+        js[v + 3] = uint8_t(dec.sym<3>(joint));
+        v += 4;
+    }
+    for (; v < V; ++v) {
+        switch (v & 3) {
+            case 0: js[v] = uint8_t(dec.get<0>(joint)); break;
+            case 1: js[v] = uint8_t(dec.get<1>(joint)); break;
+            case 2: js[v] = uint8_t(dec.get<2>(joint)); break;
+            default: js[v] = uint8_t(dec.get<3>(joint)); break;
+        }
+    }
+    // Symbols are below the table's alphabet, at most kJointSymbols (checked with the table).
+    for (v = 0; v < V; ++v) {
+        const uint32_t j = js[v];
+        int32_t* out = r + 3 * size_t(v);
+        if (j < kJointEscape) [[likely]] {
+            const std::array<int32_t, 4>& x = kJointResiduals.rgb[j];
+            out[0] = x[0], out[1] = x[1], out[2] = x[2];
+            continue;
+        }
+        dec.need_bits(3 * kMaxExtraBits);
+        out[0] = dresidual<false, 0>(dec, t[0]);
+        out[1] = dresidual<false, 1>(dec, t[1]);
+        out[2] = dresidual<false, 2>(dec, t[2]);
+    }
+    io = dec;
+}
+
 // Colours: ORs R, G, B into word1.
 template <bool kParallelogram>
-void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, bool decorrelate, uint32_t V,
+void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, bool decorrelate, bool joint, uint32_t V,
                         const Pred* pred, PackedVertex* vert) {
     // Channel values packed R | G << 8 | B << 16: one 4-byte store per vertex, which the next
     // vertices' 4-byte loads of it are forwarded from.
@@ -2013,7 +2156,12 @@ void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, b
                                        rans::TableView(ws.tables[kStreamColB])};
     grow(ws.residuals, 3 * size_t(V));
     int32_t* res = ws.residuals.data();
-    decode_residuals<3>(io, tables, V, res);
+    if (joint) {
+        grow(ws.symbols, V);
+        decode_joint_colour_residuals(io, rans::TableView(ws.tables[kStreamColJoint]), tables, V, ws.symbols.data(), res);
+    } else {
+        decode_residuals<3>(io, tables, V, res);
+    }
     const int32_t dmask = decorrelate ? -1 : 0;
     const int top = f.top, shift = f.shift, bits = f.bits;
     auto predict = [top](int a, int b, int c) {
@@ -2039,12 +2187,12 @@ void decode_colors_with(rans::Decoder& io, Workspace& ws, const ColorField& f, b
 }
 
 void decode_colors(rans::Decoder& io, Workspace& ws, const VertexLayout& layout, bool parallelogram, bool decorrelate,
-                   uint32_t V, const Pred* pred, PackedVertex* vert) {
+                   bool joint, uint32_t V, const Pred* pred, PackedVertex* vert) {
     const ColorField f(layout);
     if (parallelogram)
-        decode_colors_with<true>(io, ws, f, decorrelate, V, pred, vert);
+        decode_colors_with<true>(io, ws, f, decorrelate, joint, V, pred, vert);
     else
-        decode_colors_with<false>(io, ws, f, decorrelate, V, pred, vert);
+        decode_colors_with<false>(io, ws, f, decorrelate, joint, V, pred, vert);
 }
 
 FragmentStatus decode_compressed(const uint8_t* p, size_t size, int version, uint32_t V, uint32_t T, FragmentMesh& out,
@@ -2056,7 +2204,9 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, int version, uin
     --size;
     const int pos_mode = modes & 3, normal_mode = (modes >> 2) & 3;
     const bool color_parallelogram = (modes >> 4) & 1, color_decorrelate = (modes >> 5) & 1;
-    if (pos_mode > kPosRaw || normal_mode > kNormalGeometric || (modes >> 6) != 0) return FragmentStatus::Corrupt;
+    const bool color_joint = (modes >> 6) & 1;  // version 2
+    if (pos_mode > kPosRaw || normal_mode > kNormalGeometric || (modes >> 7) != 0) return FragmentStatus::Corrupt;
+    if (color_joint && (version < 2 || !colors)) return FragmentStatus::Corrupt;
     if (normal_mode == kNormalGeometric && pos_mode == kPosRaw) return FragmentStatus::Corrupt;
     std::array<int8_t, 9> matrix{};
     if (normal_mode == kNormalGeometric) {
@@ -2093,9 +2243,11 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, int version, uin
     for (int s = 0; s < kStreamCount; ++s) {
         if (pos_mode == kPosRaw && s >= kStreamPos0 && s <= kStreamPos2) continue;
         if (!colors && s >= kStreamColR) continue;
+        if (s == kStreamColJoint && !color_joint) continue;
         rans::FreqTable f;
         if (!dec.get_table(f, ws.tables[size_t(s)])) return FragmentStatus::Corrupt;
         if (s == kStreamConn && f.nsym > int(kConnSymbols)) return FragmentStatus::Corrupt;
+        if (s == kStreamColJoint && f.nsym > kJointSymbols) return FragmentStatus::Corrupt;
     }
 
     out.vertices.resize(V);
@@ -2124,7 +2276,7 @@ FragmentStatus decode_compressed(const uint8_t* p, size_t size, int version, uin
     if (!decode_positions(dec, ws, out.layout, pos_mode, V, pred, out.vertices.data())) return FragmentStatus::Corrupt;
     decode_normals(dec, ws, version, normal_mode, matrix, V, T, pred, out.indices.data(), out.vertices.data());
     if (colors) {
-        decode_colors(dec, ws, out.layout, color_parallelogram, color_decorrelate, V, pred, out.vertices.data());
+        decode_colors(dec, ws, out.layout, color_parallelogram, color_decorrelate, color_joint, V, pred, out.vertices.data());
     } else if (color_parallelogram || color_decorrelate) {
         return FragmentStatus::Corrupt;
     }

@@ -196,6 +196,20 @@ std::vector<PackedVertex> random_vertices(std::mt19937_64& rng, size_t n) {
     return v;
 }
 
+// A grid patch whose colours vary by one step per vertex at most (joint coding) or are random.
+FragmentMesh coloured_patch(int n, bool noisy, uint64_t seed) {
+    FragmentMesh m = grid_patch(n);
+    std::mt19937_64 rng(seed);
+    for (size_t i = 0; i < m.vertices.size(); ++i) {
+        PackedVertex& v = m.vertices[i];
+        const int x = int(i % size_t(n)), y = int(i / size_t(n));
+        const uint8_t r = noisy ? uint8_t(rng()) : uint8_t(100 + x / 3), g = noisy ? uint8_t(rng()) : uint8_t(80 + y / 4),
+                      b = noisy ? uint8_t(rng()) : uint8_t(30 + (x + y) / 5);
+        v = PackedVertex::make(v.position_index(), v.normal(), r, g, b);
+    }
+    return m;
+}
+
 // A small realistic fragment used by the corruption and fuzz tests.
 FragmentMesh small_fragment() {
     FragmentMesh m = grid_patch(9);
@@ -392,11 +406,13 @@ TEST(FragmentCodec, RoundTripIsLosslessOnAHighValenceFanAndStackedDuplicates) {
 namespace {
 
 // Fragments of every version in the compressed coding: small_fragment (degenerate triangles,
-// two components) and icosphere(3) (the geometric normal predictor, which version 2 changed).
+// two components), icosphere(3) (the geometric normal predictor, which version 2 changed) and a
+// patch of smooth colours (version 2's joint colour coding).
 std::vector<std::vector<uint8_t>> damage_seeds() {
     std::vector<std::vector<uint8_t>> seeds;
     for (int version = kFragmentOldestVersion; version <= kFragmentVersion; ++version)
-        for (const FragmentMesh& m : {small_fragment(), icosphere(3)}) seeds.push_back(encode(m, nullptr, version));
+        for (const FragmentMesh& m : {small_fragment(), icosphere(3), coloured_patch(9, false, 4)})
+            seeds.push_back(encode(m, nullptr, version));
     return seeds;
 }
 
@@ -419,6 +435,9 @@ TEST(FragmentCodec, EveryTruncationIsRejected) {
         }
     }
     EXPECT_EQ(geometric, kFragmentVersion - kFragmentOldestVersion + 1) << "one seed per version with geometric normals";
+    int joint = 0;
+    for (const std::vector<uint8_t>& bytes : damage_seeds()) joint += (bytes[kModesOffset] >> 6) & 1;
+    EXPECT_GE(joint, 1) << "a version 2 seed with the joint colour coding";
 }
 
 TEST(FragmentCodec, EverySingleBitFlipIsDetected) {
@@ -720,10 +739,10 @@ TEST(FragmentCodec, GoldenBytesOfATinyFragmentAreStable) {
     EXPECT_EQ(hex_of(bytes), kGoldenTinyVersion1);
     std::vector<uint8_t> v2 = expect_round_trip(m, 2);
     EXPECT_EQ(hex_of(v2),
-              "43465247020000001900000020000000af4316aed2ac22103b000015002dc76b"
-              "3f0200e6e46505d0220a3c9d40261567a51c54ccbddb9b90d9db141c2c2170dc"
-              "e7cff200d5ad2f072d1cce917a93eaa6b387b2aff9d7b05ff856fe0e565e5259"
-              "b5521e050ed683f56029580c5684f5602558107be1114401");
+              "43465247020000001900000020000000aacfbff42268ba5d3b000055002dab3a"
+              "ad094af09a09289a9c0f3bc93b55134e91abf8c5b5be7901892bac469cb89e79"
+              "cbfc872df720b288880da57afe0429033916203b89d4e1ad700244f26aad9ff8"
+              "3e4219d58d64b7829a050ed683f56029580c56c443c206c45e780451");
 }
 
 // Datasets on disk hold version 1 fragments: the stored bytes (not a fresh encoding) still decode
@@ -829,9 +848,9 @@ TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreUnchanged) {
 
 // ---- version 2 ------------------------------------------------------------------------------
 
-// Version 2 changed how the geometric normal prediction is computed (float), nothing else: from
-// the same input, both versions decode to the very same vertex and index arrays (not only the
-// same mesh up to the permutations the codec allows).
+// Version 2 changed how the geometric normal prediction is computed (float) and added the joint
+// colour coding, nothing else: from the same input, both versions decode to the very same vertex
+// and index arrays (not only the same mesh up to the permutations the codec allows).
 TEST(FragmentCodec, Version2DecodesToTheSameArraysAsVersion1) {
     std::vector<std::pair<std::string, FragmentMesh>> cases = varied_meshes();
     for (const VertexLayout& layout : kLayouts) {
@@ -874,9 +893,10 @@ TEST(FragmentCodec, Version2RoundTripIsLosslessOnGeneratedFragments) {
     EXPECT_GE(geometric, std::size(kLayouts)) << "round trips with the geometric normal predictor";
 }
 
-// The float prediction costs no bytes: it is the same prediction as version 1's but for rare
-// roundings.
-TEST(FragmentCodec, Version2IsNoLargerThanVersion1WithinAHair) {
+// The float prediction costs no bytes (the same prediction as version 1's but for rare
+// roundings); the joint colour coding may cost a little where it is not the smaller coding
+// (kJointColourAllowance), within the 1% the format change may cost.
+TEST(FragmentCodec, Version2CostsAtMostOnePercentMoreBytesThanVersion1) {
     size_t v1 = 0, v2 = 0;
     for (const auto& [name, m] : varied_meshes()) {
         v1 += encode(m, nullptr, 1).size();
@@ -886,7 +906,7 @@ TEST(FragmentCodec, Version2IsNoLargerThanVersion1WithinAHair) {
         v1 += encode(icosphere(sub), nullptr, 1).size();
         v2 += encode(icosphere(sub), nullptr, 2).size();
     }
-    EXPECT_LE(double(v2), 1.001 * double(v1));
+    EXPECT_LE(double(v2), 1.01 * double(v1));
 }
 
 TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreStableInVersion2) {
@@ -905,4 +925,53 @@ TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreStableInVersion2) {
               "0xb2d9e5b0d9e09a22ull,0xa51be7d3cd2e18a2ull,0x4d12bede0a5be7f9ull,0x16be6f14befc845dull,"
               "0xdb5ad8010974afe2ull,0x9b545f39f184f256ull,0xf7b976b6ab739b42ull,0xcc2519e887e470ecull,"
               "0x8441a2df46a825e1ull,0xd3bf700dfc6411f3ull,");
+}
+
+namespace {
+
+constexpr uint8_t kJointColourBit = 1 << 6;  // modes bit 6, version 2
+
+}  // namespace
+
+TEST(FragmentCodec, JointColourCodingIsChosenForSmoothColoursAndDecodesLikeVersion1) {
+    const FragmentMesh m = coloured_patch(25, false, 1);
+    const std::vector<uint8_t> v2 = expect_round_trip(m, 2);
+    ASSERT_EQ(v2[kCodingOffset], 0);
+    EXPECT_NE(v2[kModesOffset] & kJointColourBit, 0) << "joint colour coding";
+    const std::vector<uint8_t> v1 = encode(m, nullptr, 1);
+    FragmentMesh d1, d2;
+    ASSERT_EQ(fragment_decode(v1.data(), v1.size(), d1), FragmentStatus::Ok);
+    ASSERT_EQ(fragment_decode(v2.data(), v2.size(), d2), FragmentStatus::Ok);
+    for (size_t v = 0; v < d1.vertices.size(); ++v) ASSERT_EQ(key(d1.vertices[v]), key(d2.vertices[v])) << v;
+    EXPECT_EQ(d1.indices, d2.indices);
+    // Some vertices escape (colour steps of two) and some do not: both paths of the decoder.
+    FragmentMesh mixed = m;
+    for (size_t i = 0; i < mixed.vertices.size(); i += 25) {
+        PackedVertex& v = mixed.vertices[i];
+        v = PackedVertex::make(v.position_index(), v.normal(), uint8_t(v.word1 >> 8), uint8_t(v.word1 >> 16), 250);
+    }
+    const std::vector<uint8_t> b = expect_round_trip(mixed, 2);
+    EXPECT_NE(b[kModesOffset] & kJointColourBit, 0) << "joint colour coding with escapes";
+}
+
+TEST(FragmentCodec, NoisyColoursKeepTheSeparateColourCoding) {
+    const std::vector<uint8_t> bytes = expect_round_trip(coloured_patch(20, true, 2), 2);
+    ASSERT_EQ(bytes[kCodingOffset], 0);
+    EXPECT_EQ(bytes[kModesOffset] & kJointColourBit, 0);
+}
+
+// The joint colour bit is version 2's and needs colours: set in a version 1 fragment or in a
+// colourless layout's, the fragment is corrupt.
+TEST(FragmentCodec, JointColourBitIsRejectedInVersion1AndWithoutColours) {
+    FragmentMesh out;
+    for (const std::vector<uint8_t>& bytes :
+         {encode(coloured_patch(12, false, 3), nullptr, 1),
+          encode(grid_patch(12, VertexLayout{VertexLayoutKind::Position48, 2000}), nullptr, 2)}) {
+        ASSERT_EQ(bytes[kCodingOffset], 0);
+        ASSERT_EQ(bytes[kModesOffset] & kJointColourBit, 0);
+        std::vector<uint8_t> b = bytes;
+        b[kModesOffset] |= kJointColourBit;
+        refresh_integrity(b);
+        EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::Corrupt);
+    }
 }
