@@ -53,18 +53,19 @@ Canonical canonical(const FragmentMesh& m) {
     return c;
 }
 
-std::vector<uint8_t> encode(const FragmentMesh& m, FragmentEncodeStats* stats = nullptr) {
+std::vector<uint8_t> encode(const FragmentMesh& m, FragmentEncodeStats* stats = nullptr, int version = kFragmentVersion) {
     std::vector<uint8_t> bytes;
-    size_t n = fragment_encode(m, bytes, stats);
+    size_t n = fragment_encode(m, bytes, stats, version);
+    EXPECT_EQ(bytes[4], version);
     EXPECT_EQ(n, bytes.size());
     EXPECT_LE(n, fragment_encode_bound(m.vertices.size(), m.triangle_count()));
     return bytes;
 }
 
 // Encodes, decodes and checks the round trip; returns the encoded bytes.
-std::vector<uint8_t> expect_round_trip(const FragmentMesh& m) {
+std::vector<uint8_t> expect_round_trip(const FragmentMesh& m, int version = kFragmentVersion) {
     FragmentEncodeStats stats;
-    std::vector<uint8_t> bytes = encode(m, &stats);
+    std::vector<uint8_t> bytes = encode(m, &stats, version);
     EXPECT_EQ(stats.header_bytes + stats.connectivity_bytes + stats.position_bytes + stats.normal_bytes +
                   stats.color_bytes,
               bytes.size());
@@ -193,6 +194,20 @@ std::vector<PackedVertex> random_vertices(std::mt19937_64& rng, size_t n) {
         x.word1 = uint32_t(r >> 32);
     }
     return v;
+}
+
+// A grid patch whose colours vary by one step per vertex at most (joint coding) or are random.
+FragmentMesh coloured_patch(int n, bool noisy, uint64_t seed) {
+    FragmentMesh m = grid_patch(n);
+    std::mt19937_64 rng(seed);
+    for (size_t i = 0; i < m.vertices.size(); ++i) {
+        PackedVertex& v = m.vertices[i];
+        const int x = int(i % size_t(n)), y = int(i / size_t(n));
+        const uint8_t r = noisy ? uint8_t(rng()) : uint8_t(100 + x / 3), g = noisy ? uint8_t(rng()) : uint8_t(80 + y / 4),
+                      b = noisy ? uint8_t(rng()) : uint8_t(30 + (x + y) / 5);
+        v = PackedVertex::make(v.position_index(), v.normal(), r, g, b);
+    }
+    return m;
 }
 
 // A small realistic fragment used by the corruption and fuzz tests.
@@ -388,35 +403,93 @@ TEST(FragmentCodec, RoundTripIsLosslessOnAHighValenceFanAndStackedDuplicates) {
 
 // ---- damaged input --------------------------------------------------------------------------
 
+namespace {
+
+// Fragments of every version in the compressed coding: small_fragment (degenerate triangles,
+// two components), icosphere(3) (the geometric normal predictor, which version 2 changed) and a
+// patch of smooth colours (version 2's joint colour coding).
+std::vector<std::vector<uint8_t>> damage_seeds() {
+    std::vector<std::vector<uint8_t>> seeds;
+    for (int version = kFragmentOldestVersion; version <= kFragmentVersion; ++version)
+        for (const FragmentMesh& m : {small_fragment(), icosphere(3), coloured_patch(9, false, 4)})
+            seeds.push_back(encode(m, nullptr, version));
+    return seeds;
+}
+
+}  // namespace
+
 TEST(FragmentCodec, EveryTruncationIsRejected) {
-    std::vector<uint8_t> bytes = encode(small_fragment());
-    ASSERT_EQ(bytes[kCodingOffset], 0);
-    FragmentMesh out;
-    for (size_t n = 0; n < bytes.size(); ++n) {
-        std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(n));  // own allocation: ASan sees overreads
-        FragmentStatus st = fragment_decode(cut.data(), cut.size(), out);
-        EXPECT_NE(st, FragmentStatus::Ok) << "length " << n;
-        if (n < kHeaderSize) {
-            EXPECT_EQ(st, FragmentStatus::Truncated);
+    int geometric = 0;
+    for (const std::vector<uint8_t>& bytes : damage_seeds()) {
+        SCOPED_TRACE(int(bytes[4]));
+        ASSERT_EQ(bytes[kCodingOffset], 0);
+        geometric += ((bytes[kModesOffset] >> 2) & 3) == 2;
+        FragmentMesh out;
+        for (size_t n = 0; n < bytes.size(); ++n) {
+            std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(n));  // own allocation: ASan sees overreads
+            FragmentStatus st = fragment_decode(cut.data(), cut.size(), out);
+            EXPECT_NE(st, FragmentStatus::Ok) << "length " << n;
+            if (n < kHeaderSize) {
+                EXPECT_EQ(st, FragmentStatus::Truncated);
+            }
         }
     }
+    EXPECT_EQ(geometric, kFragmentVersion - kFragmentOldestVersion + 1) << "one seed per version with geometric normals";
+    int joint = 0;
+    for (const std::vector<uint8_t>& bytes : damage_seeds()) joint += (bytes[kModesOffset] >> 6) & 1;
+    EXPECT_GE(joint, 1) << "a version 2 seed with the joint colour coding";
 }
 
 TEST(FragmentCodec, EverySingleBitFlipIsDetected) {
-    std::vector<uint8_t> bytes = encode(small_fragment());
-    ASSERT_EQ(bytes[kCodingOffset], 0);
-    FragmentMesh out;
-    ASSERT_EQ(fragment_decode(bytes.data(), bytes.size(), out), FragmentStatus::Ok);
-    for (size_t at = 0; at < bytes.size(); ++at)
-        for (int bit = 0; bit < 8; ++bit) {
-            std::vector<uint8_t> b = bytes;
-            b[at] ^= uint8_t(1u << bit);
-            FragmentStatus st = fragment_decode(b.data(), b.size(), out);
-            ASSERT_NE(st, FragmentStatus::Ok) << "byte " << at << " bit " << bit;
-            if (at >= 16) {
-                EXPECT_EQ(st, FragmentStatus::ChecksumMismatch);
+    for (const std::vector<uint8_t>& bytes : damage_seeds()) {
+        SCOPED_TRACE(int(bytes[4]));
+        FragmentMesh out;
+        ASSERT_EQ(fragment_decode(bytes.data(), bytes.size(), out), FragmentStatus::Ok);
+        for (size_t at = 0; at < bytes.size(); ++at)
+            for (int bit = 0; bit < 8; ++bit) {
+                std::vector<uint8_t> b = bytes;
+                b[at] ^= uint8_t(1u << bit);
+                FragmentStatus st = fragment_decode(b.data(), b.size(), out);
+                ASSERT_NE(st, FragmentStatus::Ok) << "byte " << at << " bit " << bit;
+                if (at >= 16) {
+                    EXPECT_EQ(st, FragmentStatus::ChecksumMismatch);
+                }
             }
+    }
+}
+
+// With the checksum and the header fold recomputed, every truncation of the payload and every
+// changed payload byte reaches the parser: it must answer with an error code or a mesh whose
+// indices are in range, never crash or read out of bounds (run under ASan in CI).
+TEST(FragmentCodec, CorruptPayloadsWithValidChecksumsGiveErrorCodesInEveryVersion) {
+    std::mt19937_64 rng(16);
+    for (const std::vector<uint8_t>& bytes : damage_seeds()) {
+        SCOPED_TRACE(int(bytes[4]));
+        FragmentMesh out;
+        size_t ok = 0, tried = 0;
+        for (size_t n = kHeaderSize + 3; n < bytes.size(); ++n) {
+            std::vector<uint8_t> cut(bytes.begin(), bytes.begin() + long(n));
+            refresh_integrity(cut);
+            EXPECT_NE(fragment_decode(cut.data(), cut.size(), out), FragmentStatus::Ok) << "length " << n;
         }
+        for (size_t at = kHeaderSize + 2; at < bytes.size(); ++at)
+            for (int k = 0; k < 4; ++k) {
+                std::vector<uint8_t> b = bytes;
+                b[at] = uint8_t(rng());
+                if (b[at] == bytes[at]) continue;
+                refresh_integrity(b);
+                const FragmentStatus st = fragment_decode(b.data(), b.size(), out);
+                ++tried;
+                if (st == FragmentStatus::Ok) {
+                    ++ok;
+                    for (uint32_t i : out.indices) ASSERT_LT(i, out.vertices.size());
+                } else {
+                    EXPECT_TRUE(out.vertices.empty() && out.indices.empty());
+                }
+            }
+        // A changed residual can still decode (to other values); most changes are caught.
+        EXPECT_LT(ok, tried / 2);
+    }
 }
 
 TEST(FragmentCodec, ExtraTrailingBytesAreRejected) {
@@ -435,9 +508,11 @@ TEST(FragmentCodec, HeaderFieldsAreValidated) {
     std::vector<uint8_t> b = bytes;
     b[0] = 'X';
     EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::BadMagic);
-    b = bytes;
-    b[4] = 2;
-    EXPECT_EQ(fragment_peek(b.data(), b.size(), vc, tc), FragmentStatus::UnsupportedVersion);
+    for (int version : {0, kFragmentVersion + 1}) {
+        b = bytes;
+        b[4] = uint8_t(version);
+        EXPECT_EQ(fragment_peek(b.data(), b.size(), vc, tc), FragmentStatus::UnsupportedVersion) << version;
+    }
     b = bytes;
     b[11] = 0x40;  // vertex count 2^30
     EXPECT_EQ(fragment_peek(b.data(), b.size(), vc, tc), FragmentStatus::TooLarge);
@@ -475,7 +550,7 @@ TEST(FragmentCodec, FuzzedInputNeverCrashesTheDecoder) {
         for (auto& x : b) x = uint8_t(rng());
         check(b);
         if (b.size() >= kHeaderSize) {
-            const uint8_t head[8] = {'C', 'F', 'R', 'G', 1, 0, 0, 0};
+            const uint8_t head[8] = {'C', 'F', 'R', 'G', uint8_t(1 + i % kFragmentVersion), 0, 0, 0};
             std::copy(head, head + 8, b.begin());
             for (int k = 8; k < 16; ++k) b[size_t(k)] = (k % 4 == 0) ? uint8_t(rng() % 64) : 0;
             refresh_integrity(b);
@@ -483,7 +558,8 @@ TEST(FragmentCodec, FuzzedInputNeverCrashesTheDecoder) {
         }
     }
     // Mutations of valid fragments (every coding path), checksum recomputed so the parser runs.
-    std::vector<std::vector<uint8_t>> seeds = {encode(small_fragment()), encode(icosphere(1)), encode(grid_patch(3))};
+    std::vector<std::vector<uint8_t>> seeds = {encode(small_fragment()), encode(icosphere(1)), encode(grid_patch(3)),
+                                               encode(icosphere(1), nullptr, 1)};
     {
         FragmentMesh r = grid_patch(7);
         r.vertices = random_vertices(rng, r.vertices.size());
@@ -610,8 +686,10 @@ TEST(FragmentCodec, HeaderNamesTheLayoutAndInvalidLayoutsAreRejected) {
 
 // ---- format stability -----------------------------------------------------------------------
 
-TEST(FragmentCodec, GoldenBytesOfATinyFragmentAreStable) {
-    // A 5 x 5 grid patch (32 triangles) with integer-built vertex words: the compressed coding.
+namespace {
+
+// A 5 x 5 grid patch (32 triangles) with integer-built vertex words: the compressed coding.
+FragmentMesh golden_tiny_fragment() {
     FragmentMesh m;
     for (int j = 0; j < 5; ++j)
         for (int i = 0; i < 5; ++i) {
@@ -624,28 +702,63 @@ TEST(FragmentCodec, GoldenBytesOfATinyFragmentAreStable) {
             uint32_t a = j * 5 + i, b = a + 1, c = a + 5, d = c + 1;
             m.indices.insert(m.indices.end(), {a, b, d, a, d, c});
         }
-    std::vector<uint8_t> bytes = expect_round_trip(m);
-    EXPECT_EQ(bytes[kCodingOffset], 0) << "the golden fragment must exercise the compressed coding";
+    return m;
+}
+
+std::string hex_of(const std::vector<uint8_t>& bytes) {
     std::string hex;
     char buf[4];
     for (uint8_t b : bytes) {
         std::snprintf(buf, sizeof buf, "%02x", b);
         hex += buf;
     }
-    // If this changes, the bitstream changed: bump the version in fragment_codec.cpp (and the
-    // format documentation) unless the change is deliberate and nothing was ever stored.
-    EXPECT_EQ(hex,
-              "43465247010000001900000020000000477d510788a0072738000015002dc76b"
-              "3f0200e6e46505d0220a3c9d40261567a51c54ccbddb9b90d9db141c2c2170dc"
-              "e7cff200d5ad2f072d1cce917a93eaa6b387b2aff9d7b05ff856fe0e565e5259"
-              "b5521e050ed683f56029580c5684f5602558107be1114401");
+    return hex;
 }
 
-// The encoder was restructured for speed (trial modes only counted, symbols coded with
-// reciprocal tables, per-thread scratch memory) without changing a single output byte. These
-// digests (XXH3-64 of the encoded bytes) were taken with the encoder before that change, over
-// meshes that exercise every coding mode and the traversal's special cases.
-TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreUnchanged) {
+std::vector<uint8_t> bytes_of(const std::string& hex) {
+    std::vector<uint8_t> out;
+    for (size_t i = 0; i + 1 < hex.size(); i += 2) out.push_back(uint8_t(std::stoi(hex.substr(i, 2), nullptr, 16)));
+    return out;
+}
+
+// Version 1's bytes of golden_tiny_fragment(), as the first datasets stored them.
+const char* const kGoldenTinyVersion1 =
+    "43465247010000001900000020000000477d510788a0072738000015002dc76b"
+    "3f0200e6e46505d0220a3c9d40261567a51c54ccbddb9b90d9db141c2c2170dc"
+    "e7cff200d5ad2f072d1cce917a93eaa6b387b2aff9d7b05ff856fe0e565e5259"
+    "b5521e050ed683f56029580c5684f5602558107be1114401";
+
+}  // namespace
+
+TEST(FragmentCodec, GoldenBytesOfATinyFragmentAreStable) {
+    const FragmentMesh m = golden_tiny_fragment();
+    std::vector<uint8_t> bytes = expect_round_trip(m, 1);
+    EXPECT_EQ(bytes[kCodingOffset], 0) << "the golden fragment must exercise the compressed coding";
+    // If this changes, the bitstream changed: bump the version in fragment_codec.cpp (and the
+    // format documentation) unless the change is deliberate and nothing was ever stored.
+    EXPECT_EQ(hex_of(bytes), kGoldenTinyVersion1);
+    std::vector<uint8_t> v2 = expect_round_trip(m, 2);
+    EXPECT_EQ(hex_of(v2),
+              "43465247020000001900000020000000aacfbff42268ba5d3b000055002dab3a"
+              "ad094af09a09289a9c0f3bc93b55134e91abf8c5b5be7901892bac469cb89e79"
+              "cbfc872df720b288880da57afe0429033916203b89d4e1ad700244f26aad9ff8"
+              "3e4219d58d64b7829a050ed683f56029580c56c443c206c45e780451");
+}
+
+// Datasets on disk hold version 1 fragments: the stored bytes (not a fresh encoding) still decode
+// to the mesh they were made from.
+TEST(FragmentCodec, Version1BytesOnDiskStillDecode) {
+    const std::vector<uint8_t> stored = bytes_of(kGoldenTinyVersion1);
+    ASSERT_EQ(stored[4], 1);
+    FragmentMesh out;
+    ASSERT_EQ(fragment_decode(stored.data(), stored.size(), out), FragmentStatus::Ok);
+    EXPECT_TRUE(canonical(out) == canonical(golden_tiny_fragment()));
+}
+
+namespace {
+
+// Meshes that exercise every coding mode and the traversal's special cases.
+std::vector<std::pair<std::string, FragmentMesh>> varied_meshes() {
     std::vector<std::pair<std::string, FragmentMesh>> cases;
     for (int n : {2, 3, 5, 9, 17, 40}) cases.push_back({"grid " + std::to_string(n), grid_patch(n)});
     for (int s = 0; s <= 3; ++s) cases.push_back({"icosphere " + std::to_string(s), icosphere(s)});
@@ -693,6 +806,17 @@ TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreUnchanged) {
             cases.push_back({"random words " + std::to_string(round), m});
         }
     }
+    return cases;
+}
+
+}  // namespace
+
+// The encoder was restructured for speed (trial modes only counted, symbols coded with
+// reciprocal tables, per-thread scratch memory) without changing a single output byte. These
+// digests (XXH3-64 of the encoded bytes of version 1) were taken with the encoder before that
+// change.
+TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreUnchanged) {
+    const std::vector<std::pair<std::string, FragmentMesh>> cases = varied_meshes();
     const uint64_t expected[] = {
         0x9e2c54af7039fd12ull,  // grid 2
         0x473f42ed61c3072full,  // grid 3
@@ -715,9 +839,139 @@ TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreUnchanged) {
     };
     ASSERT_EQ(cases.size(), sizeof expected / sizeof expected[0]);
     for (size_t i = 0; i < cases.size(); ++i) {
-        std::vector<uint8_t> bytes = encode(cases[i].second);
+        std::vector<uint8_t> bytes = encode(cases[i].second, nullptr, 1);
         char digest[24];
         std::snprintf(digest, sizeof digest, "0x%016llxull", (unsigned long long)checksum64(bytes.data(), bytes.size()));
         EXPECT_EQ(checksum64(bytes.data(), bytes.size()), expected[i]) << cases[i].first << ": now " << digest;
+    }
+}
+
+// ---- version 2 ------------------------------------------------------------------------------
+
+// Version 2 changed how the geometric normal prediction is computed (float) and added the joint
+// colour coding, nothing else: from the same input, both versions decode to the very same vertex
+// and index arrays (not only the same mesh up to the permutations the codec allows).
+TEST(FragmentCodec, Version2DecodesToTheSameArraysAsVersion1) {
+    std::vector<std::pair<std::string, FragmentMesh>> cases = varied_meshes();
+    for (const VertexLayout& layout : kLayouts) {
+        cases.push_back({"icosphere 3 " + describe(layout), icosphere(3, layout)});
+        cases.push_back({"grid 23 " + describe(layout), grid_patch(23, layout)});
+    }
+    size_t geometric = 0;
+    for (const auto& [name, m] : cases) {
+        SCOPED_TRACE(name);
+        const std::vector<uint8_t> b1 = encode(m, nullptr, 1), b2 = encode(m, nullptr, 2);
+        FragmentMesh d1, d2;
+        ASSERT_EQ(fragment_decode(b1.data(), b1.size(), d1), FragmentStatus::Ok);
+        ASSERT_EQ(fragment_decode(b2.data(), b2.size(), d2), FragmentStatus::Ok);
+        EXPECT_TRUE(d1.layout == d2.layout);
+        ASSERT_EQ(d1.vertices.size(), d2.vertices.size());
+        for (size_t v = 0; v < d1.vertices.size(); ++v) ASSERT_EQ(key(d1.vertices[v]), key(d2.vertices[v])) << v;
+        EXPECT_EQ(d1.indices, d2.indices);
+        geometric += b2[kCodingOffset] == 0 && ((b2[kModesOffset] >> 2) & 3) == 2;
+    }
+    EXPECT_GE(geometric, 8u) << "the cases must exercise version 2's geometric normals";
+}
+
+// Round trips of version 2 with the geometric predictor on generated fragments of every layout
+// and of vertex counts that are and are not multiples of the predictor's block of four.
+TEST(FragmentCodec, Version2RoundTripIsLosslessOnGeneratedFragments) {
+    size_t geometric = 0;
+    for (const VertexLayout& layout : kLayouts) {
+        SCOPED_TRACE(describe(layout));
+        for (int n : {4, 5, 6, 7, 16, 31}) {
+            FragmentMesh m = grid_patch(n, layout);
+            const std::vector<uint8_t> bytes = expect_round_trip(m, 2);
+            EXPECT_EQ(bytes[4], 2);
+        }
+        for (int sub = 0; sub <= 4; ++sub) {
+            const std::vector<uint8_t> bytes = expect_round_trip(icosphere(sub, layout), 2);
+            geometric += bytes[kCodingOffset] == 0 && ((bytes[kModesOffset] >> 2) & 3) == 2;
+        }
+    }
+    // (Coarse grids and small spheres often prefer the parallelogram.)
+    EXPECT_GE(geometric, std::size(kLayouts)) << "round trips with the geometric normal predictor";
+}
+
+// The float prediction costs no bytes (the same prediction as version 1's but for rare
+// roundings); the joint colour coding may cost a little where it is not the smaller coding
+// (kJointColourAllowance), within the 1% the format change may cost.
+TEST(FragmentCodec, Version2CostsAtMostOnePercentMoreBytesThanVersion1) {
+    size_t v1 = 0, v2 = 0;
+    for (const auto& [name, m] : varied_meshes()) {
+        v1 += encode(m, nullptr, 1).size();
+        v2 += encode(m, nullptr, 2).size();
+    }
+    for (int sub = 3; sub <= 5; ++sub) {
+        v1 += encode(icosphere(sub), nullptr, 1).size();
+        v2 += encode(icosphere(sub), nullptr, 2).size();
+    }
+    EXPECT_LE(double(v2), 1.01 * double(v1));
+}
+
+TEST(FragmentCodec, EncodedBytesOfVariedMeshesAreStableInVersion2) {
+    const std::vector<std::pair<std::string, FragmentMesh>> cases = varied_meshes();
+    std::string now;
+    for (const auto& [name, m] : cases) {
+        const std::vector<uint8_t> bytes = encode(m, nullptr, 2);
+        char digest[32];
+        std::snprintf(digest, sizeof digest, "0x%016llxull,", (unsigned long long)checksum64(bytes.data(), bytes.size()));
+        now += digest;
+    }
+    // If this changes, version 2's bitstream changed (see GoldenBytesOfATinyFragmentAreStable).
+    EXPECT_EQ(now,
+              "0x7130bf7821da06f8ull,0xbf531cf99904a2fbull,0x152318f912442f87ull,0x09ec36a063567c67ull,"
+              "0x4056b7746da7babdull,0x43d2d6ca4a96c3f2ull,0x24fde9af2ae775e2ull,0xa6fbca585d113cdbull,"
+              "0xb2d9e5b0d9e09a22ull,0xa51be7d3cd2e18a2ull,0x4d12bede0a5be7f9ull,0x16be6f14befc845dull,"
+              "0xdb5ad8010974afe2ull,0x9b545f39f184f256ull,0xf7b976b6ab739b42ull,0xcc2519e887e470ecull,"
+              "0x8441a2df46a825e1ull,0xd3bf700dfc6411f3ull,");
+}
+
+namespace {
+
+constexpr uint8_t kJointColourBit = 1 << 6;  // modes bit 6, version 2
+
+}  // namespace
+
+TEST(FragmentCodec, JointColourCodingIsChosenForSmoothColoursAndDecodesLikeVersion1) {
+    const FragmentMesh m = coloured_patch(25, false, 1);
+    const std::vector<uint8_t> v2 = expect_round_trip(m, 2);
+    ASSERT_EQ(v2[kCodingOffset], 0);
+    EXPECT_NE(v2[kModesOffset] & kJointColourBit, 0) << "joint colour coding";
+    const std::vector<uint8_t> v1 = encode(m, nullptr, 1);
+    FragmentMesh d1, d2;
+    ASSERT_EQ(fragment_decode(v1.data(), v1.size(), d1), FragmentStatus::Ok);
+    ASSERT_EQ(fragment_decode(v2.data(), v2.size(), d2), FragmentStatus::Ok);
+    for (size_t v = 0; v < d1.vertices.size(); ++v) ASSERT_EQ(key(d1.vertices[v]), key(d2.vertices[v])) << v;
+    EXPECT_EQ(d1.indices, d2.indices);
+    // Some vertices escape (colour steps of two) and some do not: both paths of the decoder.
+    FragmentMesh mixed = m;
+    for (size_t i = 0; i < mixed.vertices.size(); i += 25) {
+        PackedVertex& v = mixed.vertices[i];
+        v = PackedVertex::make(v.position_index(), v.normal(), uint8_t(v.word1 >> 8), uint8_t(v.word1 >> 16), 250);
+    }
+    const std::vector<uint8_t> b = expect_round_trip(mixed, 2);
+    EXPECT_NE(b[kModesOffset] & kJointColourBit, 0) << "joint colour coding with escapes";
+}
+
+TEST(FragmentCodec, NoisyColoursKeepTheSeparateColourCoding) {
+    const std::vector<uint8_t> bytes = expect_round_trip(coloured_patch(20, true, 2), 2);
+    ASSERT_EQ(bytes[kCodingOffset], 0);
+    EXPECT_EQ(bytes[kModesOffset] & kJointColourBit, 0);
+}
+
+// The joint colour bit is version 2's and needs colours: set in a version 1 fragment or in a
+// colourless layout's, the fragment is corrupt.
+TEST(FragmentCodec, JointColourBitIsRejectedInVersion1AndWithoutColours) {
+    FragmentMesh out;
+    for (const std::vector<uint8_t>& bytes :
+         {encode(coloured_patch(12, false, 3), nullptr, 1),
+          encode(grid_patch(12, VertexLayout{VertexLayoutKind::Position48, 2000}), nullptr, 2)}) {
+        ASSERT_EQ(bytes[kCodingOffset], 0);
+        ASSERT_EQ(bytes[kModesOffset] & kJointColourBit, 0);
+        std::vector<uint8_t> b = bytes;
+        b[kModesOffset] |= kJointColourBit;
+        refresh_integrity(b);
+        EXPECT_EQ(fragment_decode(b.data(), b.size(), out), FragmentStatus::Corrupt);
     }
 }

@@ -40,6 +40,11 @@ enum class FragmentStatus {
 };
 const char* fragment_status_name(FragmentStatus status);
 
+// Bitstream versions: the encoder writes kFragmentVersion unless told otherwise, the decoder
+// reads every version from kFragmentOldestVersion on (docs/formats/fragment.md).
+constexpr int kFragmentVersion = 2;
+constexpr int kFragmentOldestVersion = 1;
+
 constexpr uint32_t kFragmentMaxVertices = 1u << 22;
 constexpr uint32_t kFragmentMaxTriangles = 1u << 23;
 
@@ -60,8 +65,10 @@ struct FragmentEncodeStats {
     size_t header_bytes = 0, connectivity_bytes = 0, position_bytes = 0, normal_bytes = 0, color_bytes = 0;
 };
 // Encodes `mesh` (indices must be in range and its layout valid; asserts otherwise) and appends
-// to `out`.
+// to `out`, in bitstream `version` (kFragmentOldestVersion..kFragmentVersion; older versions for
+// tests and comparisons: they decode to the same mesh, slower).
 // Returns the number of bytes appended; fills `stats` when given.
-size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, FragmentEncodeStats* stats = nullptr);
+size_t fragment_encode(const FragmentMesh& mesh, std::vector<uint8_t>& out, FragmentEncodeStats* stats = nullptr,
+                       int version = kFragmentVersion);
 
 }  // namespace catpaq
