@@ -136,21 +136,27 @@ uint64_t block_cost(const uint32_t* values, size_t n, uint32_t k) {
     return cost;
 }
 
-// Chooses the block's Rice parameter: the cheapest k (values and parameter code) among those
-// near log2 of the mean.
-uint32_t choose_k(const uint32_t* values, size_t n, uint32_t previous) {
+// Chooses the block's parameter (docs/formats/points.md, "Block parameters"): from version 3 on,
+// 0 for a block of zeros, else the Rice parameter k plus one; in version 2, k. k is the cheapest
+// (values and parameter code) among those near log2 of the mean.
+uint32_t choose_parameter(const uint32_t* values, size_t n, uint32_t previous, bool zero_blocks) {
     uint64_t sum = 0;
     for (size_t i = 0; i < n; ++i) sum += values[i];
+    // A block of zeros costs its parameter only, where a Rice code spends a bit per value: the
+    // chroma of grey or evenly coloured points is such blocks throughout (a quarter of a byte
+    // per point on points_bench's scan).
+    if (zero_blocks && sum == 0) return 0;
+    const uint32_t offset = zero_blocks ? 1 : 0;
     uint32_t guess = n ? bit_width32(uint32_t(std::min<uint64_t>(sum / n, UINT32_MAX))) : 0;
-    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(guess + 1, kRiceMaxK);
+    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(guess + 1, kRiceMaxK - offset);
     lo = std::min(lo, hi);
     uint32_t best_k = lo;
     uint64_t best = UINT64_MAX;
     for (uint32_t k = lo; k <= hi; ++k) {
-        const uint64_t cost = parameter_bits(previous, k) + block_cost(values, n, k);
+        const uint64_t cost = parameter_bits(previous, k + offset) + block_cost(values, n, k);
         if (cost < best) best = cost, best_k = k;
     }
-    return best_k;
+    return best_k + offset;
 }
 
 // The low bits of a full block in the vertical layout: value i is the (i / 4)-th k-bit field of
@@ -196,7 +202,7 @@ struct StreamBuffers {
 
 // Writes one stream (docs/formats/points.md, "Streams"): the blocks' parameters, the unary quotients, the low bits (full blocks vertical, then the partial block
 // packed) and the escaped values' high bits.
-void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, StreamBuffers& s) {
+void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, bool zero_blocks, StreamBuffers& s) {
     const size_t n = values.size();
     s.parameters.clear();
     s.unary.clear();
@@ -206,9 +212,11 @@ void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, StreamBuff
     uint32_t previous = kNoPrevious;
     for (size_t first = 0; first < n; first += kRiceBlock) {
         const size_t end = std::min(n, first + kRiceBlock);
-        const uint32_t k = choose_k(values.data() + first, end - first, previous);
-        put_parameter(s.parameters, previous, k);
-        previous = k;
+        const uint32_t parameter = choose_parameter(values.data() + first, end - first, previous, zero_blocks);
+        put_parameter(s.parameters, previous, parameter);
+        previous = parameter;
+        if (zero_blocks && parameter == 0) continue;  // no quotients, low bits or exceptions
+        const uint32_t k = zero_blocks ? parameter - 1 : parameter;
         // The unary codes gathered in a local word and handed to the writer 32 bits at a time:
         // a put per value kept the writer's state in memory (most of the stream's time).
         uint64_t word = 0;
@@ -326,6 +334,7 @@ void morton_order(const std::vector<uint32_t>& q, std::vector<uint32_t>& order) 
 struct StreamWriter {
     ByteWriter& out;
     const std::vector<uint32_t>& order;
+    bool zero_blocks;  // version 3 on
     std::vector<uint32_t> residuals;
     StreamBuffers buffers;
 
@@ -339,7 +348,7 @@ struct StreamWriter {
             previous = v;
         }
         size_t before = out.size();
-        put_stream(out, residuals, buffers);
+        put_stream(out, residuals, zero_blocks, buffers);
         return out.size() - before;
     }
 };
@@ -412,13 +421,19 @@ void seal_node(ByteWriter& out, size_t pad_at, size_t body_end, const PointSampl
     }
     stats.position_error = worst;
     float pad = round_up(worst);
+    float largest_radius = 0;
+    for (float r : decoded.radii) largest_radius = std::max(largest_radius, r);
     for (int attempt = 0;; ++attempt) {
         double deficit = 0;
         for (size_t i = 0; i < n; ++i)
             deficit = std::max(deficit, double(points.radii[order[i]]) + error[i] - double(decoded.radii[i] + pad));
         if (deficit <= 0) break;
-        assert(attempt < 8);
-        pad = round_up(double(pad) + deficit * (1.0 + 1e-6));
+        assert(attempt < 16);
+        // A deficit far below a float step of the radius is lost when the decoder adds the pad
+        // (float(r + pad) == r): after 8 such steps, grow by that step too (a single point a
+        // little off its grid origin asserted here; nodes that met the bound sooner keep their bytes).
+        const double step = attempt >= 8 ? double(largest_radius) * 0x1p-23 : 0.0;
+        pad = round_up(double(pad) + deficit * (1.0 + 1e-6) + step);
     }
     seal(pad);
     for (float& r : decoded.radii) r += pad;
@@ -457,7 +472,8 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
     // Room for the usual node (about 4 bytes a point), so the streams rarely regrow it.
     out.bytes().reserve(kHeaderSize + kChecksumSize + 8 * n);
     out.raw(kPointNodeMagic, 4);
-    out.u8(kPointNodeVersion);
+    assert(settings.version >= kPointNodeOldestVersion && settings.version <= kPointNodeVersion);
+    out.u8(settings.version);
     out.u8(uint8_t((has_normals ? kPointHasNormals : 0) | (has_colors ? kPointHasColors : 0)));
     out.u8(color_bits.luma);
     out.u8(color_bits.chroma);
@@ -473,7 +489,7 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
     PointEncodeStats stats;
     stats.min_radius = min_radius;
     stats.bytes_header = kHeaderSize + kChecksumSize;
-    StreamWriter streams{out, order, {}, {}};
+    StreamWriter streams{out, order, settings.version >= 3, {}, {}};
     for (int a = 0; a < 3; ++a)
         stats.bytes_position += streams.put_deltas([&](uint32_t i) { return int32_t(q[3 * i + a]); });
     if (has_normals) {
@@ -513,52 +529,94 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
 
 namespace {
 
-// The unary quotients a byte of the unary string holds (bits least significant first): the
-// zeros before each of its one bits, `count` of them, in the bytes of `q`; then the zeros after
-// its last one bit (`tail`, which add to the next byte's first quotient). Decoding a byte per
-// look-up rather than a bit per step: measured, the count-zeros loop was the decoder's bound.
-struct UnaryByte {
-    uint64_t q;
-    uint32_t count, tail;
+// The one bits of a byte of the unary string (bits least significant first): their bit
+// indices (0-7) in the bytes of kOnesAt[byte], kOnesCount[byte] of them. A quotient is the
+// distance between two one bits less one, so the string decodes to the positions of its one
+// bits (modulo 256, a byte each) and the quotients follow in a separate SIMD pass. Measured:
+// the earlier table of quotients carried the zeros after a byte's last one bit into the next
+// byte's first quotient, a dependency from byte to byte, and its loop took a quarter of the
+// decoder's time; with positions, the only dependency is the output pointer.
+struct OnesTables {
+    uint64_t at[256];
+    uint8_t count[256];
 };
-constexpr std::array<UnaryByte, 256> make_unary_table() {
-    std::array<UnaryByte, 256> table{};
+constexpr OnesTables make_ones_tables() {
+    OnesTables t{};
     for (uint32_t byte = 0; byte < 256; ++byte) {
-        UnaryByte e{0, 0, 0};
-        uint64_t zeros = 0;
-        for (uint32_t bit = 0; bit < 8; ++bit) {
-            if (byte >> bit & 1) {
-                e.q |= zeros << (8 * e.count++);
-                zeros = 0;
-            } else {
-                ++zeros;
-            }
-        }
-        e.tail = uint32_t(zeros);
-        table[byte] = e;
+        uint32_t count = 0;
+        for (uint32_t bit = 0; bit < 8; ++bit)
+            if (byte >> bit & 1) t.at[byte] |= uint64_t(bit) << (8 * count++);
+        t.count[byte] = uint8_t(count);
     }
-    return table;
+    return t;
 }
-constexpr std::array<UnaryByte, 256> kUnaryTable = make_unary_table();
+constexpr OnesTables kOnes = make_ones_tables();
+constexpr uint64_t kEveryByte = 0x0101010101010101ull;
 
-// Decodes the n unary quotients at the start of [cursor, end) into q[0, n) (q has 8 bytes of
-// slack after n); a run of more than kRiceEscape zeros yields a quotient above it, which the
-// caller rejects. Advances cursor past the string (which ends at its n-th one bit's byte).
-const char* get_unary(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* q) {
+// Appends the one bits' positions of the byte at `p`, whose bits are at 8b .. 8b + 7 of the
+// string: `base` is 8b modulo 256 in every byte (the indices below 8 and a multiple of 8 below
+// 256 carry nothing into each other).
+__attribute__((always_inline)) inline void put_ones(uint32_t byte, uint64_t base, uint8_t*& out) {
+    const uint64_t at = kOnes.at[byte] + base;
+    std::memcpy(out, &at, 8);
+    out += kOnes.count[byte];
+}
+
+// Bit 8j + 7 set where byte j of w is zero.
+__attribute__((always_inline)) inline uint64_t zero_bytes(uint64_t w) {
+    const uint64_t high = 0x8080808080808080ull;
+    return ~(((w & ~high) + ~high) | w) & high;
+}
+
+// Decodes the n unary quotients at the start of [cursor, end) into q[0, n), through the
+// positions (modulo 256) of the string's one bits in ones[0, n); ones[-1] must be writable and
+// both arrays need 64 bytes of slack after n. Advances cursor past the string (which ends at its
+// n-th one bit's byte).
+//
+// Positions modulo 256 give exact differences for runs of zeros below 256; a longer run holds
+// two whole zero bytes in a row, which no valid string has (its runs are at most kRiceEscape
+// zeros) and is rejected here. Runs of 9 to 255 zeros give quotients above kRiceEscape, which
+// the block decoders reject.
+const char* get_unary(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* ones, uint8_t* q) {
     const uint8_t* p = cursor;
-    uint8_t* out = q;
-    uint8_t* const out_end = q + n;
-    uint64_t carry = 0;  // zeros since the last one bit, capped so that q stays a byte
-    while (out < out_end) {
+    uint8_t* out = ones;
+    uint8_t* const out_end = ones + n;
+    ones[-1] = 0xff;  // the one bit "before" the string, at position -1
+    uint64_t zero_pairs = 0, previous_zero = 0;  // bit 7 of previous_zero: the last byte read was zero
+    uint64_t base = 0;                           // 8b mod 256 for the first byte b of the next word
+    // Eight bytes per step while they cannot hold the n-th one bit (at most 64 values).
+    while (out_end - out > 64 && end - p >= 8) {
+        uint64_t w;
+        std::memcpy(&w, p, 8);
+        if constexpr (std::endian::native == std::endian::big) w = __builtin_bswap64(w);
+        p += 8;
+        const uint64_t zeros = zero_bytes(w);
+        zero_pairs |= zeros & ((zeros << 8) | previous_zero);
+        previous_zero = zeros >> 56;
+        for (uint32_t j = 0; j < 8; ++j) put_ones(uint32_t(w >> (8 * j)) & 0xff, base + 8 * j * kEveryByte, out);
+        base = (base + 64 * kEveryByte) & (0xc0 * kEveryByte);  // the carries out of each byte masked off
+    }
+    for (; out < out_end; base += 8 * kEveryByte) {
         if (p == end) return "truncated unary string";
-        const UnaryByte& e = kUnaryTable[*p++];
-        const uint64_t quotients = e.q + carry;
-        std::memcpy(out, &quotients, 8);
-        out += e.count;
-        carry = e.count ? e.tail : std::min<uint64_t>(carry + 8, 2 * kRiceEscape);
+        const uint32_t byte = *p++;
+        const uint64_t zeros = byte == 0 ? 0x80 : 0;
+        zero_pairs |= zeros & previous_zero;
+        previous_zero = zeros;
+        put_ones(byte, base & (0xf8 * kEveryByte), out);  // 8b mod 256: the carries masked off
     }
     if (out != out_end) return "unary string has too many values";
+    if (zero_pairs) return "unary run too long";
     cursor = p;
+    size_t i = 0;
+#ifdef __SSE2__
+    const __m128i one = _mm_set1_epi8(1);
+    for (; i < n; i += 16) {  // the slack covers the last step's overrun
+        const __m128i here = _mm_loadu_si128(reinterpret_cast<const __m128i*>(ones + i));
+        const __m128i before = _mm_loadu_si128(reinterpret_cast<const __m128i*>(ones + i - 1));
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(q + i), _mm_sub_epi8(_mm_sub_epi8(here, before), one));
+    }
+#endif
+    for (; i < n; ++i) q[i] = uint8_t(ones[i] - ones[i - 1] - 1);
     return nullptr;
 }
 
@@ -575,19 +633,18 @@ __attribute__((always_inline)) inline uint32_t vertical_field(const uint8_t* wor
 
 // Where a stream's parts are while its blocks are decoded.
 struct StreamParts {
-    const uint8_t* q;        // quotients, one byte per value
     const uint8_t* low;      // the current full block's low bits
     BitReader partial;       // the partial block's low bits
     BitReader exceptions;    // escaped values' excess quotients
 };
 
-// Decodes values [first, end) of a block one at a time: the partial block, blocks with escapes
+// Decodes the count values of a block one at a time, their quotients at `quotients`: the partial block, blocks with escapes
 // and builds without SSE2. Running sums continue from `running`.
-const char* get_block_scalar(StreamParts& s, size_t first, size_t end, uint32_t k, bool full, uint32_t& running,
-                             uint32_t* sums) {
-    for (size_t i = first; i < end; ++i) {
-        const uint32_t low = full ? vertical_field(s.low, i - first, k) : s.partial.get(k);
-        const uint32_t q = s.q[i];
+const char* get_block_scalar(StreamParts& s, const uint8_t* quotients, size_t count, uint32_t k, bool full,
+                             uint32_t& running, uint32_t* sums) {
+    for (size_t i = 0; i < count; ++i) {
+        const uint32_t low = full ? vertical_field(s.low, i, k) : s.partial.get(k);
+        const uint32_t q = quotients[i];
         uint32_t v;
         uint64_t escaped;
         if (q < kRiceEscape) v = (q << k) | low;
@@ -864,49 +921,73 @@ void colors_from_sums(const uint32_t* const sums[3], size_t n, int luma_shift, i
         dequantize_color(sums[0][i] & 0x1ff, sums[1][i] & 0x3ff, sums[2][i] & 0x3ff, luma_shift, chroma_shift, &rgb[3 * i]);
 }
 
+// The work space get_stream needs for n values: the quotients (n + 64 bytes), the blocks'
+// parameters (a byte each, then 16 spare) and the one bits' positions (n + 64).
+size_t stream_work_bytes(size_t n) { return 2 * (n + 64) + (n + kRiceBlock - 1) / kRiceBlock + 16; }
+
+// A block parameter's mark for a block of zeros (version 3 on), among the Rice parameters.
+constexpr uint8_t kZeroBlock = 0xff;
+
 // Decodes one stream of n values from [cursor, end) (the node's streams; kRicePadding readable
 // bytes follow end) into sums[i], the running sum (mod 2^32) of the unzigzagged values 0..i.
-// work: n + 16 bytes for the quotients. Advances cursor past the stream.
-const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* work, uint32_t* sums) {
+// zero_blocks: version 3 on (parameter 0 marks a block of zeros, else k + 1). work:
+// stream_work_bytes(n) bytes (the quotients, the blocks' parameters and the one bits'
+// positions, each with slack). Advances cursor past the stream.
+const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, bool zero_blocks, uint8_t* work,
+                       uint32_t* sums) {
     const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
-    // Block parameters: checked here, kept as bytes after the quotients.
-    uint8_t* ks = work + n + 16;
+    // Block parameters: checked here, kept as bytes (k, or kZeroBlock) after the quotients.
+    uint8_t* ks = work + n + 64;
     BitReader parameters{cursor, end};
-    uint32_t k = 0;
-    size_t full_low_bytes = 0;
+    uint32_t parameter = 0;
+    size_t full_low_bytes = 0, coded = 0;  // coded: values outside zero blocks
     for (size_t b = 0; b < blocks; ++b) {
         if (b == 0 || parameters.get(1) == 1) {
-            if (b == 0) k = parameters.get(5);
-            else if (parameters.get(1) == 0) k = parameters.get(1) ? k + 1 : k - 1;
-            else k = parameters.get(5);
+            if (b == 0) parameter = parameters.get(5);
+            else if (parameters.get(1) == 0) parameter = parameters.get(1) ? parameter + 1 : parameter - 1;
+            else parameter = parameters.get(5);
         }
-        if (k > kRiceMaxK) return "bad Rice parameter";
+        if (parameter > kRiceMaxK) return "bad Rice parameter";
+        const size_t values = std::min(n, (b + 1) * kRiceBlock) - b * kRiceBlock;
+        if (zero_blocks && parameter == 0) {
+            ks[b] = kZeroBlock;
+            continue;
+        }
+        const uint32_t k = zero_blocks ? parameter - 1 : parameter;
         ks[b] = uint8_t(k);
-        if ((b + 1) * kRiceBlock <= n) full_low_bytes += 16 * size_t(k);
+        coded += values;
+        if (values == kRiceBlock) full_low_bytes += 16 * size_t(k);
     }
     if (parameters.overrun()) return "truncated stream";
     cursor += parameters.bytes();
-    uint8_t* q = work;
-    if (const char* why = get_unary(cursor, end, n, q)) return why;
+    uint8_t* const q = work;
+    uint8_t* ones = ks + blocks + 16;
+    if (const char* why = get_unary(cursor, end, coded, ones, q)) return why;
     const size_t rest = n % kRiceBlock;
-    const size_t partial_bytes = (rest * (rest ? ks[blocks - 1] : 0) + 7) / 8;
+    const size_t partial_bytes = rest && ks[blocks - 1] != kZeroBlock ? (rest * ks[blocks - 1] + 7) / 8 : 0;
     if (full_low_bytes + partial_bytes > size_t(end - cursor)) return "truncated stream";
-    StreamParts s{q, cursor, {cursor + full_low_bytes, cursor + full_low_bytes + partial_bytes},
+    StreamParts s{cursor, {cursor + full_low_bytes, cursor + full_low_bytes + partial_bytes},
                   {cursor + full_low_bytes + partial_bytes, end}};
     uint32_t running = 0;
+    const uint8_t* qb = q;  // the next coded block's quotients
     for (size_t b = 0; b < blocks; ++b) {
-        const size_t first = b * kRiceBlock, last = std::min(n, first + kRiceBlock);
+        const size_t first = b * kRiceBlock, count = std::min(n, first + kRiceBlock) - first;
         const uint32_t kb = ks[b];
-        const bool full = last - first == kRiceBlock;
+        if (kb == kZeroBlock) {
+            std::fill(sums + first, sums + first + count, running);
+            continue;
+        }
+        const bool full = count == kRiceBlock;
         const char* why = nullptr;
 #ifdef __SSE2__
-        if (full) why = get_block_any_k(s, q + first, kb, running, sums + first);
-        else why = get_block_scalar(s, first, last, kb, full, running, sums);
+        if (full) why = get_block_any_k(s, qb, kb, running, sums + first);
+        else why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
 #else
-        why = get_block_scalar(s, first, last, kb, full, running, sums);
+        why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
 #endif
         if (why) return why;
         if (full) s.low += 16 * size_t(kb);
+        qb += count;
     }
     if (s.exceptions.overrun()) return "truncated exceptions";
     cursor = s.exceptions.begin + s.exceptions.bytes();
@@ -928,8 +1009,9 @@ bool use_point_decoder_avx2(bool enable) {
 std::string peek_point_node(const uint8_t* data, size_t size, size_t& count, uint8_t& flags) {
     if (size < kHeaderSize + kChecksumSize) return "node too short";
     if (std::memcmp(data, kPointNodeMagic, 4) != 0) return "not a point node (bad magic)";
-    if (data[4] != kPointNodeVersion)
-        return strprintf("unsupported point node version %u (this build reads %u)", data[4], kPointNodeVersion);
+    if (data[4] < kPointNodeOldestVersion || data[4] > kPointNodeVersion)
+        return strprintf("unsupported point node version %u (this build reads %u to %u)", data[4], kPointNodeOldestVersion,
+                         kPointNodeVersion);
     flags = data[5];
     if (flags & ~(kPointHasNormals | kPointHasColors)) return "unknown point node flags";
     ByteReader r(data + 8, 4);
@@ -958,17 +1040,20 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
 
     const bool has_normals = flags & kPointHasNormals, has_colors = flags & kPointHasColors;
     const size_t streams = 3 + (has_normals ? 2 : 0) + (has_colors ? 3 : 0) + 1;
-    // Every value takes at least one bit: a count the bytes cannot hold is refused before
-    // anything is allocated for it.
+    // Every value takes at least one bit (version 2), every block at least its parameter bit
+    // (version 3 on, where a block of zeros has no other bits): a count the bytes cannot hold is
+    // refused before anything is allocated for it.
+    const bool zero_blocks = data[4] >= 3;
     const size_t body = size - kChecksumSize - kHeaderSize;
-    if (streams * n > 8 * body) return "point count too large for the node size";
+    const size_t least_bits = zero_blocks ? (n + kRiceBlock - 1) / kRiceBlock : n;
+    if (streams * least_bits > 8 * body) return "point count too large for the node size";
 
     // A padded copy of the streams, so that the block decoders may load 16 bytes anywhere in
-    // them; after it, the quotients (n + 16 bytes, then a byte per block) and three arrays of
+    // them; after it, get_stream's work space (stream_work_bytes) and three arrays of
     // running sums (the attributes decoded together: a position's axes, a colour's components).
     std::vector<uint32_t>& scratch = out.scratch;
     const size_t padded_words = (body + kRicePadding + 3) / 4;
-    const size_t work_words = (n + 16 + (n + kRiceBlock - 1) / kRiceBlock + 3) / 4;
+    const size_t work_words = (stream_work_bytes(n) + 3) / 4;
     scratch.resize(padded_words + work_words + 3 * n);
     uint8_t* copy = reinterpret_cast<uint8_t*>(scratch.data());
     std::memcpy(copy, data + kHeaderSize, body);
@@ -986,11 +1071,11 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     out.grid_step = step;
     out.positions.resize(3 * n);
     for (int a = 0; a < 3; ++a)
-        if (const char* why = get_stream(cursor, end, n, work, sums[a])) return failed(why);
+        if (const char* why = get_stream(cursor, end, n, zero_blocks, work, sums[a])) return failed(why);
     positions_from_sums(sums, n, origin, step, out.positions.data());
     if (has_normals) {
         for (int c = 0; c < 2; ++c)
-            if (const char* why = get_stream(cursor, end, n, work, sums[c])) return failed(why);
+            if (const char* why = get_stream(cursor, end, n, zero_blocks, work, sums[c])) return failed(why);
         out.normals.resize(n);
         uint16_t* normals = out.normals.data();
         const uint32_t *u = sums[0], *v = sums[1];
@@ -1000,13 +1085,13 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     }
     if (has_colors) {
         for (int c = 0; c < 3; ++c)
-            if (const char* why = get_stream(cursor, end, n, work, sums[c])) return failed(why);
+            if (const char* why = get_stream(cursor, end, n, zero_blocks, work, sums[c])) return failed(why);
         out.colors.resize(3 * n);
         colors_from_sums(sums, n, 8 - luma_bits, 9 - chroma_bits, out.colors.data());
     } else {
         out.colors.clear();
     }
-    if (const char* why = get_stream(cursor, end, n, work, sums[0])) return failed(why);
+    if (const char* why = get_stream(cursor, end, n, zero_blocks, work, sums[0])) return failed(why);
     out.radii.resize(n);
     float* radii = out.radii.data();
     const uint32_t* r = sums[0];

@@ -21,7 +21,10 @@
 
 namespace catpaq {
 
-constexpr uint8_t kPointNodeVersion = 2;
+// The version the encoder writes by default; the decoder reads kPointNodeOldestVersion to it.
+// Version 3 adds blocks of zeros (a parameter with no other bits) to version 2's streams.
+constexpr uint8_t kPointNodeVersion = 3;
+constexpr uint8_t kPointNodeOldestVersion = 2;
 constexpr char kPointNodeMagic[4] = {'C', 'P', 'P', 'N'};
 // Node payload flags: which optional attributes the points carry.
 constexpr uint8_t kPointHasNormals = 1u << 0;
@@ -39,6 +42,9 @@ struct ColorBits {
 struct PointEncodeSettings {
     ColorBits color_bits;
     double error_fraction = 0.25;  // (0, 1]
+    // The payload version written (kPointNodeOldestVersion .. kPointNodeVersion): older ones for
+    // tests and benches that compare versions. Every version decodes to the same points.
+    uint8_t version = kPointNodeVersion;
 };
 
 // The encoder's input: `count` points as parallel arrays the caller owns.
