@@ -657,44 +657,54 @@ const char* get_block_scalar(StreamParts& s, const uint8_t* quotients, size_t co
 }
 
 #ifdef __SSE2__
-// Bit i set where the quotient q[i] (i < kRiceBlock) is kRiceEscape or more.
-inline void escape_mask(const uint8_t* q, uint64_t mask[2]) {
-    const __m128i below = _mm_set1_epi8(char(kRiceEscape - 1));
+// Bit i of mask set where the quotient q[i] (i < kRiceBlock) is kRiceEscape; false if some
+// quotient is above it (a run of zeros too long).
+inline bool escape_mask(const uint8_t* q, uint64_t mask[2]) {
+    const __m128i below = _mm_set1_epi8(char(kRiceEscape - 1)), escape = _mm_set1_epi8(char(kRiceEscape));
+    __m128i top = _mm_setzero_si128();
     for (int half = 0; half < 2; ++half) {
         uint64_t bits = 0;
         for (int c = 0; c < 4; ++c) {
             const __m128i q16 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(q + 64 * half + 16 * c));
             const uint32_t plain = uint32_t(_mm_movemask_epi8(_mm_cmpeq_epi8(_mm_max_epu8(q16, below), below)));
             bits |= uint64_t(~plain & 0xffff) << (16 * c);
+            top = _mm_max_epu8(top, q16);
         }
         mask[half] = bits;
     }
+    return _mm_movemask_epi8(_mm_cmpeq_epi8(_mm_max_epu8(top, escape), escape)) == 0xffff;
+}
+
+// The escaped values of a block (mask from escape_mask): each one's excess quotient, shifted by
+// k, into extra[i], which a block kernel adds to the value it decodes ((8 + e) << k | low is
+// (8 << k | low) + (e << k) modulo 2^32). False on a bad excess code. Done ahead of the block
+// (measured: patching escapes inside the kernel, through memory and a call, made the compiler
+// rebuild the kernel's constants at every step, and half the blocks hold an escape).
+inline bool take_escapes(BitReader& exceptions, const uint64_t mask[2], uint32_t k, uint32_t* extra) {
+    bool ok = true;
+    for (int half = 0; half < 2; ++half)
+        for (uint64_t bits = mask[half]; bits; bits &= bits - 1) {
+            uint64_t q = 0;
+            ok &= exceptions.escape_quotient(q);
+            extra[64 * half + uint32_t(__builtin_ctzll(bits))] = uint32_t((q - kRiceEscape) << k);
+        }
+    return ok;
+}
+// Zeroes what take_escapes wrote.
+inline void clear_escapes(const uint64_t mask[2], uint32_t* extra) {
+    for (int half = 0; half < 2; ++half)
+        for (uint64_t bits = mask[half]; bits; bits &= bits - 1) extra[64 * half + uint32_t(__builtin_ctzll(bits))] = 0;
 }
 
 // Unzigzag of four values, their running sums continuing from carry (all four lanes hold the
 // previous sum), stored at `sums`; carry becomes the last sum. The carry chain is one add per
 // step: the group's own total is broadcast before the carry joins.
 __attribute__((always_inline)) inline void store_running_sums(__m128i v, __m128i& carry, uint32_t* sums) {
-    const __m128i zero = _mm_setzero_si128();
-    __m128i d = _mm_xor_si128(_mm_srli_epi32(v, 1), _mm_sub_epi32(zero, _mm_and_si128(v, _mm_set1_epi32(1))));
+    __m128i d = _mm_xor_si128(_mm_srli_epi32(v, 1), _mm_srai_epi32(_mm_slli_epi32(v, 31), 31));
     d = _mm_add_epi32(d, _mm_slli_si128(d, 4));
     d = _mm_add_epi32(d, _mm_slli_si128(d, 8));
     _mm_storeu_si128(reinterpret_cast<__m128i*>(sums), _mm_add_epi32(d, carry));
     carry = _mm_add_epi32(carry, _mm_shuffle_epi32(d, 0xff));
-}
-
-// Adds the quotients q[0, count) to the low bits in values[0, count): quotient kRiceEscape
-// takes its excess from the exception array; a longer unary run or a bad excess code is
-// corrupt (returns false). For the steps that hold an escape.
-inline bool patch_escapes(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t* values, uint32_t count) {
-    bool ok = true;
-    for (uint32_t lane = 0; lane < count; ++lane) {
-        uint64_t qi = q[lane];
-        ok &= qi <= kRiceEscape;
-        if (qi >= kRiceEscape) ok &= s.exceptions.escape_quotient(qi);
-        values[lane] |= uint32_t(qi << k);
-    }
-    return ok;
 }
 
 // The four quotients at q as 32-bit lanes.
@@ -707,23 +717,19 @@ __attribute__((always_inline)) inline __m128i load_quotients(const uint8_t* q) {
 
 // Decodes a full block four values per step: the vertical layout puts values 4m .. 4m + 3 at
 // the same bit offset of the four word lanes, so one shift pair extracts their low bits; then
-// the quotient, unzigzag and the running sum (a prefix sum in the register). A step with an
-// escape patches it through memory (measured: half the blocks hold one or more escapes, so
-// sending such blocks to the scalar path was the decoder's bound).
+// the quotient, the escapes' excess (take_escapes), unzigzag and the running sum (a prefix sum
+// in the register). Quotients are checked beforehand (escape_mask).
 //
 // K is the block's Rice parameter as a constant, the 32 steps unrolled: every shift and offset
 // is then an immediate (measured: the generic loop spent half its instructions computing
 // them). The parameters measured on scans are 0-6; larger ones take the generic loop (K = -1).
 template <int K>
-const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime, uint32_t& running, uint32_t* sums) {
+void get_block_sse2(const uint8_t* low, const uint8_t* q, const uint32_t* extra, uint32_t k_runtime, uint32_t& running,
+                    uint32_t* sums) {
     const uint32_t k = K >= 0 ? uint32_t(K) : k_runtime;
     const __m128i mask = _mm_set1_epi32(int32_t((uint64_t(1) << k) - 1));
     const __m128i k_count = _mm_cvtsi32_si128(int(k));
-    uint64_t escapes[2];
-    escape_mask(q, escapes);
-    const uint8_t* low = s.low;
     __m128i carry = _mm_set1_epi32(int32_t(running));
-    bool ok = true;
     auto step = [&](uint32_t m) __attribute__((always_inline)) {
         const uint32_t bit = m * k, j = bit >> 5, shift = bit & 31;
         __m128i field = _mm_setzero_si128();
@@ -736,12 +742,7 @@ const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime,
             field = _mm_and_si128(field, mask);
         }
         __m128i v = _mm_or_si128(_mm_sll_epi32(load_quotients(q + 4 * m), k_count), field);
-        if ((escapes[m >> 4] >> (4 * (m & 15))) & 15) [[unlikely]] {
-            alignas(16) uint32_t values[4];
-            _mm_store_si128(reinterpret_cast<__m128i*>(values), field);
-            ok &= patch_escapes(s, q + 4 * m, k, values, 4);
-            v = _mm_load_si128(reinterpret_cast<const __m128i*>(values));
-        }
+        v = _mm_add_epi32(v, _mm_load_si128(reinterpret_cast<const __m128i*>(extra + 4 * m)));
         store_running_sums(v, carry, sums + 4 * m);
     };
     if constexpr (K >= 0) {
@@ -752,7 +753,6 @@ const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime,
         for (uint32_t m = 0; m < kRiceBlock / 4; ++m) step(m);
     }
     running = uint32_t(_mm_cvtsi128_si32(carry));
-    return ok ? nullptr : "unary run too long or bad escape";
 }
 
 #if CATPAQ_POINTS_AVX2
@@ -763,15 +763,11 @@ const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime,
 // register, each half shifted by its own offset (variable shifts); the running sum spans the
 // two halves. Measured: the SSE2 block loop was half the decoder's instructions.
 template <int K>
-const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, uint32_t* sums) {
+void get_block_avx2(const uint8_t* low, const uint8_t* q, const uint32_t* extra, uint32_t& running, uint32_t* sums) {
     constexpr uint32_t k = uint32_t(K);
     const __m256i mask = _mm256_set1_epi32(int32_t((uint64_t(1) << k) - 1));
-    const __m256i zero = _mm256_setzero_si256(), one = _mm256_set1_epi32(1), last = _mm256_set1_epi32(7);
-    uint64_t escapes[2];
-    escape_mask(q, escapes);
-    const uint8_t* low = s.low;
+    const __m256i last = _mm256_set1_epi32(7);
     __m256i carry = _mm256_set1_epi32(int32_t(running));
-    bool ok = true;
     // 16 bytes of lane words at word row j0 (low half) and j1 (high half).
     auto rows = [&](uint32_t j0, uint32_t j1) __attribute__((always_inline)) {
         const __m128i* at = reinterpret_cast<const __m128i*>(low);
@@ -780,7 +776,7 @@ const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, 
         return _mm256_inserti128_si256(_mm256_castsi128_si256(_mm_loadu_si128(at + j0)), _mm_loadu_si128(at + j1), 1);
     };
     auto step = [&](uint32_t m) __attribute__((always_inline)) {  // values 4m .. 4m + 7
-        __m256i field = zero;
+        __m256i field = _mm256_setzero_si256();
         if (k > 0) {
             const uint32_t bit0 = m * k, bit1 = bit0 + k;
             const uint32_t j0 = bit0 >> 5, j1 = bit1 >> 5, s0 = bit0 & 31, s1 = bit1 & 31;
@@ -794,13 +790,8 @@ const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, 
         }
         const __m256i quotient = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q + 4 * m)));
         __m256i v = _mm256_or_si256(_mm256_slli_epi32(quotient, int(k)), field);
-        if ((escapes[m >> 4] >> (4 * (m & 15))) & 0xff) [[unlikely]] {
-            alignas(32) uint32_t values[8];
-            _mm256_store_si256(reinterpret_cast<__m256i*>(values), field);
-            ok &= patch_escapes(s, q + 4 * m, k, values, 8);
-            v = _mm256_load_si256(reinterpret_cast<const __m256i*>(values));
-        }
-        __m256i d = _mm256_xor_si256(_mm256_srli_epi32(v, 1), _mm256_sub_epi32(zero, _mm256_and_si256(v, one)));
+        v = _mm256_add_epi32(v, _mm256_load_si256(reinterpret_cast<const __m256i*>(extra + 4 * m)));
+        __m256i d = _mm256_xor_si256(_mm256_srli_epi32(v, 1), _mm256_srai_epi32(_mm256_slli_epi32(v, 31), 31));
         d = _mm256_add_epi32(d, _mm256_slli_si256(d, 4));  // prefix sums within each half
         d = _mm256_add_epi32(d, _mm256_slli_si256(d, 8));
         // The low half's total into the high half.
@@ -812,7 +803,6 @@ const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, 
         (step(2 * M), ...);
     }(std::make_integer_sequence<uint32_t, kRiceBlock / 8>{});
     running = uint32_t(_mm_cvtsi128_si32(_mm256_castsi256_si128(carry)));
-    return ok ? nullptr : "unary run too long or bad escape";
 }
 #pragma GCC pop_options
 
@@ -822,32 +812,33 @@ bool g_use_avx2 = (__builtin_cpu_init(), __builtin_cpu_supports("avx2"));
 #endif
 
 // get_block_sse2 (or get_block_avx2) for the block's parameter k.
-const char* get_block_any_k(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t& running, uint32_t* sums) {
+void get_block_any_k(const uint8_t* low, const uint8_t* q, const uint32_t* extra, uint32_t k, uint32_t& running,
+                     uint32_t* sums) {
 #if CATPAQ_POINTS_AVX2
     if (g_use_avx2) {
         switch (k) {
-            case 0: return get_block_avx2<0>(s, q, running, sums);
-            case 1: return get_block_avx2<1>(s, q, running, sums);
-            case 2: return get_block_avx2<2>(s, q, running, sums);
-            case 3: return get_block_avx2<3>(s, q, running, sums);
-            case 4: return get_block_avx2<4>(s, q, running, sums);
-            case 5: return get_block_avx2<5>(s, q, running, sums);
-            case 6: return get_block_avx2<6>(s, q, running, sums);
-            case 7: return get_block_avx2<7>(s, q, running, sums);
+            case 0: return get_block_avx2<0>(low, q, extra, running, sums);
+            case 1: return get_block_avx2<1>(low, q, extra, running, sums);
+            case 2: return get_block_avx2<2>(low, q, extra, running, sums);
+            case 3: return get_block_avx2<3>(low, q, extra, running, sums);
+            case 4: return get_block_avx2<4>(low, q, extra, running, sums);
+            case 5: return get_block_avx2<5>(low, q, extra, running, sums);
+            case 6: return get_block_avx2<6>(low, q, extra, running, sums);
+            case 7: return get_block_avx2<7>(low, q, extra, running, sums);
             default: break;
         }
     }
 #endif
     switch (k) {
-        case 0: return get_block_sse2<0>(s, q, k, running, sums);
-        case 1: return get_block_sse2<1>(s, q, k, running, sums);
-        case 2: return get_block_sse2<2>(s, q, k, running, sums);
-        case 3: return get_block_sse2<3>(s, q, k, running, sums);
-        case 4: return get_block_sse2<4>(s, q, k, running, sums);
-        case 5: return get_block_sse2<5>(s, q, k, running, sums);
-        case 6: return get_block_sse2<6>(s, q, k, running, sums);
-        case 7: return get_block_sse2<7>(s, q, k, running, sums);
-        default: return get_block_sse2<-1>(s, q, k, running, sums);
+        case 0: return get_block_sse2<0>(low, q, extra, k, running, sums);
+        case 1: return get_block_sse2<1>(low, q, extra, k, running, sums);
+        case 2: return get_block_sse2<2>(low, q, extra, k, running, sums);
+        case 3: return get_block_sse2<3>(low, q, extra, k, running, sums);
+        case 4: return get_block_sse2<4>(low, q, extra, k, running, sums);
+        case 5: return get_block_sse2<5>(low, q, extra, k, running, sums);
+        case 6: return get_block_sse2<6>(low, q, extra, k, running, sums);
+        case 7: return get_block_sse2<7>(low, q, extra, k, running, sums);
+        default: return get_block_sse2<-1>(low, q, extra, k, running, sums);
     }
 }
 #endif
@@ -970,6 +961,9 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, boo
                   {cursor + full_low_bytes + partial_bytes, end}};
     uint32_t running = 0;
     const uint8_t* qb = q;  // the next coded block's quotients
+#ifdef __SSE2__
+    alignas(32) uint32_t extra[kRiceBlock] = {};  // the escapes of a full block (take_escapes)
+#endif
     for (size_t b = 0; b < blocks; ++b) {
         const size_t first = b * kRiceBlock, count = std::min(n, first + kRiceBlock) - first;
         const uint32_t kb = ks[b];
@@ -980,8 +974,16 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, boo
         const bool full = count == kRiceBlock;
         const char* why = nullptr;
 #ifdef __SSE2__
-        if (full) why = get_block_any_k(s, qb, kb, running, sums + first);
-        else why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
+        if (full) {
+            uint64_t escapes[2];
+            if (!escape_mask(qb, escapes)) return "unary run too long";
+            const bool escaped = (escapes[0] | escapes[1]) != 0;
+            if (escaped && !take_escapes(s.exceptions, escapes, kb, extra)) return "bad escape";
+            get_block_any_k(s.low, qb, extra, kb, running, sums + first);
+            if (escaped) clear_escapes(escapes, extra);
+        } else {
+            why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
+        }
 #else
         why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
 #endif
