@@ -742,7 +742,7 @@ void get_block_sse2(const uint8_t* low, const uint8_t* q, const uint32_t* extra,
             field = _mm_and_si128(field, mask);
         }
         __m128i v = _mm_or_si128(_mm_sll_epi32(load_quotients(q + 4 * m), k_count), field);
-        v = _mm_add_epi32(v, _mm_load_si128(reinterpret_cast<const __m128i*>(extra + 4 * m)));
+        v = _mm_add_epi32(v, _mm_loadu_si128(reinterpret_cast<const __m128i*>(extra + 4 * m)));
         store_running_sums(v, carry, sums + 4 * m);
     };
     if constexpr (K >= 0) {
@@ -790,7 +790,7 @@ void get_block_avx2(const uint8_t* low, const uint8_t* q, const uint32_t* extra,
         }
         const __m256i quotient = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q + 4 * m)));
         __m256i v = _mm256_or_si256(_mm256_slli_epi32(quotient, int(k)), field);
-        v = _mm256_add_epi32(v, _mm256_load_si256(reinterpret_cast<const __m256i*>(extra + 4 * m)));
+        v = _mm256_add_epi32(v, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(extra + 4 * m)));
         __m256i d = _mm256_xor_si256(_mm256_srli_epi32(v, 1), _mm256_srai_epi32(_mm256_slli_epi32(v, 31), 31));
         d = _mm256_add_epi32(d, _mm256_slli_si256(d, 4));  // prefix sums within each half
         d = _mm256_add_epi32(d, _mm256_slli_si256(d, 8));
@@ -873,6 +873,41 @@ void positions_from_sums(const uint32_t* const sums[3], size_t n, const float or
         for (int a = 0; a < 3; ++a) p[3 * i + a] = grid_position(origin[a], step, sums[a][i] & grid_mask);
 }
 
+#if CATPAQ_POINTS_AVX2
+#pragma GCC push_options
+#pragma GCC target("avx2")
+// positions_from_sums eight points per step: the same in-lane shuffles put points 0-3 and 4-7
+// in x y z order in the two 128-bit halves, and three cross-half permutes join them for three
+// 32-byte stores (measured: the baseline loop was a third of the conversions' time).
+void positions_from_sums_avx2(const uint32_t* const sums[3], size_t n, const float origin[3], float step, float* p) {
+    const uint32_t grid_mask = (1u << kMaxGridBits) - 1;
+    const __m256i mask = _mm256_set1_epi32(int32_t(grid_mask));
+    const __m256 step8 = _mm256_set1_ps(step);
+    __m256 o[3];
+    for (int a = 0; a < 3; ++a) o[a] = _mm256_set1_ps(origin[a]);
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+        __m256 c[3];
+        for (int a = 0; a < 3; ++a) {
+            const __m256i q = _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(sums[a] + i)), mask);
+            c[a] = _mm256_add_ps(o[a], _mm256_mul_ps(_mm256_cvtepi32_ps(q), step8));
+        }
+        const __m256 xy_lo = _mm256_unpacklo_ps(c[0], c[1]), xy_hi = _mm256_unpackhi_ps(c[0], c[1]);
+        const __m256 yz_lo = _mm256_unpacklo_ps(c[1], c[2]), yz_hi = _mm256_unpackhi_ps(c[1], c[2]);
+        const __m256 zx_lo = _mm256_unpacklo_ps(c[2], c[0]), zx_hi = _mm256_unpackhi_ps(c[2], c[0]);
+        const __m256 r0 = _mm256_shuffle_ps(xy_lo, zx_lo, _MM_SHUFFLE(3, 0, 1, 0));  // x0 y0 z0 x1 | x4 y4 z4 x5
+        const __m256 r1 = _mm256_shuffle_ps(yz_lo, xy_hi, _MM_SHUFFLE(1, 0, 3, 2));  // y1 z1 x2 y2 | y5 z5 x6 y6
+        const __m256 r2 = _mm256_shuffle_ps(zx_hi, yz_hi, _MM_SHUFFLE(3, 2, 3, 0));  // z2 x3 y3 z3 | z6 x7 y7 z7
+        _mm256_storeu_ps(p + 3 * i, _mm256_permute2f128_ps(r0, r1, 0x20));
+        _mm256_storeu_ps(p + 3 * i + 8, _mm256_permute2f128_ps(r2, r0, 0x30));
+        _mm256_storeu_ps(p + 3 * i + 16, _mm256_permute2f128_ps(r1, r2, 0x31));
+    }
+    const uint32_t* const rest[3] = {sums[0] + i, sums[1] + i, sums[2] + i};
+    positions_from_sums(rest, n - i, origin, step, p + 3 * i);
+}
+#pragma GCC pop_options
+#endif
+
 // RGB from the running sums of quantized Y, Co, Cg (dequantize_color), eight points per step in
 // 16-bit lanes (every intermediate fits: |Co|, |Cg| <= 255, Y <= 255), the clamp to 0..255 by
 // the saturating pack. GCC left the scalar loop unvectorized (byte stores three apart): it was
@@ -916,6 +951,19 @@ void colors_from_sums(const uint32_t* const sums[3], size_t n, int luma_shift, i
 // parameters (a byte each, then 16 spare) and the one bits' positions (n + 64).
 size_t stream_work_bytes(size_t n) { return 2 * (n + 64) + (n + kRiceBlock - 1) / kRiceBlock + 16; }
 
+// The running sums of a block of zeros: count copies of running. Sixteen bytes per store and
+// four stores per step for a full block (measured: GCC's loop of one store per step took 2% of
+// the decoder's time on points_bench's scan, whose chroma is blocks of zeros).
+inline void fill_sums(uint32_t* sums, size_t count, uint32_t running) {
+    size_t i = 0;
+#ifdef __SSE2__
+    const __m128i v = _mm_set1_epi32(int32_t(running));
+    for (; i + 16 <= count; i += 16)
+        for (size_t j = 0; j < 16; j += 4) _mm_storeu_si128(reinterpret_cast<__m128i*>(sums + i + j), v);
+#endif
+    for (; i < count; ++i) sums[i] = running;
+}
+
 // A block parameter's mark for a block of zeros (version 3 on), among the Rice parameters.
 constexpr uint8_t kZeroBlock = 0xff;
 
@@ -923,9 +971,10 @@ constexpr uint8_t kZeroBlock = 0xff;
 // bytes follow end) into sums[i], the running sum (mod 2^32) of the unzigzagged values 0..i.
 // zero_blocks: version 3 on (parameter 0 marks a block of zeros, else k + 1). work:
 // stream_work_bytes(n) bytes (the quotients, the blocks' parameters and the one bits'
-// positions, each with slack). Advances cursor past the stream.
+// positions, each with slack); extra: kRiceBlock zeros, for take_escapes, left zero. Advances
+// cursor past the stream.
 const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, bool zero_blocks, uint8_t* work,
-                       uint32_t* sums) {
+                       uint32_t* extra, uint32_t* sums) {
     const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
     // Block parameters: checked here, kept as bytes (k, or kZeroBlock) after the quotients.
     uint8_t* ks = work + n + 64;
@@ -961,14 +1010,11 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, boo
                   {cursor + full_low_bytes + partial_bytes, end}};
     uint32_t running = 0;
     const uint8_t* qb = q;  // the next coded block's quotients
-#ifdef __SSE2__
-    alignas(32) uint32_t extra[kRiceBlock] = {};  // the escapes of a full block (take_escapes)
-#endif
     for (size_t b = 0; b < blocks; ++b) {
         const size_t first = b * kRiceBlock, count = std::min(n, first + kRiceBlock) - first;
         const uint32_t kb = ks[b];
         if (kb == kZeroBlock) {
-            std::fill(sums + first, sums + first + count, running);
+            fill_sums(sums + first, count, running);
             continue;
         }
         const bool full = count == kRiceBlock;
@@ -985,6 +1031,7 @@ const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, boo
             why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
         }
 #else
+        (void)extra;
         why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
 #endif
         if (why) return why;
@@ -1051,17 +1098,19 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     if (streams * least_bits > 8 * body) return "point count too large for the node size";
 
     // A padded copy of the streams, so that the block decoders may load 16 bytes anywhere in
-    // them; after it, get_stream's work space (stream_work_bytes) and three arrays of
+    // them; after it, get_stream's work space (stream_work_bytes), the escapes' array and three arrays of
     // running sums (the attributes decoded together: a position's axes, a colour's components).
     std::vector<uint32_t>& scratch = out.scratch;
     const size_t padded_words = (body + kRicePadding + 3) / 4;
     const size_t work_words = (stream_work_bytes(n) + 3) / 4;
-    scratch.resize(padded_words + work_words + 3 * n);
+    scratch.resize(padded_words + work_words + kRiceBlock + 3 * n);
     uint8_t* copy = reinterpret_cast<uint8_t*>(scratch.data());
     std::memcpy(copy, data + kHeaderSize, body);
     std::memset(copy + body, 0, padded_words * 4 - body);
     uint8_t* work = reinterpret_cast<uint8_t*>(scratch.data() + padded_words);
-    uint32_t* const sums0 = scratch.data() + padded_words + work_words;
+    uint32_t* const extra = scratch.data() + padded_words + work_words;
+    std::memset(extra, 0, kRiceBlock * sizeof(uint32_t));
+    uint32_t* const sums0 = extra + kRiceBlock;
     uint32_t* const sums[3] = {sums0, sums0 + n, sums0 + 2 * n};
     const uint8_t* cursor = copy;
     const uint8_t* end = copy + body;
@@ -1073,11 +1122,15 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     out.grid_step = step;
     out.positions.resize(3 * n);
     for (int a = 0; a < 3; ++a)
-        if (const char* why = get_stream(cursor, end, n, zero_blocks, work, sums[a])) return failed(why);
-    positions_from_sums(sums, n, origin, step, out.positions.data());
+        if (const char* why = get_stream(cursor, end, n, zero_blocks, work, extra, sums[a])) return failed(why);
+#if CATPAQ_POINTS_AVX2
+    if (g_use_avx2) positions_from_sums_avx2(sums, n, origin, step, out.positions.data());
+    else
+#endif
+        positions_from_sums(sums, n, origin, step, out.positions.data());
     if (has_normals) {
         for (int c = 0; c < 2; ++c)
-            if (const char* why = get_stream(cursor, end, n, zero_blocks, work, sums[c])) return failed(why);
+            if (const char* why = get_stream(cursor, end, n, zero_blocks, work, extra, sums[c])) return failed(why);
         out.normals.resize(n);
         uint16_t* normals = out.normals.data();
         const uint32_t *u = sums[0], *v = sums[1];
@@ -1087,13 +1140,13 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     }
     if (has_colors) {
         for (int c = 0; c < 3; ++c)
-            if (const char* why = get_stream(cursor, end, n, zero_blocks, work, sums[c])) return failed(why);
+            if (const char* why = get_stream(cursor, end, n, zero_blocks, work, extra, sums[c])) return failed(why);
         out.colors.resize(3 * n);
         colors_from_sums(sums, n, 8 - luma_bits, 9 - chroma_bits, out.colors.data());
     } else {
         out.colors.clear();
     }
-    if (const char* why = get_stream(cursor, end, n, zero_blocks, work, sums[0])) return failed(why);
+    if (const char* why = get_stream(cursor, end, n, zero_blocks, work, extra, sums[0])) return failed(why);
     out.radii.resize(n);
     float* radii = out.radii.data();
     const uint32_t* r = sums[0];
