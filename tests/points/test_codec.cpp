@@ -289,6 +289,26 @@ TEST(PointCodec, BlocksOfZerosShrinkGreyNodes) {
     EXPECT_LE(double(new_size), double(old_size) - 0.95 * 2 * 4000 / 8);  // 984 bytes less (measured)
 }
 
+TEST(PointCodec, RunsOfZerosLongerThanAnEscapeAreRejectedWithAValidChecksum) {
+    // The decoder reads the quotient string as the positions of its one bits modulo 256: runs
+    // of 9 to 255 zeros must fail the quotient check, and longer ones (which would alias to
+    // short quotients) the check for two zero bytes in a row. A node of one block: the first
+    // stream's parameter takes a byte, and its quotients start at body byte 1.
+    Node node = make_node(100, 11);
+    const std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
+    constexpr size_t kQuotients = 40 + 1;
+    DecodedPoints out;
+    for (size_t zeros : {2, 3, 8, 33, 40}) {
+        std::vector<uint8_t> bad = bytes;
+        ASSERT_LT(kQuotients + zeros, bad.size() - 8);
+        std::fill(bad.begin() + ptrdiff_t(kQuotients), bad.begin() + ptrdiff_t(kQuotients + zeros), 0);
+        if (zeros == 2) bad[kQuotients + 2] = 0x01;  // a run of 16 zeros, then a one bit
+        const uint64_t sum = checksum64(bad.data(), bad.size() - 8);
+        std::memcpy(bad.data() + bad.size() - 8, &sum, 8);
+        EXPECT_NE(decode_point_node(bad.data(), bad.size(), out), "") << zeros;
+    }
+}
+
 TEST(PointCodec, EveryTruncationIsRejected) {
     for (uint8_t version = kPointNodeOldestVersion; version <= kPointNodeVersion; ++version) {
         Node node = make_node(700, 7);

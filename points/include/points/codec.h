@@ -11,7 +11,8 @@
 // (positions per axis, octahedral normals modulo 256, colours in YCoCg, radii), and the
 // zigzagged residuals are entropy coded with block-adaptive Rice codes whose unary quotients and
 // binary low bits are stored apart (the low bits in SIMD bit-packing layout), so that they
-// decode with table look-ups and SIMD shifts rather than one bit-string walk per value.
+// decode with table look-ups and SIMD shifts rather than one bit-string walk per value; from
+// version 3 on, a block of zero residuals is its parameter alone.
 //
 // Thread safety: all functions are reentrant; decode_point_node only writes `out`.
 #include <cstddef>
