@@ -908,6 +908,29 @@ void positions_from_sums_avx2(const uint32_t* const sums[3], size_t n, const flo
 #pragma GCC pop_options
 #endif
 
+// Octahedral codes from the running sums of u and v (modulo 256 each).
+inline void normals_from_sums(const uint32_t* u, const uint32_t* v, size_t n, uint16_t* normals) {
+    for (size_t i = 0; i < n; ++i) normals[i] = uint16_t((u[i] & 0xff) | (v[i] & 0xff) << 8);
+}
+// Radii from the running sums of their grid indices (radius_value, the decoder's float operations).
+inline void radii_from_sums(const uint32_t* r, size_t n, float base, float step, float pad, float* radii) {
+    for (size_t i = 0; i < n; ++i) radii[i] = radius_value(base, step, pad, r[i] & ((1u << 30) - 1));
+}
+
+#if CATPAQ_POINTS_AVX2
+#pragma GCC push_options
+#pragma GCC target("avx2")
+// The same loops, which GCC vectorizes eight values per step for AVX2 (measured: 2% of the
+// decoder's time saved, alternated runs).
+void normals_from_sums_avx2(const uint32_t* u, const uint32_t* v, size_t n, uint16_t* normals) {
+    normals_from_sums(u, v, n, normals);
+}
+void radii_from_sums_avx2(const uint32_t* r, size_t n, float base, float step, float pad, float* radii) {
+    radii_from_sums(r, n, base, step, pad, radii);
+}
+#pragma GCC pop_options
+#endif
+
 // RGB from the running sums of quantized Y, Co, Cg (dequantize_color), eight points per step in
 // 16-bit lanes (every intermediate fits: |Co|, |Cg| <= 255, Y <= 255), the clamp to 0..255 by
 // the saturating pack. GCC left the scalar loop unvectorized (byte stores three apart): it was
@@ -1134,7 +1157,11 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
         out.normals.resize(n);
         uint16_t* normals = out.normals.data();
         const uint32_t *u = sums[0], *v = sums[1];
-        for (size_t i = 0; i < n; ++i) normals[i] = uint16_t((u[i] & 0xff) | (v[i] & 0xff) << 8);
+#if CATPAQ_POINTS_AVX2
+        if (g_use_avx2) normals_from_sums_avx2(u, v, n, normals);
+        else
+#endif
+            normals_from_sums(u, v, n, normals);
     } else {
         out.normals.clear();
     }
@@ -1150,7 +1177,11 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     out.radii.resize(n);
     float* radii = out.radii.data();
     const uint32_t* r = sums[0];
-    for (size_t i = 0; i < n; ++i) radii[i] = radius_value(radius_base, radius_step, pad, r[i] & ((1u << 30) - 1));
+#if CATPAQ_POINTS_AVX2
+    if (g_use_avx2) radii_from_sums_avx2(r, n, radius_base, radius_step, pad, radii);
+    else
+#endif
+        radii_from_sums(r, n, radius_base, radius_step, pad, radii);
     if (cursor != end) return "point node: bytes left after the last stream";
     return "";
 }
