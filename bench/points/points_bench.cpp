@@ -21,8 +21,11 @@
 // usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]
 //                     [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]
 //        points_bench --decode-only DATASET [--decode-runs 5]
+//        points_bench --compare DATASET DATASET
 // (--skip-rate skips the split and rate parts; sizes like 3e7 work for larger runs; --decode-only
-// runs only the decode part on a dataset kept from an earlier run, for quick codec iterations.)
+// runs only the decode part on a dataset kept from an earlier run, for quick codec iterations;
+// --compare decodes every node of two conversions of the same cloud, say by builds writing
+// different node versions, and fails unless every decoded point is bit for bit the same.)
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
@@ -32,6 +35,7 @@
 #include <sys/resource.h>
 #include <sys/wait.h>
 #include <thread>
+#include <tuple>
 #include <unistd.h>
 #include <vector>
 
@@ -228,6 +232,34 @@ void print_decode(const std::string& dataset, int runs) {
     std::fflush(stdout);
 }
 
+// Every node of two datasets decoded and compared attribute by attribute, bit for bit.
+int compare_decoded(const std::string& first, const std::string& second) {
+    PointDataset a(first), b(second);
+    if (a.node_count() != b.node_count()) fail("%zu nodes against %zu", a.node_count(), b.node_count());
+    DecodedPoints da, db;
+    size_t points = 0, bytes_a = 0, bytes_b = 0;
+    for (size_t i = 0; i < a.node_count(); ++i) {
+        std::string error;
+        const uint8_t* pa = a.node_bytes(i, &error);
+        const uint8_t* pb = pa ? b.node_bytes(i, &error) : nullptr;
+        if (!pa || !pb) fail("%s", error.c_str());
+        bytes_a += a.entries()[i].size;
+        bytes_b += b.entries()[i].size;
+        for (auto [bytes, size, out] : {std::tuple{pa, a.entries()[i].size, &da}, std::tuple{pb, b.entries()[i].size, &db}}) {
+            std::string problem = decode_point_node(bytes, size, *out);
+            if (!problem.empty()) fail("node %zu: %s", i, problem.c_str());
+        }
+        if (a.entries()[i].key != b.entries()[i].key || da.count != db.count || da.flags != db.flags ||
+            da.positions != db.positions || da.normals != db.normals || da.colors != db.colors || da.radii != db.radii ||
+            da.position_error != db.position_error || da.grid_step != db.grid_step)
+            fail("node %zu (key %" PRIu64 ") decodes differently", i, a.entries()[i].key);
+        points += da.count;
+    }
+    std::printf("identical: %zu nodes, %zu points; payload %.3f against %.3f bytes per point\n", a.node_count(), points,
+                double(bytes_a) / double(points), double(bytes_b) / double(points));
+    return 0;
+}
+
 std::vector<size_t> parse_sizes(const std::string& text) {
     std::vector<size_t> sizes;
     std::stringstream in(text);
@@ -243,7 +275,8 @@ int main(int argc, char** argv) {
         Options options(argc, argv,
                         "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]\n"
                         "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n"
-                        "       points_bench --decode-only DATASET [--decode-runs 5]\n",
+                        "       points_bench --decode-only DATASET [--decode-runs 5]\n"
+                        "       points_bench --compare DATASET DATASET\n",
                         {"with-normals", "skip-rate"});
         if (options.help()) {
             std::printf("%s", options.usage().c_str());
@@ -274,7 +307,13 @@ int main(int argc, char** argv) {
         const int runs = int(options.integer("decode-runs", 5, 1, 100));
         std::string keep = options.get("keep", "");
         const std::string decode_only = options.get("decode-only", "");
+        const std::string compare = options.get("compare", "");
+        std::vector<std::string> rest = options.positional();
         options.finish();
+        if (!compare.empty()) {
+            if (rest.size() != 1) usage_error("--compare takes two datasets");
+            return compare_decoded(compare, rest[0]);
+        }
         if (!decode_only.empty()) {
             print_decode(decode_only, runs);
             return 0;

@@ -136,21 +136,27 @@ uint64_t block_cost(const uint32_t* values, size_t n, uint32_t k) {
     return cost;
 }
 
-// Chooses the block's Rice parameter: the cheapest k (values and parameter code) among those
-// near log2 of the mean.
-uint32_t choose_k(const uint32_t* values, size_t n, uint32_t previous) {
+// Chooses the block's parameter (docs/formats/points.md, "Block parameters"): from version 3 on,
+// 0 for a block of zeros, else the Rice parameter k plus one; in version 2, k. k is the cheapest
+// (values and parameter code) among those near log2 of the mean.
+uint32_t choose_parameter(const uint32_t* values, size_t n, uint32_t previous, bool zero_blocks) {
     uint64_t sum = 0;
     for (size_t i = 0; i < n; ++i) sum += values[i];
+    // A block of zeros costs its parameter only, where a Rice code spends a bit per value: the
+    // chroma of grey or evenly coloured points is such blocks throughout (a quarter of a byte
+    // per point on points_bench's scan).
+    if (zero_blocks && sum == 0) return 0;
+    const uint32_t offset = zero_blocks ? 1 : 0;
     uint32_t guess = n ? bit_width32(uint32_t(std::min<uint64_t>(sum / n, UINT32_MAX))) : 0;
-    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(guess + 1, kRiceMaxK);
+    uint32_t lo = guess > 2 ? guess - 2 : 0, hi = std::min(guess + 1, kRiceMaxK - offset);
     lo = std::min(lo, hi);
     uint32_t best_k = lo;
     uint64_t best = UINT64_MAX;
     for (uint32_t k = lo; k <= hi; ++k) {
-        const uint64_t cost = parameter_bits(previous, k) + block_cost(values, n, k);
+        const uint64_t cost = parameter_bits(previous, k + offset) + block_cost(values, n, k);
         if (cost < best) best = cost, best_k = k;
     }
-    return best_k;
+    return best_k + offset;
 }
 
 // The low bits of a full block in the vertical layout: value i is the (i / 4)-th k-bit field of
@@ -196,7 +202,7 @@ struct StreamBuffers {
 
 // Writes one stream (docs/formats/points.md, "Streams"): the blocks' parameters, the unary quotients, the low bits (full blocks vertical, then the partial block
 // packed) and the escaped values' high bits.
-void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, StreamBuffers& s) {
+void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, bool zero_blocks, StreamBuffers& s) {
     const size_t n = values.size();
     s.parameters.clear();
     s.unary.clear();
@@ -206,9 +212,11 @@ void put_stream(ByteWriter& out, const std::vector<uint32_t>& values, StreamBuff
     uint32_t previous = kNoPrevious;
     for (size_t first = 0; first < n; first += kRiceBlock) {
         const size_t end = std::min(n, first + kRiceBlock);
-        const uint32_t k = choose_k(values.data() + first, end - first, previous);
-        put_parameter(s.parameters, previous, k);
-        previous = k;
+        const uint32_t parameter = choose_parameter(values.data() + first, end - first, previous, zero_blocks);
+        put_parameter(s.parameters, previous, parameter);
+        previous = parameter;
+        if (zero_blocks && parameter == 0) continue;  // no quotients, low bits or exceptions
+        const uint32_t k = zero_blocks ? parameter - 1 : parameter;
         // The unary codes gathered in a local word and handed to the writer 32 bits at a time:
         // a put per value kept the writer's state in memory (most of the stream's time).
         uint64_t word = 0;
@@ -326,6 +334,7 @@ void morton_order(const std::vector<uint32_t>& q, std::vector<uint32_t>& order) 
 struct StreamWriter {
     ByteWriter& out;
     const std::vector<uint32_t>& order;
+    bool zero_blocks;  // version 3 on
     std::vector<uint32_t> residuals;
     StreamBuffers buffers;
 
@@ -339,7 +348,7 @@ struct StreamWriter {
             previous = v;
         }
         size_t before = out.size();
-        put_stream(out, residuals, buffers);
+        put_stream(out, residuals, zero_blocks, buffers);
         return out.size() - before;
     }
 };
@@ -412,13 +421,19 @@ void seal_node(ByteWriter& out, size_t pad_at, size_t body_end, const PointSampl
     }
     stats.position_error = worst;
     float pad = round_up(worst);
+    float largest_radius = 0;
+    for (float r : decoded.radii) largest_radius = std::max(largest_radius, r);
     for (int attempt = 0;; ++attempt) {
         double deficit = 0;
         for (size_t i = 0; i < n; ++i)
             deficit = std::max(deficit, double(points.radii[order[i]]) + error[i] - double(decoded.radii[i] + pad));
         if (deficit <= 0) break;
-        assert(attempt < 8);
-        pad = round_up(double(pad) + deficit * (1.0 + 1e-6));
+        assert(attempt < 16);
+        // A deficit far below a float step of the radius is lost when the decoder adds the pad
+        // (float(r + pad) == r): after 8 such steps, grow by that step too (a single point a
+        // little off its grid origin asserted here; nodes that met the bound sooner keep their bytes).
+        const double step = attempt >= 8 ? double(largest_radius) * 0x1p-23 : 0.0;
+        pad = round_up(double(pad) + deficit * (1.0 + 1e-6) + step);
     }
     seal(pad);
     for (float& r : decoded.radii) r += pad;
@@ -457,7 +472,8 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
     // Room for the usual node (about 4 bytes a point), so the streams rarely regrow it.
     out.bytes().reserve(kHeaderSize + kChecksumSize + 8 * n);
     out.raw(kPointNodeMagic, 4);
-    out.u8(kPointNodeVersion);
+    assert(settings.version >= kPointNodeOldestVersion && settings.version <= kPointNodeVersion);
+    out.u8(settings.version);
     out.u8(uint8_t((has_normals ? kPointHasNormals : 0) | (has_colors ? kPointHasColors : 0)));
     out.u8(color_bits.luma);
     out.u8(color_bits.chroma);
@@ -473,7 +489,7 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
     PointEncodeStats stats;
     stats.min_radius = min_radius;
     stats.bytes_header = kHeaderSize + kChecksumSize;
-    StreamWriter streams{out, order, {}, {}};
+    StreamWriter streams{out, order, settings.version >= 3, {}, {}};
     for (int a = 0; a < 3; ++a)
         stats.bytes_position += streams.put_deltas([&](uint32_t i) { return int32_t(q[3 * i + a]); });
     if (has_normals) {
@@ -513,51 +529,94 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
 
 namespace {
 
-// The unary quotients a byte of the unary string holds (bits least significant first): the
-// zeros before each of its one bits, `count` of them, in the bytes of `q`; then the zeros after
-// its last one bit (`tail`, which add to the next byte's first quotient). Decoding a byte per
-// look-up rather than a bit per step: measured, the count-zeros loop was the decoder's bound.
-struct UnaryByte {
-    uint64_t q;
-    uint32_t count, tail;
+// The one bits of a byte of the unary string (bits least significant first): their bit
+// indices (0-7) in the bytes of kOnesAt[byte], kOnesCount[byte] of them. A quotient is the
+// distance between two one bits less one, so the string decodes to the positions of its one
+// bits (modulo 256, a byte each) and the quotients follow in a separate SIMD pass. Measured:
+// the earlier table of quotients carried the zeros after a byte's last one bit into the next
+// byte's first quotient, a dependency from byte to byte, and its loop took a quarter of the
+// decoder's time; with positions, the only dependency is the output pointer.
+struct OnesTables {
+    uint64_t at[256];
+    uint8_t count[256];
 };
-constexpr std::array<UnaryByte, 256> make_unary_table() {
-    std::array<UnaryByte, 256> table{};
+constexpr OnesTables make_ones_tables() {
+    OnesTables t{};
     for (uint32_t byte = 0; byte < 256; ++byte) {
-        UnaryByte e{0, 0, 0};
-        uint64_t zeros = 0;
-        for (uint32_t bit = 0; bit < 8; ++bit) {
-            if (byte >> bit & 1) {
-                e.q |= zeros << (8 * e.count++);
-                zeros = 0;
-            } else {
-                ++zeros;
-            }
-        }
-        e.tail = uint32_t(zeros);
-        table[byte] = e;
+        uint32_t count = 0;
+        for (uint32_t bit = 0; bit < 8; ++bit)
+            if (byte >> bit & 1) t.at[byte] |= uint64_t(bit) << (8 * count++);
+        t.count[byte] = uint8_t(count);
     }
-    return table;
+    return t;
 }
-constexpr std::array<UnaryByte, 256> kUnaryTable = make_unary_table();
+constexpr OnesTables kOnes = make_ones_tables();
+constexpr uint64_t kEveryByte = 0x0101010101010101ull;
 
-// Decodes the n unary quotients at the start of [cursor, end) into q[0, n) (q has 8 bytes of
-// slack after n); a run of more than kRiceEscape zeros yields a quotient above it, which the
-// caller rejects. Advances cursor past the string (which ends at its n-th one bit's byte).
-const char* get_unary(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* q) {
-    const uint8_t* p = cursor;
-    uint8_t* out = q;
-    uint8_t* const out_end = q + n;
-    uint64_t carry = 0;  // zeros since the last one bit, capped so that q stays a byte
-    while (out < out_end) {
+// Appends the one bits' positions of the byte at `p`, whose bits are at 8b .. 8b + 7 of the
+// string: `base` is 8b modulo 256 in every byte (the indices below 8 and a multiple of 8 below
+// 256 carry nothing into each other).
+__attribute__((always_inline)) inline void put_ones(uint32_t byte, uint64_t base, uint8_t*& out) {
+    const uint64_t at = kOnes.at[byte] + base;
+    std::memcpy(out, &at, 8);
+    out += kOnes.count[byte];
+}
+
+// Decodes the n unary quotients at the start of [cursor, end) into q[0, n), through the
+// positions (modulo 256) of the string's one bits in ones[0, n); ones[-1] must be writable and
+// both arrays need 64 bytes of slack after n. Advances cursor past the string (which ends at its
+// n-th one bit's byte).
+//
+// Positions modulo 256 give exact differences for runs of zeros below 256; a longer run would
+// alias to a short quotient, so the quotients plus their one bits must add up to the position
+// of the n-th one bit (a sum the quotient pass keeps by the way; measured: checking the bytes
+// for long runs took a tenth of this loop). Runs of 9 to 255 zeros give quotients above
+// kRiceEscape, which the block decoders reject.
+const char* get_unary(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* ones, uint8_t* q) {
+    const uint8_t* const start = cursor;
+    const uint8_t* p = start;
+    uint8_t* out = ones;
+    uint8_t* const out_end = ones + n;
+    ones[-1] = 0xff;  // the one bit "before" the string, at position -1
+    uint64_t base = 0;  // 8b mod 256 for the first byte b of the next word
+    // Eight bytes per step while they cannot hold the n-th one bit (at most 64 values).
+    while (out_end - out > 64 && end - p >= 8) {
+        uint64_t w;
+        std::memcpy(&w, p, 8);
+        if constexpr (std::endian::native == std::endian::big) w = __builtin_bswap64(w);
+        p += 8;
+        for (uint32_t j = 0; j < 8; ++j) put_ones(uint32_t(w >> (8 * j)) & 0xff, base + 8 * j * kEveryByte, out);
+        base = (base + 64 * kEveryByte) & (0xc0 * kEveryByte);  // the carries out of each byte masked off
+    }
+    for (; out < out_end; base += 8 * kEveryByte) {
         if (p == end) return "truncated unary string";
-        const UnaryByte& e = kUnaryTable[*p++];
-        const uint64_t quotients = e.q + carry;
-        std::memcpy(out, &quotients, 8);
-        out += e.count;
-        carry = e.count ? e.tail : std::min<uint64_t>(carry + 8, 2 * kRiceEscape);
+        put_ones(*p++, base & (0xf8 * kEveryByte), out);  // 8b mod 256: the carries masked off
     }
     if (out != out_end) return "unary string has too many values";
+    if (n == 0) return nullptr;
+    uint64_t total = 0;  // the quotients' sum
+    size_t i = 0;
+#ifdef __SSE2__
+    const __m128i one = _mm_set1_epi8(1), zero = _mm_setzero_si128();
+    __m128i sums = zero;
+    for (; i + 16 <= n; i += 16) {
+        const __m128i here = _mm_loadu_si128(reinterpret_cast<const __m128i*>(ones + i));
+        const __m128i before = _mm_loadu_si128(reinterpret_cast<const __m128i*>(ones + i - 1));
+        const __m128i quotients = _mm_sub_epi8(_mm_sub_epi8(here, before), one);
+        _mm_storeu_si128(reinterpret_cast<__m128i*>(q + i), quotients);
+        sums = _mm_add_epi64(sums, _mm_sad_epu8(quotients, zero));
+    }
+    alignas(16) uint64_t halves[2];
+    _mm_store_si128(reinterpret_cast<__m128i*>(halves), sums);
+    total = halves[0] + halves[1];
+#endif
+    for (; i < n; ++i) {
+        q[i] = uint8_t(ones[i] - ones[i - 1] - 1);
+        total += q[i];
+    }
+    // The n-th one bit is in the last byte read, at the index its position has modulo 8.
+    const uint64_t last = 8 * uint64_t(p - start - 1) + (ones[n - 1] & 7);
+    if (total + n != last + 1) return "unary run too long";
     cursor = p;
     return nullptr;
 }
@@ -575,19 +634,18 @@ __attribute__((always_inline)) inline uint32_t vertical_field(const uint8_t* wor
 
 // Where a stream's parts are while its blocks are decoded.
 struct StreamParts {
-    const uint8_t* q;        // quotients, one byte per value
     const uint8_t* low;      // the current full block's low bits
     BitReader partial;       // the partial block's low bits
     BitReader exceptions;    // escaped values' excess quotients
 };
 
-// Decodes values [first, end) of a block one at a time: the partial block, blocks with escapes
+// Decodes the count values of a block one at a time, their quotients at `quotients`: the partial block, blocks with escapes
 // and builds without SSE2. Running sums continue from `running`.
-const char* get_block_scalar(StreamParts& s, size_t first, size_t end, uint32_t k, bool full, uint32_t& running,
-                             uint32_t* sums) {
-    for (size_t i = first; i < end; ++i) {
-        const uint32_t low = full ? vertical_field(s.low, i - first, k) : s.partial.get(k);
-        const uint32_t q = s.q[i];
+const char* get_block_scalar(StreamParts& s, const uint8_t* quotients, size_t count, uint32_t k, bool full,
+                             uint32_t& running, uint32_t* sums) {
+    for (size_t i = 0; i < count; ++i) {
+        const uint32_t low = full ? vertical_field(s.low, i, k) : s.partial.get(k);
+        const uint32_t q = quotients[i];
         uint32_t v;
         uint64_t escaped;
         if (q < kRiceEscape) v = (q << k) | low;
@@ -600,44 +658,54 @@ const char* get_block_scalar(StreamParts& s, size_t first, size_t end, uint32_t 
 }
 
 #ifdef __SSE2__
-// Bit i set where the quotient q[i] (i < kRiceBlock) is kRiceEscape or more.
-inline void escape_mask(const uint8_t* q, uint64_t mask[2]) {
-    const __m128i below = _mm_set1_epi8(char(kRiceEscape - 1));
+// Bit i of mask set where the quotient q[i] (i < kRiceBlock) is kRiceEscape; false if some
+// quotient is above it (a run of zeros too long).
+inline bool escape_mask(const uint8_t* q, uint64_t mask[2]) {
+    const __m128i below = _mm_set1_epi8(char(kRiceEscape - 1)), escape = _mm_set1_epi8(char(kRiceEscape));
+    __m128i top = _mm_setzero_si128();
     for (int half = 0; half < 2; ++half) {
         uint64_t bits = 0;
         for (int c = 0; c < 4; ++c) {
             const __m128i q16 = _mm_loadu_si128(reinterpret_cast<const __m128i*>(q + 64 * half + 16 * c));
             const uint32_t plain = uint32_t(_mm_movemask_epi8(_mm_cmpeq_epi8(_mm_max_epu8(q16, below), below)));
             bits |= uint64_t(~plain & 0xffff) << (16 * c);
+            top = _mm_max_epu8(top, q16);
         }
         mask[half] = bits;
     }
+    return _mm_movemask_epi8(_mm_cmpeq_epi8(_mm_max_epu8(top, escape), escape)) == 0xffff;
+}
+
+// The escaped values of a block (mask from escape_mask): each one's excess quotient, shifted by
+// k, into extra[i], which a block kernel adds to the value it decodes ((8 + e) << k | low is
+// (8 << k | low) + (e << k) modulo 2^32). False on a bad excess code. Done ahead of the block
+// (measured: patching escapes inside the kernel, through memory and a call, made the compiler
+// rebuild the kernel's constants at every step, and half the blocks hold an escape).
+inline bool take_escapes(BitReader& exceptions, const uint64_t mask[2], uint32_t k, uint32_t* extra) {
+    bool ok = true;
+    for (int half = 0; half < 2; ++half)
+        for (uint64_t bits = mask[half]; bits; bits &= bits - 1) {
+            uint64_t q = 0;
+            ok &= exceptions.escape_quotient(q);
+            extra[64 * half + uint32_t(__builtin_ctzll(bits))] = uint32_t((q - kRiceEscape) << k);
+        }
+    return ok;
+}
+// Zeroes what take_escapes wrote.
+inline void clear_escapes(const uint64_t mask[2], uint32_t* extra) {
+    for (int half = 0; half < 2; ++half)
+        for (uint64_t bits = mask[half]; bits; bits &= bits - 1) extra[64 * half + uint32_t(__builtin_ctzll(bits))] = 0;
 }
 
 // Unzigzag of four values, their running sums continuing from carry (all four lanes hold the
 // previous sum), stored at `sums`; carry becomes the last sum. The carry chain is one add per
 // step: the group's own total is broadcast before the carry joins.
 __attribute__((always_inline)) inline void store_running_sums(__m128i v, __m128i& carry, uint32_t* sums) {
-    const __m128i zero = _mm_setzero_si128();
-    __m128i d = _mm_xor_si128(_mm_srli_epi32(v, 1), _mm_sub_epi32(zero, _mm_and_si128(v, _mm_set1_epi32(1))));
+    __m128i d = _mm_xor_si128(_mm_srli_epi32(v, 1), _mm_srai_epi32(_mm_slli_epi32(v, 31), 31));
     d = _mm_add_epi32(d, _mm_slli_si128(d, 4));
     d = _mm_add_epi32(d, _mm_slli_si128(d, 8));
     _mm_storeu_si128(reinterpret_cast<__m128i*>(sums), _mm_add_epi32(d, carry));
     carry = _mm_add_epi32(carry, _mm_shuffle_epi32(d, 0xff));
-}
-
-// Adds the quotients q[0, count) to the low bits in values[0, count): quotient kRiceEscape
-// takes its excess from the exception array; a longer unary run or a bad excess code is
-// corrupt (returns false). For the steps that hold an escape.
-inline bool patch_escapes(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t* values, uint32_t count) {
-    bool ok = true;
-    for (uint32_t lane = 0; lane < count; ++lane) {
-        uint64_t qi = q[lane];
-        ok &= qi <= kRiceEscape;
-        if (qi >= kRiceEscape) ok &= s.exceptions.escape_quotient(qi);
-        values[lane] |= uint32_t(qi << k);
-    }
-    return ok;
 }
 
 // The four quotients at q as 32-bit lanes.
@@ -650,23 +718,19 @@ __attribute__((always_inline)) inline __m128i load_quotients(const uint8_t* q) {
 
 // Decodes a full block four values per step: the vertical layout puts values 4m .. 4m + 3 at
 // the same bit offset of the four word lanes, so one shift pair extracts their low bits; then
-// the quotient, unzigzag and the running sum (a prefix sum in the register). A step with an
-// escape patches it through memory (measured: half the blocks hold one or more escapes, so
-// sending such blocks to the scalar path was the decoder's bound).
+// the quotient, the escapes' excess (take_escapes), unzigzag and the running sum (a prefix sum
+// in the register). Quotients are checked beforehand (escape_mask).
 //
 // K is the block's Rice parameter as a constant, the 32 steps unrolled: every shift and offset
 // is then an immediate (measured: the generic loop spent half its instructions computing
 // them). The parameters measured on scans are 0-6; larger ones take the generic loop (K = -1).
 template <int K>
-const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime, uint32_t& running, uint32_t* sums) {
+void get_block_sse2(const uint8_t* low, const uint8_t* q, const uint32_t* extra, uint32_t k_runtime, uint32_t& running,
+                    uint32_t* sums) {
     const uint32_t k = K >= 0 ? uint32_t(K) : k_runtime;
     const __m128i mask = _mm_set1_epi32(int32_t((uint64_t(1) << k) - 1));
     const __m128i k_count = _mm_cvtsi32_si128(int(k));
-    uint64_t escapes[2];
-    escape_mask(q, escapes);
-    const uint8_t* low = s.low;
     __m128i carry = _mm_set1_epi32(int32_t(running));
-    bool ok = true;
     auto step = [&](uint32_t m) __attribute__((always_inline)) {
         const uint32_t bit = m * k, j = bit >> 5, shift = bit & 31;
         __m128i field = _mm_setzero_si128();
@@ -679,12 +743,7 @@ const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime,
             field = _mm_and_si128(field, mask);
         }
         __m128i v = _mm_or_si128(_mm_sll_epi32(load_quotients(q + 4 * m), k_count), field);
-        if ((escapes[m >> 4] >> (4 * (m & 15))) & 15) [[unlikely]] {
-            alignas(16) uint32_t values[4];
-            _mm_store_si128(reinterpret_cast<__m128i*>(values), field);
-            ok &= patch_escapes(s, q + 4 * m, k, values, 4);
-            v = _mm_load_si128(reinterpret_cast<const __m128i*>(values));
-        }
+        v = _mm_add_epi32(v, _mm_loadu_si128(reinterpret_cast<const __m128i*>(extra + 4 * m)));
         store_running_sums(v, carry, sums + 4 * m);
     };
     if constexpr (K >= 0) {
@@ -695,7 +754,6 @@ const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime,
         for (uint32_t m = 0; m < kRiceBlock / 4; ++m) step(m);
     }
     running = uint32_t(_mm_cvtsi128_si32(carry));
-    return ok ? nullptr : "unary run too long or bad escape";
 }
 
 #if CATPAQ_POINTS_AVX2
@@ -706,15 +764,11 @@ const char* get_block_sse2(StreamParts& s, const uint8_t* q, uint32_t k_runtime,
 // register, each half shifted by its own offset (variable shifts); the running sum spans the
 // two halves. Measured: the SSE2 block loop was half the decoder's instructions.
 template <int K>
-const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, uint32_t* sums) {
+void get_block_avx2(const uint8_t* low, const uint8_t* q, const uint32_t* extra, uint32_t& running, uint32_t* sums) {
     constexpr uint32_t k = uint32_t(K);
     const __m256i mask = _mm256_set1_epi32(int32_t((uint64_t(1) << k) - 1));
-    const __m256i zero = _mm256_setzero_si256(), one = _mm256_set1_epi32(1), last = _mm256_set1_epi32(7);
-    uint64_t escapes[2];
-    escape_mask(q, escapes);
-    const uint8_t* low = s.low;
+    const __m256i last = _mm256_set1_epi32(7);
     __m256i carry = _mm256_set1_epi32(int32_t(running));
-    bool ok = true;
     // 16 bytes of lane words at word row j0 (low half) and j1 (high half).
     auto rows = [&](uint32_t j0, uint32_t j1) __attribute__((always_inline)) {
         const __m128i* at = reinterpret_cast<const __m128i*>(low);
@@ -723,7 +777,7 @@ const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, 
         return _mm256_inserti128_si256(_mm256_castsi128_si256(_mm_loadu_si128(at + j0)), _mm_loadu_si128(at + j1), 1);
     };
     auto step = [&](uint32_t m) __attribute__((always_inline)) {  // values 4m .. 4m + 7
-        __m256i field = zero;
+        __m256i field = _mm256_setzero_si256();
         if (k > 0) {
             const uint32_t bit0 = m * k, bit1 = bit0 + k;
             const uint32_t j0 = bit0 >> 5, j1 = bit1 >> 5, s0 = bit0 & 31, s1 = bit1 & 31;
@@ -737,13 +791,8 @@ const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, 
         }
         const __m256i quotient = _mm256_cvtepu8_epi32(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(q + 4 * m)));
         __m256i v = _mm256_or_si256(_mm256_slli_epi32(quotient, int(k)), field);
-        if ((escapes[m >> 4] >> (4 * (m & 15))) & 0xff) [[unlikely]] {
-            alignas(32) uint32_t values[8];
-            _mm256_store_si256(reinterpret_cast<__m256i*>(values), field);
-            ok &= patch_escapes(s, q + 4 * m, k, values, 8);
-            v = _mm256_load_si256(reinterpret_cast<const __m256i*>(values));
-        }
-        __m256i d = _mm256_xor_si256(_mm256_srli_epi32(v, 1), _mm256_sub_epi32(zero, _mm256_and_si256(v, one)));
+        v = _mm256_add_epi32(v, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(extra + 4 * m)));
+        __m256i d = _mm256_xor_si256(_mm256_srli_epi32(v, 1), _mm256_srai_epi32(_mm256_slli_epi32(v, 31), 31));
         d = _mm256_add_epi32(d, _mm256_slli_si256(d, 4));  // prefix sums within each half
         d = _mm256_add_epi32(d, _mm256_slli_si256(d, 8));
         // The low half's total into the high half.
@@ -755,7 +804,6 @@ const char* get_block_avx2(StreamParts& s, const uint8_t* q, uint32_t& running, 
         (step(2 * M), ...);
     }(std::make_integer_sequence<uint32_t, kRiceBlock / 8>{});
     running = uint32_t(_mm_cvtsi128_si32(_mm256_castsi256_si128(carry)));
-    return ok ? nullptr : "unary run too long or bad escape";
 }
 #pragma GCC pop_options
 
@@ -765,32 +813,33 @@ bool g_use_avx2 = (__builtin_cpu_init(), __builtin_cpu_supports("avx2"));
 #endif
 
 // get_block_sse2 (or get_block_avx2) for the block's parameter k.
-const char* get_block_any_k(StreamParts& s, const uint8_t* q, uint32_t k, uint32_t& running, uint32_t* sums) {
+void get_block_any_k(const uint8_t* low, const uint8_t* q, const uint32_t* extra, uint32_t k, uint32_t& running,
+                     uint32_t* sums) {
 #if CATPAQ_POINTS_AVX2
     if (g_use_avx2) {
         switch (k) {
-            case 0: return get_block_avx2<0>(s, q, running, sums);
-            case 1: return get_block_avx2<1>(s, q, running, sums);
-            case 2: return get_block_avx2<2>(s, q, running, sums);
-            case 3: return get_block_avx2<3>(s, q, running, sums);
-            case 4: return get_block_avx2<4>(s, q, running, sums);
-            case 5: return get_block_avx2<5>(s, q, running, sums);
-            case 6: return get_block_avx2<6>(s, q, running, sums);
-            case 7: return get_block_avx2<7>(s, q, running, sums);
+            case 0: return get_block_avx2<0>(low, q, extra, running, sums);
+            case 1: return get_block_avx2<1>(low, q, extra, running, sums);
+            case 2: return get_block_avx2<2>(low, q, extra, running, sums);
+            case 3: return get_block_avx2<3>(low, q, extra, running, sums);
+            case 4: return get_block_avx2<4>(low, q, extra, running, sums);
+            case 5: return get_block_avx2<5>(low, q, extra, running, sums);
+            case 6: return get_block_avx2<6>(low, q, extra, running, sums);
+            case 7: return get_block_avx2<7>(low, q, extra, running, sums);
             default: break;
         }
     }
 #endif
     switch (k) {
-        case 0: return get_block_sse2<0>(s, q, k, running, sums);
-        case 1: return get_block_sse2<1>(s, q, k, running, sums);
-        case 2: return get_block_sse2<2>(s, q, k, running, sums);
-        case 3: return get_block_sse2<3>(s, q, k, running, sums);
-        case 4: return get_block_sse2<4>(s, q, k, running, sums);
-        case 5: return get_block_sse2<5>(s, q, k, running, sums);
-        case 6: return get_block_sse2<6>(s, q, k, running, sums);
-        case 7: return get_block_sse2<7>(s, q, k, running, sums);
-        default: return get_block_sse2<-1>(s, q, k, running, sums);
+        case 0: return get_block_sse2<0>(low, q, extra, k, running, sums);
+        case 1: return get_block_sse2<1>(low, q, extra, k, running, sums);
+        case 2: return get_block_sse2<2>(low, q, extra, k, running, sums);
+        case 3: return get_block_sse2<3>(low, q, extra, k, running, sums);
+        case 4: return get_block_sse2<4>(low, q, extra, k, running, sums);
+        case 5: return get_block_sse2<5>(low, q, extra, k, running, sums);
+        case 6: return get_block_sse2<6>(low, q, extra, k, running, sums);
+        case 7: return get_block_sse2<7>(low, q, extra, k, running, sums);
+        default: return get_block_sse2<-1>(low, q, extra, k, running, sums);
     }
 }
 #endif
@@ -824,6 +873,64 @@ void positions_from_sums(const uint32_t* const sums[3], size_t n, const float or
     for (; i < n; ++i)
         for (int a = 0; a < 3; ++a) p[3 * i + a] = grid_position(origin[a], step, sums[a][i] & grid_mask);
 }
+
+#if CATPAQ_POINTS_AVX2
+#pragma GCC push_options
+#pragma GCC target("avx2")
+// positions_from_sums eight points per step: the same in-lane shuffles put points 0-3 and 4-7
+// in x y z order in the two 128-bit halves, and three cross-half permutes join them for three
+// 32-byte stores (measured: the baseline loop was a third of the conversions' time).
+void positions_from_sums_avx2(const uint32_t* const sums[3], size_t n, const float origin[3], float step, float* p) {
+    const uint32_t grid_mask = (1u << kMaxGridBits) - 1;
+    const __m256i mask = _mm256_set1_epi32(int32_t(grid_mask));
+    const __m256 step8 = _mm256_set1_ps(step);
+    __m256 o[3];
+    for (int a = 0; a < 3; ++a) o[a] = _mm256_set1_ps(origin[a]);
+    size_t i = 0;
+    for (; i + 8 <= n; i += 8) {
+        __m256 c[3];
+        for (int a = 0; a < 3; ++a) {
+            const __m256i q = _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(sums[a] + i)), mask);
+            c[a] = _mm256_add_ps(o[a], _mm256_mul_ps(_mm256_cvtepi32_ps(q), step8));
+        }
+        const __m256 xy_lo = _mm256_unpacklo_ps(c[0], c[1]), xy_hi = _mm256_unpackhi_ps(c[0], c[1]);
+        const __m256 yz_lo = _mm256_unpacklo_ps(c[1], c[2]), yz_hi = _mm256_unpackhi_ps(c[1], c[2]);
+        const __m256 zx_lo = _mm256_unpacklo_ps(c[2], c[0]), zx_hi = _mm256_unpackhi_ps(c[2], c[0]);
+        const __m256 r0 = _mm256_shuffle_ps(xy_lo, zx_lo, _MM_SHUFFLE(3, 0, 1, 0));  // x0 y0 z0 x1 | x4 y4 z4 x5
+        const __m256 r1 = _mm256_shuffle_ps(yz_lo, xy_hi, _MM_SHUFFLE(1, 0, 3, 2));  // y1 z1 x2 y2 | y5 z5 x6 y6
+        const __m256 r2 = _mm256_shuffle_ps(zx_hi, yz_hi, _MM_SHUFFLE(3, 2, 3, 0));  // z2 x3 y3 z3 | z6 x7 y7 z7
+        _mm256_storeu_ps(p + 3 * i, _mm256_permute2f128_ps(r0, r1, 0x20));
+        _mm256_storeu_ps(p + 3 * i + 8, _mm256_permute2f128_ps(r2, r0, 0x30));
+        _mm256_storeu_ps(p + 3 * i + 16, _mm256_permute2f128_ps(r1, r2, 0x31));
+    }
+    const uint32_t* const rest[3] = {sums[0] + i, sums[1] + i, sums[2] + i};
+    positions_from_sums(rest, n - i, origin, step, p + 3 * i);
+}
+#pragma GCC pop_options
+#endif
+
+// Octahedral codes from the running sums of u and v (modulo 256 each).
+inline void normals_from_sums(const uint32_t* u, const uint32_t* v, size_t n, uint16_t* normals) {
+    for (size_t i = 0; i < n; ++i) normals[i] = uint16_t((u[i] & 0xff) | (v[i] & 0xff) << 8);
+}
+// Radii from the running sums of their grid indices (radius_value, the decoder's float operations).
+inline void radii_from_sums(const uint32_t* r, size_t n, float base, float step, float pad, float* radii) {
+    for (size_t i = 0; i < n; ++i) radii[i] = radius_value(base, step, pad, r[i] & ((1u << 30) - 1));
+}
+
+#if CATPAQ_POINTS_AVX2
+#pragma GCC push_options
+#pragma GCC target("avx2")
+// The same loops, which GCC vectorizes eight values per step for AVX2 (measured: 2% of the
+// decoder's time saved, alternated runs).
+void normals_from_sums_avx2(const uint32_t* u, const uint32_t* v, size_t n, uint16_t* normals) {
+    normals_from_sums(u, v, n, normals);
+}
+void radii_from_sums_avx2(const uint32_t* r, size_t n, float base, float step, float pad, float* radii) {
+    radii_from_sums(r, n, base, step, pad, radii);
+}
+#pragma GCC pop_options
+#endif
 
 // RGB from the running sums of quantized Y, Co, Cg (dequantize_color), eight points per step in
 // 16-bit lanes (every intermediate fits: |Co|, |Cg| <= 255, Y <= 255), the clamp to 0..255 by
@@ -864,49 +971,96 @@ void colors_from_sums(const uint32_t* const sums[3], size_t n, int luma_shift, i
         dequantize_color(sums[0][i] & 0x1ff, sums[1][i] & 0x3ff, sums[2][i] & 0x3ff, luma_shift, chroma_shift, &rgb[3 * i]);
 }
 
+// The work space get_stream needs for n values: the quotients (n + 64 bytes), the blocks'
+// parameters (a byte each, then 16 spare) and the one bits' positions (n + 64).
+size_t stream_work_bytes(size_t n) { return 2 * (n + 64) + (n + kRiceBlock - 1) / kRiceBlock + 16; }
+
+// The running sums of a block of zeros: count copies of running. Sixteen bytes per store and
+// four stores per step for a full block (measured: GCC's loop of one store per step took 2% of
+// the decoder's time on points_bench's scan, whose chroma is blocks of zeros).
+inline void fill_sums(uint32_t* sums, size_t count, uint32_t running) {
+    size_t i = 0;
+#ifdef __SSE2__
+    const __m128i v = _mm_set1_epi32(int32_t(running));
+    for (; i + 16 <= count; i += 16)
+        for (size_t j = 0; j < 16; j += 4) _mm_storeu_si128(reinterpret_cast<__m128i*>(sums + i + j), v);
+#endif
+    for (; i < count; ++i) sums[i] = running;
+}
+
+// A block parameter's mark for a block of zeros (version 3 on), among the Rice parameters.
+constexpr uint8_t kZeroBlock = 0xff;
+
 // Decodes one stream of n values from [cursor, end) (the node's streams; kRicePadding readable
 // bytes follow end) into sums[i], the running sum (mod 2^32) of the unzigzagged values 0..i.
-// work: n + 16 bytes for the quotients. Advances cursor past the stream.
-const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, uint8_t* work, uint32_t* sums) {
+// zero_blocks: version 3 on (parameter 0 marks a block of zeros, else k + 1). work:
+// stream_work_bytes(n) bytes (the quotients, the blocks' parameters and the one bits'
+// positions, each with slack); extra: kRiceBlock zeros, for take_escapes, left zero. Advances
+// cursor past the stream.
+const char* get_stream(const uint8_t*& cursor, const uint8_t* end, size_t n, bool zero_blocks, uint8_t* work,
+                       uint32_t* extra, uint32_t* sums) {
     const size_t blocks = (n + kRiceBlock - 1) / kRiceBlock;
-    // Block parameters: checked here, kept as bytes after the quotients.
-    uint8_t* ks = work + n + 16;
+    // Block parameters: checked here, kept as bytes (k, or kZeroBlock) after the quotients.
+    uint8_t* ks = work + n + 64;
     BitReader parameters{cursor, end};
-    uint32_t k = 0;
-    size_t full_low_bytes = 0;
+    uint32_t parameter = 0;
+    size_t full_low_bytes = 0, coded = 0;  // coded: values outside zero blocks
     for (size_t b = 0; b < blocks; ++b) {
         if (b == 0 || parameters.get(1) == 1) {
-            if (b == 0) k = parameters.get(5);
-            else if (parameters.get(1) == 0) k = parameters.get(1) ? k + 1 : k - 1;
-            else k = parameters.get(5);
+            if (b == 0) parameter = parameters.get(5);
+            else if (parameters.get(1) == 0) parameter = parameters.get(1) ? parameter + 1 : parameter - 1;
+            else parameter = parameters.get(5);
         }
-        if (k > kRiceMaxK) return "bad Rice parameter";
+        if (parameter > kRiceMaxK) return "bad Rice parameter";
+        const size_t values = std::min(n, (b + 1) * kRiceBlock) - b * kRiceBlock;
+        if (zero_blocks && parameter == 0) {
+            ks[b] = kZeroBlock;
+            continue;
+        }
+        const uint32_t k = zero_blocks ? parameter - 1 : parameter;
         ks[b] = uint8_t(k);
-        if ((b + 1) * kRiceBlock <= n) full_low_bytes += 16 * size_t(k);
+        coded += values;
+        if (values == kRiceBlock) full_low_bytes += 16 * size_t(k);
     }
     if (parameters.overrun()) return "truncated stream";
     cursor += parameters.bytes();
-    uint8_t* q = work;
-    if (const char* why = get_unary(cursor, end, n, q)) return why;
+    uint8_t* const q = work;
+    uint8_t* ones = ks + blocks + 16;
+    if (const char* why = get_unary(cursor, end, coded, ones, q)) return why;
     const size_t rest = n % kRiceBlock;
-    const size_t partial_bytes = (rest * (rest ? ks[blocks - 1] : 0) + 7) / 8;
+    const size_t partial_bytes = rest && ks[blocks - 1] != kZeroBlock ? (rest * ks[blocks - 1] + 7) / 8 : 0;
     if (full_low_bytes + partial_bytes > size_t(end - cursor)) return "truncated stream";
-    StreamParts s{q, cursor, {cursor + full_low_bytes, cursor + full_low_bytes + partial_bytes},
+    StreamParts s{cursor, {cursor + full_low_bytes, cursor + full_low_bytes + partial_bytes},
                   {cursor + full_low_bytes + partial_bytes, end}};
     uint32_t running = 0;
+    const uint8_t* qb = q;  // the next coded block's quotients
     for (size_t b = 0; b < blocks; ++b) {
-        const size_t first = b * kRiceBlock, last = std::min(n, first + kRiceBlock);
+        const size_t first = b * kRiceBlock, count = std::min(n, first + kRiceBlock) - first;
         const uint32_t kb = ks[b];
-        const bool full = last - first == kRiceBlock;
+        if (kb == kZeroBlock) {
+            fill_sums(sums + first, count, running);
+            continue;
+        }
+        const bool full = count == kRiceBlock;
         const char* why = nullptr;
 #ifdef __SSE2__
-        if (full) why = get_block_any_k(s, q + first, kb, running, sums + first);
-        else why = get_block_scalar(s, first, last, kb, full, running, sums);
+        if (full) {
+            uint64_t escapes[2];
+            if (!escape_mask(qb, escapes)) return "unary run too long";
+            const bool escaped = (escapes[0] | escapes[1]) != 0;
+            if (escaped && !take_escapes(s.exceptions, escapes, kb, extra)) return "bad escape";
+            get_block_any_k(s.low, qb, extra, kb, running, sums + first);
+            if (escaped) clear_escapes(escapes, extra);
+        } else {
+            why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
+        }
 #else
-        why = get_block_scalar(s, first, last, kb, full, running, sums);
+        (void)extra;
+        why = get_block_scalar(s, qb, count, kb, full, running, sums + first);
 #endif
         if (why) return why;
         if (full) s.low += 16 * size_t(kb);
+        qb += count;
     }
     if (s.exceptions.overrun()) return "truncated exceptions";
     cursor = s.exceptions.begin + s.exceptions.bytes();
@@ -928,8 +1082,9 @@ bool use_point_decoder_avx2(bool enable) {
 std::string peek_point_node(const uint8_t* data, size_t size, size_t& count, uint8_t& flags) {
     if (size < kHeaderSize + kChecksumSize) return "node too short";
     if (std::memcmp(data, kPointNodeMagic, 4) != 0) return "not a point node (bad magic)";
-    if (data[4] != kPointNodeVersion)
-        return strprintf("unsupported point node version %u (this build reads %u)", data[4], kPointNodeVersion);
+    if (data[4] < kPointNodeOldestVersion || data[4] > kPointNodeVersion)
+        return strprintf("unsupported point node version %u (this build reads %u to %u)", data[4], kPointNodeOldestVersion,
+                         kPointNodeVersion);
     flags = data[5];
     if (flags & ~(kPointHasNormals | kPointHasColors)) return "unknown point node flags";
     ByteReader r(data + 8, 4);
@@ -958,23 +1113,28 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
 
     const bool has_normals = flags & kPointHasNormals, has_colors = flags & kPointHasColors;
     const size_t streams = 3 + (has_normals ? 2 : 0) + (has_colors ? 3 : 0) + 1;
-    // Every value takes at least one bit: a count the bytes cannot hold is refused before
-    // anything is allocated for it.
+    // Every value takes at least one bit (version 2), every block at least its parameter bit
+    // (version 3 on, where a block of zeros has no other bits): a count the bytes cannot hold is
+    // refused before anything is allocated for it.
+    const bool zero_blocks = data[4] >= 3;
     const size_t body = size - kChecksumSize - kHeaderSize;
-    if (streams * n > 8 * body) return "point count too large for the node size";
+    const size_t least_bits = zero_blocks ? (n + kRiceBlock - 1) / kRiceBlock : n;
+    if (streams * least_bits > 8 * body) return "point count too large for the node size";
 
     // A padded copy of the streams, so that the block decoders may load 16 bytes anywhere in
-    // them; after it, the quotients (n + 16 bytes, then a byte per block) and three arrays of
+    // them; after it, get_stream's work space (stream_work_bytes), the escapes' array and three arrays of
     // running sums (the attributes decoded together: a position's axes, a colour's components).
     std::vector<uint32_t>& scratch = out.scratch;
     const size_t padded_words = (body + kRicePadding + 3) / 4;
-    const size_t work_words = (n + 16 + (n + kRiceBlock - 1) / kRiceBlock + 3) / 4;
-    scratch.resize(padded_words + work_words + 3 * n);
+    const size_t work_words = (stream_work_bytes(n) + 3) / 4;
+    scratch.resize(padded_words + work_words + kRiceBlock + 3 * n);
     uint8_t* copy = reinterpret_cast<uint8_t*>(scratch.data());
     std::memcpy(copy, data + kHeaderSize, body);
     std::memset(copy + body, 0, padded_words * 4 - body);
     uint8_t* work = reinterpret_cast<uint8_t*>(scratch.data() + padded_words);
-    uint32_t* const sums0 = scratch.data() + padded_words + work_words;
+    uint32_t* const extra = scratch.data() + padded_words + work_words;
+    std::memset(extra, 0, kRiceBlock * sizeof(uint32_t));
+    uint32_t* const sums0 = extra + kRiceBlock;
     uint32_t* const sums[3] = {sums0, sums0 + n, sums0 + 2 * n};
     const uint8_t* cursor = copy;
     const uint8_t* end = copy + body;
@@ -986,31 +1146,43 @@ std::string decode_point_node(const uint8_t* data, size_t size, DecodedPoints& o
     out.grid_step = step;
     out.positions.resize(3 * n);
     for (int a = 0; a < 3; ++a)
-        if (const char* why = get_stream(cursor, end, n, work, sums[a])) return failed(why);
-    positions_from_sums(sums, n, origin, step, out.positions.data());
+        if (const char* why = get_stream(cursor, end, n, zero_blocks, work, extra, sums[a])) return failed(why);
+#if CATPAQ_POINTS_AVX2
+    if (g_use_avx2) positions_from_sums_avx2(sums, n, origin, step, out.positions.data());
+    else
+#endif
+        positions_from_sums(sums, n, origin, step, out.positions.data());
     if (has_normals) {
         for (int c = 0; c < 2; ++c)
-            if (const char* why = get_stream(cursor, end, n, work, sums[c])) return failed(why);
+            if (const char* why = get_stream(cursor, end, n, zero_blocks, work, extra, sums[c])) return failed(why);
         out.normals.resize(n);
         uint16_t* normals = out.normals.data();
         const uint32_t *u = sums[0], *v = sums[1];
-        for (size_t i = 0; i < n; ++i) normals[i] = uint16_t((u[i] & 0xff) | (v[i] & 0xff) << 8);
+#if CATPAQ_POINTS_AVX2
+        if (g_use_avx2) normals_from_sums_avx2(u, v, n, normals);
+        else
+#endif
+            normals_from_sums(u, v, n, normals);
     } else {
         out.normals.clear();
     }
     if (has_colors) {
         for (int c = 0; c < 3; ++c)
-            if (const char* why = get_stream(cursor, end, n, work, sums[c])) return failed(why);
+            if (const char* why = get_stream(cursor, end, n, zero_blocks, work, extra, sums[c])) return failed(why);
         out.colors.resize(3 * n);
         colors_from_sums(sums, n, 8 - luma_bits, 9 - chroma_bits, out.colors.data());
     } else {
         out.colors.clear();
     }
-    if (const char* why = get_stream(cursor, end, n, work, sums[0])) return failed(why);
+    if (const char* why = get_stream(cursor, end, n, zero_blocks, work, extra, sums[0])) return failed(why);
     out.radii.resize(n);
     float* radii = out.radii.data();
     const uint32_t* r = sums[0];
-    for (size_t i = 0; i < n; ++i) radii[i] = radius_value(radius_base, radius_step, pad, r[i] & ((1u << 30) - 1));
+#if CATPAQ_POINTS_AVX2
+    if (g_use_avx2) radii_from_sums_avx2(r, n, radius_base, radius_step, pad, radii);
+    else
+#endif
+        radii_from_sums(r, n, radius_base, radius_step, pad, radii);
     if (cursor != end) return "point node: bytes left after the last stream";
     return "";
 }

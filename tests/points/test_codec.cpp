@@ -13,10 +13,19 @@
 namespace catpaq {
 namespace {
 
-// GoldenBytesOfASmallNode: recorded from the encoder of format version 2 (version 1: 152 bytes,
-// four interleaved Rice lanes per stream).
+// GoldenBytesOfASmallNode: recorded from the encoder of format version 3 (version 2: 95 bytes,
+// checksum 12957350842320211667; version 1: 152 bytes, four interleaved Rice lanes per stream).
 constexpr size_t kGoldenSize = 95;
-constexpr uint64_t kGoldenChecksum = 12957350842320211667ull;
+constexpr uint64_t kGoldenChecksum = 4545968190027558109ull;
+
+// The same node as written by the encoder of format version 2 (before blocks of zeros), which
+// the decoder still reads: datasets converted before version 3 stay readable.
+constexpr uint8_t kGoldenVersion2[95] = {
+    0x43, 0x50, 0x50, 0x4e, 0x02, 0x03, 0x08, 0x09, 0x04, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00, 0x00,
+    0x00, 0x00, 0x00, 0x00, 0x00, 0x3a, 0xcd, 0x13, 0x3e, 0x00, 0x00, 0x00, 0x3f, 0x00, 0x00, 0x00, 0x3e, 0x3b, 0x0a,
+    0x93, 0x3c, 0x03, 0x55, 0x70, 0x0d, 0x01, 0x03, 0x06, 0x00, 0x01, 0x07, 0x04, 0x00, 0x06, 0x23, 0x02, 0x00, 0xe0,
+    0xf7, 0x05, 0x07, 0x04, 0x00, 0x00, 0x0f, 0x06, 0x52, 0x01, 0x3e, 0xf0, 0x57, 0x09, 0x1e, 0xfc, 0xfb, 0xf7, 0xb7,
+    0x0e, 0x08, 0x92, 0x01, 0x00, 0xfc, 0xfb, 0xfe, 0x00, 0x43, 0x08, 0xdc, 0xb8, 0x20, 0x5e, 0x6c, 0x6a, 0xac, 0x6d};
 
 struct Node {
     std::vector<double> positions;
@@ -192,13 +201,30 @@ TEST(PointCodec, FarFromTheOriginKeepsTheBoundRelativeToTheLocalOrigin) {
         EXPECT_LE(distance(&out.positions[3 * i], &node.positions[3 * order[i]]), out.position_error);
 }
 
-TEST(PointCodec, GoldenBytesOfASmallNode) {
-    // The byte layout of docs/formats/points.md: a change of format must change the version.
+Node make_golden_node() {
     Node node;
     node.positions = {0, 0, 0, 1, 0, 0, 0, 1, 0, 1, 1, 1};
     node.normals = {0, 0, 1, 0, 0, 1, 1, 0, 0, 0, 1, 0};
     node.colors = {255, 0, 0, 0, 255, 0, 0, 0, 255, 10, 20, 30};
     node.radii = {0.5f, 0.5f, 0.75f, 1.0f};
+    return node;
+}
+
+// Every attribute of two decodes, bit for bit.
+void expect_same_points(const DecodedPoints& a, const DecodedPoints& b) {
+    EXPECT_EQ(a.count, b.count);
+    EXPECT_EQ(a.flags, b.flags);
+    EXPECT_EQ(a.positions, b.positions);
+    EXPECT_EQ(a.normals, b.normals);
+    EXPECT_EQ(a.colors, b.colors);
+    EXPECT_EQ(a.radii, b.radii);
+    EXPECT_EQ(a.position_error, b.position_error);
+    EXPECT_EQ(a.grid_step, b.grid_step);
+}
+
+TEST(PointCodec, GoldenBytesOfASmallNode) {
+    // The byte layout of docs/formats/points.md: a change of format must change the version.
+    Node node = make_golden_node();
     std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
     ASSERT_GE(bytes.size(), 48u);
     EXPECT_EQ(std::string(reinterpret_cast<const char*>(bytes.data()), 4), "CPPN");
@@ -211,13 +237,90 @@ TEST(PointCodec, GoldenBytesOfASmallNode) {
     EXPECT_EQ(checksum64(bytes.data(), bytes.size()), kGoldenChecksum);
 }
 
-TEST(PointCodec, EveryTruncationIsRejected) {
-    Node node = make_node(700, 7);
+TEST(PointCodec, Version2GoldenBytesStillDecodeToTheVersion3Points) {
+    // Datasets written before version 3 stay readable, and decode to what the current encoder's
+    // node decodes to.
+    DecodedPoints old_points, new_points;
+    ASSERT_EQ(decode_point_node(kGoldenVersion2, sizeof(kGoldenVersion2), old_points), "");
+    Node node = make_golden_node();
+    PointEncodeSettings v2;
+    v2.version = 2;
+    EXPECT_EQ(encode_point_node(node.view(), v2), std::vector<uint8_t>(std::begin(kGoldenVersion2), std::end(kGoldenVersion2)));
     std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
+    ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), new_points), "");
+    expect_same_points(old_points, new_points);
+}
+
+TEST(PointCodec, EveryVersionDecodesToIdenticalPoints) {
+    // Versions differ in how the streams are coded, never in what they decode to: nodes of many
+    // sizes (partial last blocks), colour precisions, grey (all chroma deltas zero: blocks of
+    // zeros), constant radii, escapes and missing attributes.
+    for (uint64_t seed = 40; seed < 52; ++seed) {
+        Node node = make_node(1 + 397 * (seed - 40), seed);
+        if (seed % 3 == 0)
+            for (size_t i = 0; i < node.colors.size(); i += 3) node.colors[i + 1] = node.colors[i + 2] = node.colors[i];
+        if (seed % 4 == 1) std::fill(node.radii.begin(), node.radii.end(), 0.015f);
+        if (seed % 5 == 2) node.normals.clear();
+        if (seed % 5 == 3) node.colors.clear();
+        for (size_t i = 0; i < node.radii.size(); i += 97) node.positions[3 * i + 2] += 0.2;
+        PointEncodeSettings settings{ColorBits{uint8_t(1 + seed % 8), uint8_t(1 + seed % 9)}};
+        DecodedPoints reference;
+        for (uint8_t version = kPointNodeOldestVersion; version <= kPointNodeVersion; ++version) {
+            settings.version = version;
+            std::vector<uint8_t> bytes = encode_point_node(node.view(), settings);
+            EXPECT_EQ(bytes[4], version);
+            DecodedPoints out;
+            ASSERT_EQ(decode_point_node(bytes.data(), bytes.size(), out), "") << int(version);
+            if (version == kPointNodeOldestVersion) reference = out;
+            else expect_same_points(reference, out);
+        }
+    }
+}
+
+TEST(PointCodec, BlocksOfZerosShrinkGreyNodes) {
+    // Grey points have zero Co and Cg deltas throughout: version 3 codes such blocks by their
+    // parameter alone, where version 2 spent a bit per value (two bits per point).
+    Node node = make_node(4000, 53);
+    for (size_t i = 0; i < node.colors.size(); i += 3) node.colors[i + 1] = node.colors[i + 2] = node.colors[i];
+    PointEncodeSettings v2;
+    v2.version = 2;
+    const size_t old_size = encode_point_node(node.view(), v2).size();
+    const size_t new_size = encode_point_node(node.view(), PointEncodeSettings{}).size();
+    EXPECT_LE(double(new_size), double(old_size) - 0.95 * 2 * 4000 / 8);  // 984 bytes less (measured)
+}
+
+TEST(PointCodec, RunsOfZerosLongerThanAnEscapeAreRejectedWithAValidChecksum) {
+    // The decoder reads the quotient string as the positions of its one bits modulo 256: runs
+    // of 9 to 255 zeros must fail the quotient check, and longer ones (which would alias to
+    // short quotients) the check for two zero bytes in a row. A node of one block: the first
+    // stream's parameter takes a byte, and its quotients start at body byte 1.
+    Node node = make_node(100, 11);
+    const std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
+    constexpr size_t kQuotients = 40 + 1;
     DecodedPoints out;
-    for (size_t size = 0; size < bytes.size(); ++size) {
-        std::vector<uint8_t> part(bytes.begin(), bytes.begin() + ptrdiff_t(size));  // exact-size heap copy (ASan)
-        EXPECT_NE(decode_point_node(part.data(), part.size(), out), "") << size;
+    for (size_t zeros : {2, 3, 8, 33, 40}) {
+        std::vector<uint8_t> bad = bytes;
+        ASSERT_LT(kQuotients + zeros, bad.size() - 8);
+        std::fill(bad.begin() + ptrdiff_t(kQuotients), bad.begin() + ptrdiff_t(kQuotients + zeros), 0);
+        if (zeros == 2) bad[kQuotients + 2] = 0x01;  // a run of 16 zeros, then a one bit
+        const uint64_t sum = checksum64(bad.data(), bad.size() - 8);
+        std::memcpy(bad.data() + bad.size() - 8, &sum, 8);
+        EXPECT_NE(decode_point_node(bad.data(), bad.size(), out), "") << zeros;
+    }
+}
+
+TEST(PointCodec, EveryTruncationIsRejected) {
+    for (uint8_t version = kPointNodeOldestVersion; version <= kPointNodeVersion; ++version) {
+        Node node = make_node(700, 7);
+        for (size_t i = 0; i < node.colors.size(); i += 6) node.colors[i + 1] = node.colors[i + 2] = node.colors[i];
+        PointEncodeSettings settings;
+        settings.version = version;
+        std::vector<uint8_t> bytes = encode_point_node(node.view(), settings);
+        DecodedPoints out;
+        for (size_t size = 0; size < bytes.size(); ++size) {
+            std::vector<uint8_t> part(bytes.begin(), bytes.begin() + ptrdiff_t(size));  // exact-size heap copy (ASan)
+            EXPECT_NE(decode_point_node(part.data(), part.size(), out), "") << size;
+        }
     }
 }
 
@@ -235,14 +338,22 @@ TEST(PointCodec, CorruptBytesAreRejected) {
 TEST(PointCodec, CorruptStreamsWithAValidChecksumNeverCrash) {
     // The checksum catches accidents; a forged node (checksum recomputed) must still decode
     // safely: an error, or some points, but no read outside the bytes (run under ASan in CI).
-    Node node = make_node(700, 9);
-    std::vector<uint8_t> bytes = encode_point_node(node.view(), PointEncodeSettings{});
+    // Both versions, and a node with blocks of zeros (grey), whose forged parameters change
+    // which values the quotient string holds.
+    Node node = make_node(700, 9), grey = make_node(900, 10);
+    for (size_t i = 0; i < grey.colors.size(); i += 3) grey.colors[i + 1] = grey.colors[i + 2] = grey.colors[i];
+    PointEncodeSettings v2;
+    v2.version = 2;
+    const std::vector<uint8_t> originals[3] = {encode_point_node(node.view(), PointEncodeSettings{}),
+                                               encode_point_node(node.view(), v2),
+                                               encode_point_node(grey.view(), PointEncodeSettings{})};
     DecodedPoints out;
     uint64_t state = 99;
     size_t rejected = 0, trials = 0;
     const bool had_avx2 = use_point_decoder_avx2(true);
-    for (int trial = 0; trial < 3000; ++trial) {
+    for (int trial = 0; trial < 6000; ++trial) {
         use_point_decoder_avx2(trial % 2 == 0);  // both kernels (where the CPU has AVX2)
+        const std::vector<uint8_t>& bytes = originals[trial / 2 % 3];
         std::vector<uint8_t> bad = bytes;
         size_t flips = 1 + test::next_random(state) % 4;
         for (size_t f = 0; f < flips; ++f) bad[8 + test::next_random(state) % (bad.size() - 16)] ^= uint8_t(1 + test::next_random(state) % 255);
@@ -265,7 +376,8 @@ TEST(PointCodec, RandomBytesAreRejected) {
     for (int trial = 0; trial < 2000; ++trial) {
         std::vector<uint8_t> bytes(test::next_random(state) % 300);
         for (uint8_t& b : bytes) b = uint8_t(test::next_random(state));
-        if (bytes.size() >= 4 && trial % 2) std::memcpy(bytes.data(), "CPPN\x02", std::min<size_t>(5, bytes.size()));
+        if (bytes.size() >= 4 && trial % 2)
+            std::memcpy(bytes.data(), trial % 4 == 1 ? "CPPN\x02" : "CPPN\x03", std::min<size_t>(5, bytes.size()));
         EXPECT_NE(decode_point_node(bytes.data(), bytes.size(), out), "");
     }
 }

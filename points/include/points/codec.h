@@ -11,7 +11,8 @@
 // (positions per axis, octahedral normals modulo 256, colours in YCoCg, radii), and the
 // zigzagged residuals are entropy coded with block-adaptive Rice codes whose unary quotients and
 // binary low bits are stored apart (the low bits in SIMD bit-packing layout), so that they
-// decode with table look-ups and SIMD shifts rather than one bit-string walk per value.
+// decode with table look-ups and SIMD shifts rather than one bit-string walk per value; from
+// version 3 on, a block of zero residuals is its parameter alone.
 //
 // Thread safety: all functions are reentrant; decode_point_node only writes `out`.
 #include <cstddef>
@@ -21,7 +22,10 @@
 
 namespace catpaq {
 
-constexpr uint8_t kPointNodeVersion = 2;
+// The version the encoder writes by default; the decoder reads kPointNodeOldestVersion to it.
+// Version 3 adds blocks of zeros (a parameter with no other bits) to version 2's streams.
+constexpr uint8_t kPointNodeVersion = 3;
+constexpr uint8_t kPointNodeOldestVersion = 2;
 constexpr char kPointNodeMagic[4] = {'C', 'P', 'P', 'N'};
 // Node payload flags: which optional attributes the points carry.
 constexpr uint8_t kPointHasNormals = 1u << 0;
@@ -39,6 +43,9 @@ struct ColorBits {
 struct PointEncodeSettings {
     ColorBits color_bits;
     double error_fraction = 0.25;  // (0, 1]
+    // The payload version written (kPointNodeOldestVersion .. kPointNodeVersion): older ones for
+    // tests and benches that compare versions. Every version decodes to the same points.
+    uint8_t version = kPointNodeVersion;
 };
 
 // The encoder's input: `count` points as parallel arrays the caller owns.
