@@ -398,7 +398,9 @@ private:
     std::vector<CatpLevelStats> stats_;
     std::mutex stats_mutex_;
     // The slot table of the meta (catp/format.h), by (level, key): the archive's index order.
-    std::map<std::pair<uint16_t, uint64_t>, std::vector<uint32_t>> slot_bytes_;
+    // Every node's index entry (no offset or checksum) and its slots' sizes, in index order
+    // (level, key): the slot table in the metadata.
+    std::map<std::pair<uint16_t, uint64_t>, std::pair<ArchiveEntry, std::vector<uint32_t>>> slot_bytes_;
     // The level being coarsened: its fragments, and each diamond's errors (lattice units).
     // `unquantized`: of its unquantized geometry from the original, 0 at the leaves, above them
     // the largest child's plus the diamond's own measured simplification error. `stored`: the
@@ -810,7 +812,8 @@ double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::a
     entry.error = float(stored * place_.cell);
     archive_->add_node(entry, bytes.data(), bytes.size());
     std::lock_guard lock(stats_mutex_);
-    slot_bytes_[{entry.level, entry.key}] = std::move(slot_bytes);
+    entry.size = uint32_t(bytes.size());
+    slot_bytes_[{entry.level, entry.key}] = {entry, std::move(slot_bytes)};
     if (leaf) {
         const double area = place_.cell * place_.cell;
         report_.lost_triangles += loss.triangles;
@@ -1039,8 +1042,12 @@ void CatpBuild::finish_archive() {
     meta.up = settings_.up;
     meta.precision = report_.precision;
     meta.mean_edge = report_.mean_edge;
-    for (const auto& [node, sizes] : slot_bytes_) meta.slot_bytes.insert(meta.slot_bytes.end(), sizes.begin(), sizes.end());
-    report_.file_bytes = archive_->finish(encode_catp_meta(meta));
+    std::vector<ArchiveEntry> entries;
+    for (const auto& [node, slots] : slot_bytes_) {
+        entries.push_back(slots.first);
+        meta.slot_bytes.insert(meta.slot_bytes.end(), slots.second.begin(), slots.second.end());
+    }
+    report_.file_bytes = archive_->finish(encode_catp_meta(meta, entries));
 }
 
 CatpBuildReport CatpBuild::run() {

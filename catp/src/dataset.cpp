@@ -9,7 +9,7 @@ CatpIndex::CatpIndex(const ArchiveHeader& header, std::vector<uint8_t> meta, std
     : header_(header), entries_(std::move(entries)) {
     if (header.kind != ArchiveKind::Catp)
         fail("'%s' is a %s dataset, not CATP", source.c_str(), archive_kind_name(header.kind));
-    std::string problem = decode_catp_meta(meta.data(), meta.size(), meta_);
+    std::string problem = decode_catp_meta(meta.data(), meta.size(), meta_, &entries_);
     if (!problem.empty()) fail("'%s': %s", source.c_str(), problem.c_str());
     by_key_.reserve(entries_.size() * 2);
     for (size_t i = 0; i < entries_.size(); ++i) {

@@ -5,13 +5,34 @@
 
 #include "base/bytes.h"
 #include "base/error.h"
+#include "common_codec/deflate.h"
 
 namespace catpaq {
 
-std::vector<uint8_t> encode_catp_meta(const CatpMeta& m) {
+namespace {
+
+// Version 4's slot table, before deflating: the sizes as four byte planes (low bytes first).
+// Sizes vary from fragment to fragment with no order to exploit; the planes deflate to 13% less
+// than the varints did (10M scan: 13,676 sizes), and leaving each entry's last slot out
+// removes a fifth of them (3,062 of 13,676).
+std::vector<uint8_t> size_planes(const std::vector<uint32_t>& sizes) {
+    std::vector<uint8_t> planes(4 * sizes.size());
+    for (size_t i = 0; i < sizes.size(); ++i)
+        for (int b = 0; b < 4; ++b) planes[b * sizes.size() + i] = uint8_t(sizes[i] >> (8 * b));
+    return planes;
+}
+
+// The number of slots of an index entry: its slot mask's bits.
+int entry_slots(const ArchiveEntry& e) { return __builtin_popcount(e.flags & 0xffu); }
+
+}  // namespace
+
+std::vector<uint8_t> encode_catp_meta(const CatpMeta& m, const std::vector<ArchiveEntry>& entries, uint32_t version) {
+    if (version < 1 || version > kCatpMetaVersion) fail("cannot write CATP metadata version %u", version);
+    if (version < 3 && !m.slot_bytes.empty()) fail("CATP metadata version %u has no slot table", version);
     ByteWriter w;
     w.raw("CATPMETA", 8);
-    w.u32(kCatpMetaVersion);
+    w.u32(version);
     w.u32(m.lattice_bits);
     for (double v : m.origin) w.f64(v);
     w.f64(m.cell);
@@ -22,17 +43,42 @@ std::vector<uint8_t> encode_catp_meta(const CatpMeta& m) {
     for (double v : m.bounds_min) w.f64(v);
     for (double v : m.bounds_max) w.f64(v);
     w.u32(m.default_rgb);
+    if (version < 2) return std::move(w.bytes());
     w.u8(uint8_t(m.layout.kind));
     w.u8(uint8_t(m.up));
     w.u16(uint16_t(m.layout.grid));
     w.f64(m.precision);
     w.f64(m.mean_edge);
-    w.u32(uint32_t(m.slot_bytes.size()));
-    for (uint32_t n : m.slot_bytes) w.varint(n);
+    if (version == 3) {
+        w.u32(uint32_t(m.slot_bytes.size()));
+        for (uint32_t n : m.slot_bytes) w.varint(n);
+    } else if (version >= 4) {
+        if (m.slot_bytes.empty()) {
+            w.u32(0);
+            return std::move(w.bytes());
+        }
+        std::vector<uint32_t> stored;
+        size_t next = 0;
+        for (const ArchiveEntry& e : entries) {
+            const size_t k = size_t(entry_slots(e));
+            uint64_t total = 0;
+            for (size_t s = 0; s < k && next + s < m.slot_bytes.size(); ++s) total += m.slot_bytes[next + s];
+            if (next + k > m.slot_bytes.size() || (k > 0 && diamond_slot_offset(total, int(k) - 1) != e.size))
+                fail("cannot write CATP metadata: the slot table does not match the index at entry %llu",
+                     (unsigned long long)e.key);
+            for (size_t s = 0; s + 1 < k; ++s) stored.push_back(m.slot_bytes[next + s]);
+            next += k;
+        }
+        if (next != m.slot_bytes.size()) fail("cannot write CATP metadata: the slot table is longer than the index");
+        w.u32(uint32_t(entries.size()));
+        w.u32(uint32_t(stored.size()));
+        const std::vector<uint8_t> packed = deflate_bytes(size_planes(stored));
+        w.raw(packed.data(), packed.size());
+    }
     return std::move(w.bytes());
 }
 
-std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m) {
+std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m, const std::vector<ArchiveEntry>* entries) {
     if (size < 8 || std::memcmp(data, "CATPMETA", 8) != 0) return "not CATP metadata";
     ByteReader r(data + 8, size - 8);
     uint32_t version = r.u32();
@@ -60,7 +106,42 @@ std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m) {
         m.mean_edge = r.f64();
     }
     m.slot_bytes.clear();
-    if (version >= 3) {
+    if (version >= 4) {
+        const uint32_t covered = r.u32();
+        if (!r.ok()) return "CATP metadata truncated";
+        if (covered != 0) {
+            const uint32_t n = r.u32();
+            // A size is four bytes inflated, and deflate expands at most about 1032 times:
+            // refuse counts the stream cannot hold before allocating for them.
+            if (!r.ok() || uint64_t(n) * 4 > 1032 * uint64_t(r.remaining()) + 64)
+                return "CATP metadata has a truncated slot table";
+            std::vector<uint8_t> planes;
+            if (!inflate_bytes(r.cursor(), r.remaining(), size_t(n) * 4, planes) || planes.size() != size_t(n) * 4)
+                return "CATP metadata's slot table is not a valid deflate stream of the expected size";
+            r.take(r.remaining());
+            if (entries) {
+                if (entries->size() != covered) return "CATP metadata's slot table covers another index";
+                size_t next = 0;
+                for (const ArchiveEntry& e : *entries) {
+                    const int k = entry_slots(e);
+                    uint64_t before = 0;
+                    for (int s = 0; s + 1 < k; ++s) {
+                        if (next == n) return "CATP metadata's slot table is shorter than the index";
+                        uint32_t v = 0;
+                        for (int b = 0; b < 4; ++b) v |= uint32_t(planes[size_t(b) * n + next]) << (8 * b);
+                        m.slot_bytes.push_back(v);
+                        before += v;
+                        ++next;
+                    }
+                    if (k == 0) continue;
+                    const uint64_t start = diamond_slot_offset(before, k - 1);
+                    if (start > e.size) return "CATP metadata's slot table does not match an index entry's size";
+                    m.slot_bytes.push_back(uint32_t(e.size - start));
+                }
+                if (next != n) return "CATP metadata's slot table is longer than the index";
+            }
+        }
+    } else if (version >= 3) {
         const uint32_t n = r.u32();
         // Each size takes at least one byte: a count beyond the bytes left is corrupt (and must
         // not reserve memory).

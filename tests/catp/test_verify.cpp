@@ -94,6 +94,7 @@ void rewrite(const std::string& from, const std::string& to,
     ArchiveWriter writer(to, ArchiveKind::Catp);
     CatpMeta meta = file.index().meta();
     meta.slot_bytes.clear();
+    std::vector<ArchiveEntry> written;  // (the slot table's writer checks it against them)
     for (const ArchiveEntry& e : file.index().entries()) {  // in index order, as the slot table
         DiamondFragments node = file.decode(e);
         edit(e, node);
@@ -106,8 +107,10 @@ void rewrite(const std::string& from, const std::string& to,
         std::vector<uint8_t> bytes = encode_diamond_node(node, &slot_bytes);
         meta.slot_bytes.insert(meta.slot_bytes.end(), slot_bytes.begin(), slot_bytes.end());
         writer.add_node(entry, bytes.data(), bytes.size());
+        entry.size = uint32_t(bytes.size());
+        written.push_back(entry);
     }
-    writer.finish(encode_catp_meta(meta));
+    writer.finish(encode_catp_meta(meta, written));
 }
 
 // The first leaf-level fragment vertex with exactly one zero weight (on one face of its

@@ -31,12 +31,13 @@
 #include <vector>
 
 #include "catp/lattice.h"
+#include "common_codec/archive.h"
 #include "common_codec/fragment_codec.h"
 #include "mesh/up_axis.h"
 
 namespace catpaq {
 
-constexpr uint32_t kCatpMetaVersion = 3;
+constexpr uint32_t kCatpMetaVersion = 4;
 
 constexpr uint16_t kCatpLeafFlag = 1u << 8;
 
@@ -53,14 +54,20 @@ struct CatpMeta {
     UpAxis up = UpAxis::Unknown;
     double precision = 0;  // world units; 0: not recorded
     double mean_edge = 0;  // world units; 0: not recorded
-    // Version 3: the fragment sizes of every entry's slots, in index order (see above); empty
-    // when the dataset has no slot table.
+    // The slot table (versions 3 and 4): the fragment sizes of every entry's slots, in index
+    // order, ascending slots; empty when the dataset has no slot table. In memory always every
+    // slot's size: version 4 stores all but each entry's last (the entry's size implies it).
     std::vector<uint32_t> slot_bytes;
 };
 
-std::vector<uint8_t> encode_catp_meta(const CatpMeta& meta);
-// Empty string on success, else what is wrong.
-std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& out);
+// `entries`: the dataset's index, which version 4 needs to leave each entry's last slot out
+// (Error when a non-empty slot table does not match it). Versions 1-3 for tests of readers.
+std::vector<uint8_t> encode_catp_meta(const CatpMeta& meta, const std::vector<ArchiveEntry>& entries = {},
+                                      uint32_t version = kCatpMetaVersion);
+// Empty string on success, else what is wrong. A version-4 slot table is completed from
+// `entries` (and checked against them); without them it is left empty.
+std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& out,
+                             const std::vector<ArchiveEntry>* entries = nullptr);
 
 // A diamond's decoded fragments, one per existing slot with geometry.
 struct DiamondFragments {
