@@ -212,9 +212,8 @@ std::string decode_aqp_meta(const uint8_t* data, size_t size, AqpMeta& m) {
     if (m.atlas_columns == 0 || m.atlas_columns > patch_count) return "AQP metadata has an invalid atlas width";
     const uint64_t quad_vertices = uint64_t(m.base_vertices) + m.base_triangles + m.border_edges;
     // Version 5: the patch table, deflated; a patch count no table could hold is refused before
-    // anything is allocated for it (a varint is at least a byte, and deflate packs at most
-    // about 1000 to 1).
-    if (version >= 5 && uint64_t(patch_count) * 10 > uint64_t(r.remaining()) * 1032 + 64)
+    // anything is allocated for it (a patch's varints are at least ten bytes).
+    if (version >= 5 && !deflate_can_hold(uint64_t(patch_count) * 10, r.remaining()))
         return strprintf("AQP metadata's patch table is too short for %u patches", patch_count);
     m.patches.assign(patch_count, {});
     if (version >= 5) {

@@ -111,9 +111,8 @@ std::string decode_catp_meta(const uint8_t* data, size_t size, CatpMeta& m, cons
         if (!r.ok()) return "CATP metadata truncated";
         if (covered != 0) {
             const uint32_t n = r.u32();
-            // A size is four bytes inflated, and deflate expands at most about 1032 times:
-            // refuse counts the stream cannot hold before allocating for them.
-            if (!r.ok() || uint64_t(n) * 4 > 1032 * uint64_t(r.remaining()) + 64)
+            // A size is four bytes inflated.
+            if (!r.ok() || !deflate_can_hold(uint64_t(n) * 4, r.remaining()))
                 return "CATP metadata has a truncated slot table";
             std::vector<uint8_t> planes;
             if (!inflate_bytes(r.cursor(), r.remaining(), size_t(n) * 4, planes) || planes.size() != size_t(n) * 4)

@@ -159,9 +159,8 @@ std::string parse_archive_header(const uint8_t* data, size_t size, ArchiveHeader
     if (h.version == 1 && h.index_size != uint64_t(h.node_count) * kArchiveEntrySize)
         return "index size does not match node count";
     // Version 2: a node count no index of this size could hold is refused before anything is
-    // allocated for it (an entry is at least kMinPackedEntryBytes before deflate, which packs at
-    // most about 1032 to 1).
-    if (h.version >= 2 && uint64_t(h.node_count) * kMinPackedEntryBytes > h.index_size * 1032 + 64)
+    // allocated for it (an entry is at least kMinPackedEntryBytes before deflate).
+    if (h.version >= 2 && !deflate_can_hold(uint64_t(h.node_count) * kMinPackedEntryBytes, h.index_size))
         return "index too short for its node count";
     if (h.index_offset + h.index_size > h.file_size) return "index extends past the end of the file";
     return "";

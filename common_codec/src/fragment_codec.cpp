@@ -1693,6 +1693,31 @@ __attribute__((optimize("no-tree-slp-vectorize"))) void decode_residuals(rans::D
     io = dec;
 }
 
+// Decodes n symbols of one table, symbol k on lane k & 3, into out: four per step while the
+// stream surely holds them, then one at a time with its bounds checks. The connectivity and the
+// joint colours are such runs.
+__attribute__((always_inline)) inline void decode_symbols_on_four_lanes(rans::Decoder& io, const rans::TableView& table,
+                                                                        uint32_t n, uint8_t* out) {
+    rans::Decoder dec = io;
+    uint32_t k = 0;
+    while (n - k >= 4 && dec.rans_bytes_left() >= 4 * rans::Decoder::kMaxBytesPerSymbol) {
+        out[k] = uint8_t(dec.sym<0>(table));
+        out[k + 1] = uint8_t(dec.sym<1>(table));
+        out[k + 2] = uint8_t(dec.sym<2>(table));
+        out[k + 3] = uint8_t(dec.sym<3>(table));
+        k += 4;
+    }
+    for (; k < n; ++k) {
+        switch (k & 3) {
+            case 0: out[k] = uint8_t(dec.get<0>(table)); break;
+            case 1: out[k] = uint8_t(dec.get<1>(table)); break;
+            case 2: out[k] = uint8_t(dec.get<2>(table)); break;
+            default: out[k] = uint8_t(dec.get<3>(table)); break;
+        }
+    }
+    io = dec;
+}
+
 // Each decoding pass copies the decoder into a local (kept in registers) and copies it back.
 //
 // Connectivity: the `nsym` traversal symbols are decoded first in a tight loop, then the
@@ -1702,28 +1727,7 @@ FragmentStatus decode_connectivity(rans::Decoder& io, const rans::DecodeTable& c
                                    uint32_t nsym, Workspace& ws, uint32_t* tri, uint32_t& seen_out) {
     grow(ws.symbols, size_t(nsym) + 1);
     uint8_t* sym = ws.symbols.data();
-    {
-        rans::Decoder dec = io;
-        const rans::TableView conn(conn_table);
-        uint32_t k = 0;
-        // Symbol k is on lane k & 3.
-        while (nsym - k >= 4 && dec.rans_bytes_left() >= 4 * rans::Decoder::kMaxBytesPerSymbol) {
-            sym[k] = uint8_t(dec.sym<0>(conn));
-            sym[k + 1] = uint8_t(dec.sym<1>(conn));
-            sym[k + 2] = uint8_t(dec.sym<2>(conn));
-            sym[k + 3] = uint8_t(dec.sym<3>(conn));
-            k += 4;
-        }
-        for (; k < nsym; ++k) {
-            switch (k & 3) {
-                case 0: sym[k] = uint8_t(dec.get<0>(conn)); break;
-                case 1: sym[k] = uint8_t(dec.get<1>(conn)); break;
-                case 2: sym[k] = uint8_t(dec.get<2>(conn)); break;
-                default: sym[k] = uint8_t(dec.get<3>(conn)); break;
-            }
-        }
-        io = dec;
-    }
+    decode_symbols_on_four_lanes(io, rans::TableView(conn_table), nsym, sym);
     sym[nsym] = 0xff;  // sentinel: running out of symbols reads an invalid one
     rans::Decoder dec = io;
     Pred* pred = ws.pred.data();
@@ -2108,25 +2112,10 @@ void decode_normals(rans::Decoder& io, Workspace& ws, int version, int normal_mo
 // escape, from the stream (lanes 0, 1, 2; t: the G, R and B tables).
 void decode_joint_colour_residuals(rans::Decoder& io, const rans::TableView& joint, const rans::TableView* t,
                                    uint32_t V, uint8_t* js, int32_t* r) {
+    decode_symbols_on_four_lanes(io, joint, V, js);
     rans::Decoder dec = io;
-    uint32_t v = 0;
-    while (V - v >= 4 && dec.rans_bytes_left() >= 4 * rans::Decoder::kMaxBytesPerSymbol) {
-        js[v] = uint8_t(dec.sym<0>(joint));
-        js[v + 1] = uint8_t(dec.sym<1>(joint));
-        js[v + 2] = uint8_t(dec.sym<2>(joint));
-        js[v + 3] = uint8_t(dec.sym<3>(joint));
-        v += 4;
-    }
-    for (; v < V; ++v) {
-        switch (v & 3) {
-            case 0: js[v] = uint8_t(dec.get<0>(joint)); break;
-            case 1: js[v] = uint8_t(dec.get<1>(joint)); break;
-            case 2: js[v] = uint8_t(dec.get<2>(joint)); break;
-            default: js[v] = uint8_t(dec.get<3>(joint)); break;
-        }
-    }
     // Symbols are below the table's alphabet, at most kJointSymbols (checked with the table).
-    for (v = 0; v < V; ++v) {
+    for (uint32_t v = 0; v < V; ++v) {
         const uint32_t j = js[v];
         int32_t* out = r + 3 * size_t(v);
         if (j < kJointEscape) [[likely]] {

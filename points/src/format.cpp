@@ -251,10 +251,8 @@ std::string decode_points_meta(const uint8_t* data, size_t size, PointsMeta& out
     for (int a = 0; a < 3; ++a)
         if (!std::isfinite(out.origin[a])) return "point metadata: non-finite origin";
     if (version >= 2) {
-        // Each node takes at least a shape bit and two radius bytes of the inflated table, and
-        // deflate expands at most about 1032 times: refuse counts the bytes cannot hold before
-        // allocating for them.
-        if (uint64_t(count) > 1032 * uint64_t(r.remaining()) / 2 + 1) return "point metadata: node count larger than its table";
+        // Each node takes at least two radius bytes of the inflated table.
+        if (!deflate_can_hold(2 * uint64_t(count), r.remaining())) return "point metadata: node count larger than its table";
         out.nodes.assign(count, {});
         std::vector<uint8_t> table;
         if (!inflate_bytes(r.cursor(), r.remaining(), max_node_table_bytes(count), table))

@@ -298,39 +298,35 @@ def parse_build(text):
     return rows
 
 
-def parse_build_phases(text):
-    """The build bench's second table: seconds per phase and cores used, per input."""
+def parse_rows_after(text, header, fields, make):
+    """Rows of `fields` whitespace-separated values after the line starting with `header`, each
+    made into a dict by `make` (lines it cannot convert are skipped)."""
     rows = []
     in_table = False
     for l in text.splitlines():
         p = l.split()
-        if l.startswith("phases (s)"):
+        if l.startswith(header):
             in_table = True
             continue
-        if in_table and len(p) == 8:
+        if in_table and len(p) == fields:
             try:
-                rows.append(dict(input=p[0], phases=[float(x) for x in p[1:7]], cores=float(p[7])))
+                rows.append(make(p))
             except ValueError:
                 pass
     return rows
+
+
+def parse_build_phases(text):
+    """The build bench's second table: seconds per phase and cores used, per input."""
+    return parse_rows_after(text, "phases (s)", 8,
+                            lambda p: dict(input=p[0], phases=[float(x) for x in p[1:7]], cores=float(p[7])))
 
 
 def parse_build_first_frame(text):
     """The build bench's third table: the first frame (prefix and level 0) of each dataset built."""
-    rows = []
-    in_table = False
-    for l in text.splitlines():
-        p = l.split()
-        if l.startswith("first frame"):
-            in_table = True
-            continue
-        if in_table and len(p) == 6:
-            try:
-                rows.append(dict(input=p[0], nodes=int(p[1]), prefix=int(p[2]), level0=int(p[3]), total=int(p[4]),
-                                 within=p[5]))
-            except ValueError:
-                pass
-    return rows
+    return parse_rows_after(text, "first frame", 6,
+                            lambda p: dict(input=p[0], nodes=int(p[1]), prefix=int(p[2]), level0=int(p[3]),
+                                           total=int(p[4]), within=p[5]))
 
 
 def parse_memory_budget(text, what):

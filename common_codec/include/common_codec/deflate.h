@@ -13,5 +13,9 @@ std::vector<uint8_t> deflate_bytes(const std::vector<uint8_t>& in);
 // forged stream cannot make it allocate more); false when the stream is broken, does not end
 // where the bytes do, or inflates to more.
 bool inflate_bytes(const uint8_t* data, size_t size, size_t limit, std::vector<uint8_t>& out);
+// Whether `deflated` bytes of a zlib stream can inflate to `inflated`: deflate packs at most
+// about 1032 to 1. Readers refuse counts in a header that their stream cannot hold before
+// allocating for them.
+inline bool deflate_can_hold(uint64_t inflated, uint64_t deflated) { return inflated <= deflated * 1032 + 64; }
 
 }  // namespace catpaq
