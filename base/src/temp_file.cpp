@@ -3,6 +3,7 @@
 #include <cerrno>
 #include <cstring>
 #include <fcntl.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include "base/error.h"
@@ -61,6 +62,21 @@ void TempFile::read_at(uint64_t offset, void* data, size_t size) const {
 void TempFile::read_or_zero(uint64_t offset, void* data, size_t size) const {
     size_t done = read_up_to(offset, data, size);
     std::memset(static_cast<char*>(data) + done, 0, size - done);
+}
+
+void* TempFile::map(uint64_t size) {
+    if (size == 0) return nullptr;
+    void* data = ::mmap(nullptr, size_t(size), PROT_READ | PROT_WRITE, MAP_SHARED, fd_, 0);
+    if (data == MAP_FAILED) fail("cannot map scratch data in '%s': %s", dir_.c_str(), std::strerror(errno));
+    return data;
+}
+
+void unmap_file(void* data, uint64_t size) {
+    if (data) ::munmap(data, size_t(size));
+}
+
+void release_mapped_pages(void* data, uint64_t size) {
+    if (data) ::madvise(data, size_t(size), MADV_DONTNEED);
 }
 
 uint64_t physical_memory_bytes() {

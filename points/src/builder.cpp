@@ -23,6 +23,8 @@
 #include "common_codec/octahedral.h"
 #include "estimate.h"
 #include "kdtree.h"
+#include "out_of_core.h"
+#include "partition.h"
 #include "splat.h"
 
 namespace catpaq {
@@ -30,28 +32,6 @@ namespace catpaq {
 using namespace points_detail;
 
 namespace {
-
-constexpr size_t kParallelPoints = 1 << 16;  // ranges this large are partitioned in parallel
-constexpr int kMidpointMaxDepth = 48;        // deeper, the midpoint rule gives way to the median
-
-// One node of the hierarchy: a range of the (permuted) points, and children in the same array.
-struct HNode {
-    uint32_t begin = 0, end = 0;
-    int32_t left = -1, right = -1;
-    uint64_t key = 1;
-    int depth = 0;
-    float lo[3] = {0, 0, 0}, hi[3] = {0, 0, 0};  // tight box of the points (set for the halo search)
-};
-
-// A point as the partition moves it: its position (float, relative to the origin: enough to
-// place split planes) next to its index, so that every pass over a node reads memory in order
-// (through an index array into the doubles, the first levels of a 10M cloud took 28 s of cache
-// misses).
-struct PartitionItem {
-    float p[3];
-    uint32_t index;
-};
-using Items = std::vector<PartitionItem>;
 
 // What the builder records per hierarchy node for the metadata and the report.
 struct NodeRecord {
@@ -76,37 +56,43 @@ float round_up(double v) {
     return double(f) < v ? std::nextafter(f, INFINITY) : f;
 }
 
+PartitionSettings partition_settings_of(const PointsBuildSettings& settings) {
+    PartitionSettings partition;
+    partition.node_points = settings.node_points;
+    partition.split = settings.split;
+    partition.max_aspect = settings.max_aspect;
+    return partition;
+}
+
 class Builder {
 public:
-    Builder(PointCloud& cloud, const PointsBuildSettings& settings, bool z_up, Progress* progress)
-        : cloud_(cloud), settings_(settings), z_up_(z_up), progress_(progress) {}
+    Builder(const PointsBuildSettings& settings, bool z_up, Progress* progress)
+        : settings_(settings), z_up_(z_up), progress_(progress) {}
 
-    PointsBuildReport run(const std::string& output_path);
+    // In core: `cloud` is moved to the origin and permuted into partition order.
+    PointsBuildReport run_in_core(PointCloud& cloud, const std::string& output_path);
+    // Out of core: `store` holds the input read so far.
+    PointsBuildReport run_out_of_core(OutOfCorePoints& store, const std::string& output_path);
 
 private:
-    void prepare(PointsBuildReport& report);
-    void partition_all();
-    void build_search_tree();
+    void prepare(const PointInputSummary& input, PointsBuildReport& report);
+    void partition_in_core(PointCloud& cloud);
+    void node_boxes(bool leaves);
+    PointsBuildReport finish(PointsBuildReport& report, double start);
     void halo(const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) const;
     size_t nearest_all(const float q[3], size_t k, uint32_t* index, float* distance2) const;
     PointsMeta make_meta(const PointsBuildReport& report) const;
     std::vector<size_t> index_order() const;
     void summarize(PointsBuildReport& report) const;
-    void place_at_origin();
-    std::vector<HNode> partition(Items& items, uint32_t begin, uint32_t end, uint64_t key, int depth);
-    uint32_t choose_split(Items& items, uint32_t begin, uint32_t end, int depth) const;
-    uint32_t split_midpoint(Items& items, uint32_t begin, uint32_t end, const float lo[3], const float hi[3]) const;
-    uint32_t split_balanced(Items& items, uint32_t begin, uint32_t end, const float lo[3], const float hi[3]) const;
-    uint32_t split_median(Items& items, uint32_t begin, uint32_t end, int axis) const;
-    void apply_permutation(const std::vector<uint32_t>& perm);
 
     std::vector<Splat> build_node(size_t index);
+    std::vector<Splat> build_top(size_t index, OutOfCorePoints& store);
+    std::vector<Splat> merge_children(size_t index, std::vector<Splat> left, std::vector<Splat> right);
     size_t parent_points(size_t children_points) const { return parent_points_for(children_points, settings_.node_points); }
     std::vector<Splat> leaf_splats(const HNode& node);
     std::vector<Splat> finish_node(size_t index, std::vector<Splat> splats, float children_error,
                                    const float* children_box_min, const float* children_box_max);
 
-    PointCloud& cloud_;
     const PointsBuildSettings& settings_;
     bool z_up_;
     Progress* progress_;
@@ -116,266 +102,18 @@ private:
     bool estimate_normals_ = false, estimate_radii_ = false;
     std::vector<HNode> nodes_;
     std::vector<NodeRecord> records_;
-    std::vector<float> xyz_;  // the points as floats, 3 each, for the neighbour searches
+    std::vector<float> xyz_;  // in core: the points as floats, 3 each, for the neighbour searches
+    PointArrays arrays_;      // the points in partition order (in core: the cloud's and xyz_)
     float cloud_extent_ = 0;
     std::unique_ptr<ArchiveWriter> writer_;
 };
-
-// Moves the points to the origin at the centre of their bounds (in double precision).
-void Builder::place_at_origin() {
-    bounds_ = cloud_.bounds();
-    for (int a = 0; a < 3; ++a) origin_[a] = 0.5 * (bounds_.min[a] + bounds_.max[a]);
-    for (Vec3d& p : cloud_.positions)
-        for (int a = 0; a < 3; ++a) p[a] -= origin_[a];
-}
-
-uint32_t Builder::split_median(Items& items, uint32_t begin, uint32_t end, int axis) const {
-    const uint32_t middle = begin + (end - begin) / 2;
-    std::nth_element(items.begin() + begin, items.begin() + middle, items.begin() + end,
-                     [axis](const PartitionItem& a, const PartitionItem& b) { return a.p[axis] < b.p[axis]; });
-    return middle;
-}
-
-// Seed 002: the middle of the longest side of the tight box.
-uint32_t Builder::split_midpoint(Items& items, uint32_t begin, uint32_t end, const float lo[3], const float hi[3]) const {
-    int axis = 0;
-    for (int a = 1; a < 3; ++a)
-        if (hi[a] - lo[a] > hi[axis] - lo[axis]) axis = a;
-    const float plane = 0.5f * (lo[axis] + hi[axis]);
-    auto middle = std::partition(items.begin() + begin, items.begin() + end,
-                                 [axis, plane](const PartitionItem& i) { return i.p[axis] < plane; });
-    uint32_t at = uint32_t(middle - items.begin());
-    // A tight box has points on both of its faces, so both sides are non-empty unless the box
-    // is too thin for floats to hold a plane between them.
-    if (at == begin || at == end) return split_median(items, begin, end, axis);
-    return at;
-}
-
-// Floats order as these keys do (negatives reversed below the positives; -0 just below +0).
-inline uint32_t float_order_key(float v) {
-    uint32_t bits;
-    std::memcpy(&bits, &v, 4);
-    return (bits & 0x80000000u) ? ~bits : (bits | 0x80000000u);
-}
-
-// The value of rank `rank` among n floats get(0) .. get(n - 1): the value std::nth_element
-// puts at `rank` (ties aside: equal values, and -0 and +0, which compare equal), by a radix
-// select: a histogram of the order keys' top bits above the smallest key picks the bucket
-// holding the rank, whose values are selected the same way until few are left for
-// nth_element. Written out because nth_element on a node's coordinates and radii mispredicts
-// most of its branches (3% of the conversion's time); these passes have nearly none.
-template <class Get>
-float select_rank(size_t n, size_t rank, Get get, std::vector<float>& values, std::vector<float>& next) {
-    constexpr size_t kSmall = 512;  // below, nth_element
-    constexpr uint32_t kBits = 11;  // a histogram of 2048 buckets
-    values.resize(n);
-    for (size_t i = 0; i < n; ++i) values[i] = get(i);
-    uint32_t counts[size_t(1) << kBits];
-    while (values.size() > kSmall) {
-        uint32_t low = UINT32_MAX, high = 0;
-        for (float v : values) {
-            low = std::min(low, float_order_key(v));
-            high = std::max(high, float_order_key(v));
-        }
-        if (low == high) return values[0];
-        const uint32_t width = uint32_t(std::bit_width(high - low)), shift = width > kBits ? width - kBits : 0;
-        std::fill(counts, counts + (size_t(1) << kBits), 0u);
-        for (float v : values) ++counts[(float_order_key(v) - low) >> shift];
-        uint32_t bucket = 0;
-        size_t before = 0;
-        while (before + counts[bucket] <= rank) before += counts[bucket++];
-        next.clear();
-        for (float v : values)
-            if ((float_order_key(v) - low) >> shift == bucket) next.push_back(v);
-        values.swap(next);
-        rank -= before;
-    }
-    std::nth_element(values.begin(), values.begin() + ptrdiff_t(rank), values.end());
-    return values[rank];
-}
-
-// The value of rank n / 2 of the items' coordinates on `axis` (what std::nth_element puts at
-// n / 2 of a copy of them). Large ranges select by a histogram of the top 16 bits of the
-// coordinates' order-preserving keys and a selection within the bucket holding that rank: on
-// 10M points, the copies and nth_elements of the balanced split were a tenth of the CPU time.
-float median_coordinate(const Items& items, uint32_t begin, uint32_t end, int axis) {
-    const size_t n = end - begin, rank = n / 2;
-    std::vector<float> values;
-    if (n < kParallelPoints) {
-        std::vector<float> next;
-        return select_rank(n, rank, [&](size_t i) { return items[begin + i].p[axis]; }, values, next);
-    }
-    auto key = float_order_key;
-    std::vector<uint32_t> counts(size_t(1) << 16, 0);
-    for (uint32_t i = begin; i < end; ++i) ++counts[key(items[i].p[axis]) >> 16];
-    uint32_t bucket = 0;
-    size_t before = 0;
-    while (before + counts[bucket] <= rank) before += counts[bucket++];
-    values.reserve(counts[bucket]);
-    for (uint32_t i = begin; i < end; ++i)
-        if (key(items[i].p[axis]) >> 16 == bucket) values.push_back(items[i].p[axis]);
-    std::nth_element(values.begin(), values.begin() + ptrdiff_t(rank - before), values.end());
-    return values[rank - before];
-}
-
-// Seed 000: among the planes whose children are not thinner (across the plane) than the
-// longest side / max_aspect, the most balanced one; on each axis that is the median clamped to
-// the acceptable range, and the axis whose plane splits the counts most evenly wins.
-uint32_t Builder::split_balanced(Items& items, uint32_t begin, uint32_t end, const float lo[3], const float hi[3]) const {
-    const float longest = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
-    const float margin = longest / float(std::max(settings_.max_aspect, 2.0));
-    const uint32_t n = end - begin;
-    int best_axis = -1;
-    float best_plane = 0;
-    uint64_t best_imbalance = UINT64_MAX;
-    // Each axis's median plane and how unevenly it splits; the three are independent, and on
-    // large nodes (the first levels, which run before the tree fans out over the cores) they are
-    // found in parallel.
-    float planes[3] = {0, 0, 0};
-    uint64_t imbalances[3] = {UINT64_MAX, UINT64_MAX, UINT64_MAX};
-    auto evaluate = [&](int axis) {
-        if (hi[axis] - lo[axis] < 2 * margin) return;
-        const float median = median_coordinate(items, begin, end, axis);
-        const float plane = std::clamp(median, lo[axis] + margin, hi[axis] - margin);
-        uint64_t below = 0;
-        for (uint32_t i = begin; i < end; ++i) below += items[i].p[axis] < plane;
-        uint64_t imbalance = below > n / 2 ? below - n / 2 : n / 2 - below;
-        if (plane == median) imbalance = 0;  // the median itself: split by rank below
-        planes[axis] = plane;
-        imbalances[axis] = imbalance;
-    };
-    if (n > kParallelPoints) {
-        tbb::parallel_for(0, 3, evaluate);
-    } else {
-        for (int axis = 0; axis < 3; ++axis) evaluate(axis);
-    }
-    for (int axis = 0; axis < 3; ++axis) {
-        if (imbalances[axis] == UINT64_MAX) continue;
-        const float plane = planes[axis];
-        const uint64_t imbalance = imbalances[axis];
-        if (imbalance < best_imbalance ||
-            (imbalance == best_imbalance && hi[axis] - lo[axis] > hi[best_axis] - lo[best_axis])) {
-            best_axis = axis;
-            best_plane = plane;
-            best_imbalance = imbalance;
-        }
-    }
-    if (best_axis < 0) return split_midpoint(items, begin, end, lo, hi);
-    if (best_imbalance == 0) return split_median(items, begin, end, best_axis);
-    auto middle = std::partition(items.begin() + begin, items.begin() + end,
-                                 [best_axis, best_plane](const PartitionItem& i) { return i.p[best_axis] < best_plane; });
-    uint32_t at = uint32_t(middle - items.begin());
-    if (at == begin || at == end) return split_median(items, begin, end, best_axis);
-    return at;
-}
-
-// The tight box of items[begin, end) (in parallel for large ranges).
-void item_bounds(const Items& items, uint32_t begin, uint32_t end, float lo[3], float hi[3]) {
-    struct Box {
-        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-        void add(const Box& o) {
-            for (int a = 0; a < 3; ++a) {
-                lo[a] = std::min(lo[a], o.lo[a]);
-                hi[a] = std::max(hi[a], o.hi[a]);
-            }
-        }
-    };
-    auto range_box = [&items](size_t first, size_t last) {
-        Box box;
-        for (size_t i = first; i < last; ++i)
-            for (int a = 0; a < 3; ++a) {
-                box.lo[a] = std::min(box.lo[a], items[i].p[a]);
-                box.hi[a] = std::max(box.hi[a], items[i].p[a]);
-            }
-        return box;
-    };
-    Box box;
-    if (end - begin > kParallelPoints) {
-        box = tbb::parallel_reduce(
-            tbb::blocked_range<size_t>(begin, end, 1 << 15), Box(),
-            [&](const tbb::blocked_range<size_t>& r, Box b) {
-                b.add(range_box(r.begin(), r.end()));
-                return b;
-            },
-            [](Box a, const Box& b) {
-                a.add(b);
-                return a;
-            });
-    } else {
-        box = range_box(begin, end);
-    }
-    std::copy(box.lo, box.lo + 3, lo);
-    std::copy(box.hi, box.hi + 3, hi);
-}
-
-uint32_t Builder::choose_split(Items& items, uint32_t begin, uint32_t end, int depth) const {
-    float lo[3], hi[3];
-    item_bounds(items, begin, end, lo, hi);
-    // Deep trees come from points that coincide or nearly do: split them by rank.
-    if (depth >= kMidpointMaxDepth) return split_median(items, begin, end, 0);
-    if (settings_.split == PointSplitRule::Balanced) return split_balanced(items, begin, end, lo, hi);
-    return split_midpoint(items, begin, end, lo, hi);
-}
-
-// Partitions items[begin, end) into the subtree of node `key`; returns the subtree's nodes, its
-// root first, children indices relative to the returned array.
-std::vector<HNode> Builder::partition(Items& items, uint32_t begin, uint32_t end, uint64_t key, int depth) {
-    HNode node;
-    node.begin = begin;
-    node.end = end;
-    node.key = key;
-    node.depth = depth;
-    if (end - begin <= settings_.node_points) {
-        if (progress_) progress_->add(end - begin);
-        return {node};
-    }
-    if (depth >= kPointMaxDepth) fail("the point hierarchy would be deeper than %d levels", kPointMaxDepth);
-    const uint32_t middle = choose_split(items, begin, end, depth);
-    std::vector<HNode> left, right;
-    if (end - begin > kParallelPoints) {
-        tbb::parallel_invoke([&] { left = partition(items, begin, middle, 2 * key, depth + 1); },
-                             [&] { right = partition(items, middle, end, 2 * key + 1, depth + 1); });
-    } else {
-        left = partition(items, begin, middle, 2 * key, depth + 1);
-        right = partition(items, middle, end, 2 * key + 1, depth + 1);
-    }
-    std::vector<HNode> out;
-    out.reserve(1 + left.size() + right.size());
-    node.left = 1;
-    node.right = int32_t(1 + left.size());
-    out.push_back(node);
-    for (HNode& child : left) {
-        if (child.left >= 0) child.left += 1, child.right += 1;
-        out.push_back(child);
-    }
-    for (HNode& child : right) {
-        if (child.left >= 0) child.left += node.right, child.right += node.right;
-        out.push_back(child);
-    }
-    return out;
-}
-
-void Builder::apply_permutation(const std::vector<uint32_t>& perm) {
-    auto gather = [&perm](auto& values) {
-        if (values.empty()) return;
-        std::remove_reference_t<decltype(values)> out(values.size());
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, perm.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
-            for (size_t i = r.begin(); i < r.end(); ++i) out[i] = values[perm[i]];
-        });
-        values.swap(out);
-    };
-    gather(cloud_.positions);
-    gather(cloud_.normals);
-    gather(cloud_.colors);
-    gather(cloud_.radii);
-}
 
 // The input points of a leaf as splats (normals and radii estimated where missing).
 std::vector<Splat> Builder::leaf_splats(const HNode& node) {
     if (estimate_normals_ || estimate_radii_) {
         EstimateInput in;
-        in.positions = cloud_.positions.data();
-        in.xyz = xyz_.data();
+        in.positions = arrays_.positions;
+        in.xyz = arrays_.xyz;
         in.halo = [this](const float lo[3], const float hi[3], size_t begin, size_t end, std::vector<uint32_t>& ids) {
             halo(lo, hi, begin, end, ids);
         };
@@ -387,18 +125,18 @@ std::vector<Splat> Builder::leaf_splats(const HNode& node) {
         in.radius_neighbour = settings_.radius_neighbour;
         in.orient_up = settings_.orientation == NormalOrientation::Up ||
                        (settings_.orientation == NormalOrientation::Auto && z_up_);
-        estimate_leaf(in, node.begin, node.end, estimate_normals_ ? cloud_.normals.data() : nullptr,
-                      estimate_radii_ ? cloud_.radii.data() : nullptr);
+        estimate_leaf(in, node.begin, node.end, estimate_normals_ ? arrays_.normals : nullptr,
+                      estimate_radii_ ? arrays_.radii : nullptr);
     }
     std::vector<Splat> splats(node.end - node.begin);
     for (uint32_t i = node.begin; i < node.end; ++i) {
         Splat& s = splats[i - node.begin];
         for (int a = 0; a < 3; ++a) {
-            s.p[a] = cloud_.positions[i][a];
-            s.n[a] = cloud_.normals[i][a];
-            s.color[a] = cloud_.colors.empty() ? 0.0f : float(cloud_.colors[i][a]);
+            s.p[a] = arrays_.positions[i][a];
+            s.n[a] = arrays_.normals[i][a];
+            s.color[a] = arrays_.colors ? float(arrays_.colors[i][a]) : 0.0f;
         }
-        s.radius = std::max(cloud_.radii[i], float(radius_floor_));
+        s.radius = std::max(arrays_.radii[i], float(radius_floor_));
         s.cover = 0;
         s.weight = float(M_PI) * s.radius * s.radius;
     }
@@ -419,7 +157,7 @@ std::vector<Splat> Builder::finish_node(size_t index, std::vector<Splat> splats,
     const float floor = std::max(0.5f * median, float(radius_floor_));
     std::vector<double> positions(3 * n);
     std::vector<float> normals(3 * n);
-    std::vector<uint8_t> colors(cloud_.colors.empty() ? 0 : 3 * n);
+    std::vector<uint8_t> colors(arrays_.colors ? 3 * n : 0);
     for (size_t i = 0; i < n; ++i) {
         Splat& s = splats[i];
         s.radius = std::max(s.radius, floor);
@@ -499,6 +237,26 @@ std::vector<Splat> Builder::build_node(size_t index) {
     if (node.left < 0) return finish_node(index, leaf_splats(node), 0.0f, nullptr, nullptr);
     std::vector<Splat> left, right;
     tbb::parallel_invoke([&] { left = build_node(size_t(node.left)); }, [&] { right = build_node(size_t(node.right)); });
+    return merge_children(index, std::move(left), std::move(right));
+}
+
+// Out of core: above the chunks one child after the other, each chunk's subtree in parallel, its
+// pages released when it is done, so that one chunk's points are resident at a time.
+std::vector<Splat> Builder::build_top(size_t index, OutOfCorePoints& store) {
+    if (store.is_chunk_root(index)) {
+        std::vector<Splat> splats = build_node(index);
+        store.release_pages();
+        return splats;
+    }
+    const HNode node = nodes_[index];
+    std::vector<Splat> left = build_top(size_t(node.left), store);
+    std::vector<Splat> right = build_top(size_t(node.right), store);
+    return merge_children(index, std::move(left), std::move(right));
+}
+
+// An inner node from its children's decoded splats.
+std::vector<Splat> Builder::merge_children(size_t index, std::vector<Splat> left, std::vector<Splat> right) {
+    const HNode node = nodes_[index];
     const NodeRecord& a = records_[size_t(node.left)];
     const NodeRecord& b = records_[size_t(node.right)];
     float box_min[3], box_max[3];
@@ -512,74 +270,95 @@ std::vector<Splat> Builder::build_node(size_t index) {
     return finish_node(index, std::move(left), std::max(a.error, b.error), box_min, box_max);
 }
 
-// Moves the points to their origin, decides what to estimate, and sets the radius floor.
-void Builder::prepare(PointsBuildReport& report) {
-    const size_t n = cloud_.size();
+// Sets the origin (the centre of the bounds), decides what to estimate, and sets the radius floor.
+void Builder::prepare(const PointInputSummary& input, PointsBuildReport& report) {
+    const size_t n = input.count;
     report.input_points = n;
     if (n >= (size_t(1) << 32)) fail("%zu points: more than this converter's 2^32", n);
-    place_at_origin();
-    float largest_radius = 0;
-    for (float r : cloud_.radii) largest_radius = std::max(largest_radius, r);
-    radius_floor_ = std::max(bounds_.diagonal(), double(largest_radius)) * 0x1p-20;
+    bounds_ = input.bounds;
+    for (int a = 0; a < 3; ++a) origin_[a] = 0.5 * (bounds_.min[a] + bounds_.max[a]);
+    radius_floor_ = std::max(bounds_.diagonal(), double(input.largest_radius)) * 0x1p-20;
     if (!(radius_floor_ > 0))
         fail("all %zu points coincide and carry no radii: no splat size can be estimated (give radii in the input)", n);
-    estimate_normals_ = !cloud_.has_normals();
-    estimate_radii_ = !cloud_.has_radii();
+    estimate_normals_ = !input.normals;
+    estimate_radii_ = !input.radii;
     report.normals_estimated = estimate_normals_;
     report.radii_estimated = estimate_radii_;
-    report.has_colors = cloud_.has_colors();
-    if (estimate_normals_) cloud_.normals.assign(n, Vec3f{0, 0, 1});
-    if (estimate_radii_) cloud_.radii.assign(n, 0.0f);
+    report.has_colors = input.colors;
 }
 
-// Builds the hierarchy's nodes and puts the points in their order (every leaf a range).
-void Builder::partition_all() {
-    const size_t n = cloud_.size();
+// Moves the cloud to the origin (in double precision), builds the hierarchy's nodes and puts the
+// points in their order (every leaf a range).
+void Builder::partition_in_core(PointCloud& cloud) {
+    const size_t n = cloud.size();
+    for (Vec3d& p : cloud.positions)
+        for (int a = 0; a < 3; ++a) p[a] -= origin_[a];
+    if (estimate_normals_) cloud.normals.assign(n, Vec3f{0, 0, 1});
+    if (estimate_radii_) cloud.radii.assign(n, 0.0f);
     std::vector<uint32_t> perm(n);
     {
         Items items(n);
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t i = r.begin(); i < r.end(); ++i) {
-                for (int a = 0; a < 3; ++a) items[i].p[a] = float(cloud_.positions[i][a]);
+                for (int a = 0; a < 3; ++a) items[i].p[a] = float(cloud.positions[i][a]);
                 items[i].index = uint32_t(i);
             }
         });
-        nodes_ = partition(items, 0, uint32_t(n), 1, 0);
+        nodes_ = partition_items(items, 0, uint32_t(n), 1, 0, partition_settings_of(settings_), progress_);
         for (size_t i = 0; i < n; ++i) perm[i] = items[i].index;
     }
-    apply_permutation(perm);
-    records_.resize(nodes_.size());
+    auto gather = [&perm](auto& values) {
+        if (values.empty()) return;
+        std::remove_reference_t<decltype(values)> out(values.size());
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, perm.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i < r.end(); ++i) out[i] = values[perm[i]];
+        });
+        values.swap(out);
+    };
+    gather(cloud.positions);
+    gather(cloud.normals);
+    gather(cloud.colors);
+    gather(cloud.radii);
+    // What the leaves' neighbour searches read (only when something is estimated): the points as
+    // floats (and the node boxes, node_boxes()).
+    if (estimate_normals_ || estimate_radii_) {
+        xyz_.resize(3 * n);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i < r.end(); ++i)
+                for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = float(cloud.positions[i][a]);
+        });
+    }
+    arrays_.positions = cloud.positions.data();
+    arrays_.normals = cloud.normals.data();
+    arrays_.colors = cloud.colors.empty() ? nullptr : cloud.colors.data();
+    arrays_.radii = cloud.radii.data();
+    arrays_.xyz = xyz_.data();
 }
 
-// What the leaves' neighbour searches read (only when something is estimated): the points as
-// floats, and the tight box of every node of the hierarchy, through which a leaf finds the
-// points around it (halo). This replaced a kd-tree over all points, whose queries were half the
+// The tight box of every node of the hierarchy (leaves from their points when `leaves`, else
+// already set), through which a leaf finds the points around it (halo): only when something
+// is estimated. This replaced a kd-tree over all points, whose queries were half the
 // conversion's time (grid_knn.h).
-void Builder::build_search_tree() {
+void Builder::node_boxes(bool leaves) {
     if (!estimate_normals_ && !estimate_radii_) return;
-    const size_t n = cloud_.size();
-    xyz_.resize(3 * n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i < r.end(); ++i)
-            for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = float(cloud_.positions[i][a]);
-    });
     // Leaves from their points (in parallel), inner nodes from their children, which come after
     // them in the array.
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i < r.end(); ++i) {
-            HNode& node = nodes_[i];
-            if (node.left >= 0) continue;
-            for (int a = 0; a < 3; ++a) {
-                node.lo[a] = INFINITY;
-                node.hi[a] = -INFINITY;
-            }
-            for (uint32_t p = node.begin; p < node.end; ++p)
+    if (leaves)
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, nodes_.size(), 16), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i < r.end(); ++i) {
+                HNode& node = nodes_[i];
+                if (node.left >= 0) continue;
                 for (int a = 0; a < 3; ++a) {
-                    node.lo[a] = std::min(node.lo[a], xyz_[3 * size_t(p) + a]);
-                    node.hi[a] = std::max(node.hi[a], xyz_[3 * size_t(p) + a]);
+                    node.lo[a] = INFINITY;
+                    node.hi[a] = -INFINITY;
                 }
-        }
-    });
+                for (uint32_t p = node.begin; p < node.end; ++p)
+                    for (int a = 0; a < 3; ++a) {
+                        node.lo[a] = std::min(node.lo[a], arrays_.xyz[3 * size_t(p) + a]);
+                        node.hi[a] = std::max(node.hi[a], arrays_.xyz[3 * size_t(p) + a]);
+                    }
+            }
+        });
     for (size_t i = nodes_.size(); i-- > 0;) {
         HNode& node = nodes_[i];
         if (node.left < 0) continue;
@@ -609,7 +388,7 @@ void Builder::halo(const float lo[3], const float hi[3], size_t begin, size_t en
             continue;
         }
         for (uint32_t p = node.begin; p < node.end; ++p) {
-            const float* q = &xyz_[3 * size_t(p)];
+            const float* q = &arrays_.xyz[3 * size_t(p)];
             if (q[0] >= lo[0] && q[0] <= hi[0] && q[1] >= lo[1] && q[1] <= hi[1] && q[2] >= lo[2] && q[2] <= hi[2])
                 ids.push_back(p);
         }
@@ -654,7 +433,7 @@ size_t Builder::nearest_all(const float q[3], size_t k, uint32_t* index, float* 
             continue;
         }
         for (uint32_t p = node.begin; p < node.end; ++p) {
-            const float* x = &xyz_[3 * size_t(p)];
+            const float* x = &arrays_.xyz[3 * size_t(p)];
             const float dx = x[0] - q[0], dy = x[1] - q[1], dz = x[2] - q[2];
             const float d2 = dx * dx + dy * dy + dz * dz;
             if (found == k && !(d2 < worst)) continue;
@@ -733,26 +512,63 @@ void Builder::summarize(PointsBuildReport& report) const {
     report.mean_leaf_points = double(report.input_points) / double(report.leaves);
 }
 
-PointsBuildReport Builder::run(const std::string& output_path) {
+PointsBuildReport Builder::run_in_core(PointCloud& cloud, const std::string& output_path) {
     PointsBuildReport report;
     const double start = now_seconds();
-    prepare(report);
+    PointInputSummary input;
+    input.count = cloud.size();
+    input.bounds = cloud.bounds();
+    for (float r : cloud.radii) input.largest_radius = std::max(input.largest_radius, r);
+    input.normals = cloud.has_normals();
+    input.colors = cloud.has_colors();
+    input.radii = cloud.has_radii();
+    prepare(input, report);
     writer_ = std::make_unique<ArchiveWriter>(output_path, ArchiveKind::Points);
 
-    if (progress_) progress_->phase("partitioning", cloud_.size(), "pt");
-    partition_all();
+    if (progress_) progress_->phase("partitioning", cloud.size(), "pt");
+    partition_in_core(cloud);
     report.seconds_partition = now_seconds() - start;
 
     double t0 = now_seconds();
-    build_search_tree();
+    node_boxes(/*leaves=*/true);
     report.seconds_search_tree = now_seconds() - t0;
 
     t0 = now_seconds();
     if (progress_) progress_->phase("building nodes", nodes_.size(), "nodes");
+    records_.resize(nodes_.size());
     build_node(0);
     report.seconds_nodes = now_seconds() - t0;
+    return finish(report, start);
+}
+
+PointsBuildReport Builder::run_out_of_core(OutOfCorePoints& store, const std::string& output_path) {
+    PointsBuildReport report;
+    const double start = now_seconds();
+    prepare(store.summary(), report);
+    writer_ = std::make_unique<ArchiveWriter>(output_path, ArchiveKind::Points);
+
+    store.partition(origin_);
+    nodes_ = std::move(store.nodes());
+    arrays_ = store.arrays();
+    report.out_of_core = true;
+    report.chunks = store.chunks();
+    report.split_passes = store.split_passes();
+    report.seconds_partition = now_seconds() - start;
+
+    double t0 = now_seconds();
+    node_boxes(/*leaves=*/false);  // the store set the leaves' boxes
+    report.seconds_search_tree = now_seconds() - t0;
 
     t0 = now_seconds();
+    if (progress_) progress_->phase("building nodes", nodes_.size(), "nodes");
+    records_.resize(nodes_.size());
+    build_top(0, store);
+    report.seconds_nodes = now_seconds() - t0;
+    return finish(report, start);
+}
+
+PointsBuildReport Builder::finish(PointsBuildReport& report, double start) {
+    const double t0 = now_seconds();
     if (progress_) progress_->phase("writing", 0, "");
     summarize(report);
     report.payload_bytes = writer_->payload_bytes();
@@ -765,10 +581,9 @@ PointsBuildReport Builder::run(const std::string& output_path) {
 
 }  // namespace
 
-PointsBuildReport build_points(PointCloud cloud, const std::string& output_path, const PointsBuildSettings& settings,
-                               bool z_up) {
-    check_output_file(output_path, "output");
-    validate_point_cloud(cloud, "point cloud");
+namespace {
+
+void check_settings(const PointsBuildSettings& settings) {
     if (settings.node_points < 16 || settings.node_points > (size_t(1) << 20))
         fail("node size %zu is out of range (16 .. 2^20 points)", settings.node_points);
     if (settings.color_bits.luma < 1 || settings.color_bits.luma > 8 || settings.color_bits.chroma < 1 ||
@@ -779,21 +594,60 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
         fail("position error fraction %g is out of range (0, 1]", settings.error_fraction);
     if (settings.radius_neighbour < 1 || settings.radius_neighbour > 63)
         fail("radius neighbour %zu is out of range (1 .. 63)", settings.radius_neighbour);
-    const uint64_t estimate = points_memory_estimate(cloud.size());
-    if (settings.memory_budget && estimate > settings.memory_budget)
-        fail("%zu points need about %llu MiB in core, more than the memory budget of %llu MiB (the point converter "
-             "works in core; a larger --memory, or fewer points)",
-             cloud.size(), (unsigned long long)(estimate >> 20), (unsigned long long)(settings.memory_budget >> 20));
+}
+
+// Out of core when asked, or when the in-core estimate exceeds the budget.
+bool use_out_of_core(uint64_t points, const PointsBuildSettings& settings) {
+    return settings.chunk_points || (settings.memory_budget && points_memory_estimate(points) > settings.memory_budget);
+}
+
+// What the top splits' histograms and the distribution's buffers may take.
+uint64_t out_of_core_buffer_bytes(const PointsBuildSettings& settings) {
+    return settings.memory_budget ? std::max<uint64_t>(uint64_t(2) << 20, settings.memory_budget / 16) : uint64_t(64) << 20;
+}
+
+// The points a chunk may hold under the budget: what is left after the process's fixed needs
+// (libraries, thread stacks, node records) and the buffers, at kOutOfCorePointBytes a point.
+size_t out_of_core_chunk_points(const PointsBuildSettings& settings) {
+    if (settings.chunk_points) return settings.chunk_points;
+    const uint64_t fixed = (uint64_t(40) << 20) + out_of_core_buffer_bytes(settings);
+    const uint64_t left = settings.memory_budget > fixed ? settings.memory_budget - fixed : 0;
+    return std::max<size_t>(4 * settings.node_points, size_t(left / kOutOfCorePointBytes));
+}
+
+// The thread limit and the progress display of one conversion.
+struct ConversionScope {
     std::unique_ptr<tbb::global_control> threads;
-    if (settings.threads)
-        threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings.threads);
     std::unique_ptr<Progress> progress;
-    if (settings.progress && Progress::enabled())
-        progress = std::make_unique<Progress>("convert", "preparing", 0, "");
-    Builder builder(cloud, settings, z_up, progress.get());
-    PointsBuildReport report = builder.run(output_path);
-    report.memory_estimate = estimate;
-    if (progress) progress->finish();
+    explicit ConversionScope(const PointsBuildSettings& settings) {
+        if (settings.threads)
+            threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, settings.threads);
+        if (settings.progress && Progress::enabled()) progress = std::make_unique<Progress>("convert", "preparing", 0, "");
+    }
+};
+
+}  // namespace
+
+PointsBuildReport build_points(PointCloud cloud, const std::string& output_path, const PointsBuildSettings& settings,
+                               bool z_up) {
+    check_output_file(output_path, "output");
+    validate_point_cloud(cloud, "point cloud");
+    check_settings(settings);
+    ConversionScope scope(settings);
+    Builder builder(settings, z_up, scope.progress.get());
+    PointsBuildReport report;
+    if (!use_out_of_core(cloud.size(), settings)) {
+        report = builder.run_in_core(cloud, output_path);
+    } else {
+        OutOfCorePoints store(output_path, partition_settings_of(settings), out_of_core_chunk_points(settings),
+                              out_of_core_buffer_bytes(settings), scope.progress.get());
+        if (scope.progress) scope.progress->phase("storing", cloud.size(), "pt");
+        store.add(cloud);
+        cloud = PointCloud();  // the store holds it now
+        report = builder.run_out_of_core(store, output_path);
+    }
+    report.memory_estimate = points_memory_estimate(report.input_points);
+    if (scope.progress) scope.progress->finish();
     return report;
 }
 

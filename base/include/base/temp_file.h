@@ -24,12 +24,23 @@ public:
     // Reads what exists of [offset, offset + size) and zero-fills the rest (for sparse use).
     void read_or_zero(uint64_t offset, void* data, size_t size) const;
 
+    // Maps the file's first `size` bytes (which must exist) shared and writable: pages are read
+    // in as they are touched, and written back by the kernel. Throws Error if mapping fails.
+    // Unmap with unmap_file().
+    void* map(uint64_t size);
+
 private:
     size_t read_up_to(uint64_t offset, void* data, size_t size) const;
 
     int fd_ = -1;
     std::string dir_;
 };
+
+// Unmaps what TempFile::map returned.
+void unmap_file(void* data, uint64_t size);
+// Drops the mapping's resident pages from the process (the data stays in the file and the page
+// cache): what a phase touched stops counting towards the process's resident memory.
+void release_mapped_pages(void* data, uint64_t size);
 
 // Physical memory of the machine in bytes (0 if unknown).
 uint64_t physical_memory_bytes();

@@ -67,10 +67,17 @@ struct PointsBuildSettings {
     uint8_t up_axis = 0;
     unsigned threads = 0;       // 0: all cores
     bool progress = true;       // progress display on a terminal
-    // The converter works in core: with a budget (bytes, 0: none) a cloud whose estimate
-    // (points_memory_estimate) exceeds it is refused before the build starts.
+    // Memory budget (bytes, 0: none). A cloud whose in-core estimate (points_memory_estimate)
+    // exceeds it is converted out of core, in chunks sized from the budget.
     uint64_t memory_budget = 0;
+    // Out of core with chunks of at most this many points (at least 4 node sizes), whatever the
+    // budget; 0: chosen as above. The dataset is the same either way, and for every chunk size.
+    size_t chunk_points = 0;
 };
+
+// Out of core, the bytes a chunk's point takes at the peak (its data read, its partition's items
+// and permutation, its arrays in partition order while its nodes are built, the halo around it).
+constexpr uint64_t kOutOfCorePointBytes = 160;
 
 // Peak memory of build_points on `points` input points, reading included: 72 bytes a point and
 // 8 MiB (measured peaks: 73 MiB at 1M points, 684 MiB at 10M, 6790 MiB at 100M; RESULTS section 7).
@@ -101,6 +108,9 @@ struct PointsBuildReport {
     // seconds_search_tree: what the neighbour searches need beforehand (the float copy, node boxes).
     double seconds = 0, seconds_partition = 0, seconds_search_tree = 0, seconds_nodes = 0, seconds_write = 0;
     uint64_t peak_rss = 0;
+    bool out_of_core = false;
+    size_t chunks = 0;        // out of core: the parts partitioned and built one at a time
+    size_t split_passes = 0;  // out of core: passes over the input that decided the splits above them
     std::vector<PointsLevelStats> levels;  // by depth, root first
     std::vector<std::string> dropped_input;
 };

@@ -1,0 +1,99 @@
+// The point converter out of core (points/builder.h, points/src/out_of_core.h): the top of the
+// tree decided by passes over scratch files, the rest chunk by chunk, gives the very dataset the
+// in-core converter writes, for every chunk size.
+#include <gtest/gtest.h>
+
+#include <fstream>
+#include <iterator>
+
+#include "points/builder.h"
+#include "support.h"
+
+namespace catpaq {
+namespace {
+
+std::string file_bytes(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+PointsBuildSettings quiet(size_t node_points = 512) {
+    PointsBuildSettings settings;
+    settings.node_points = node_points;
+    settings.progress = false;
+    return settings;
+}
+
+// Builds `cloud` in core and with each chunk size; every dataset must be byte-identical.
+void expect_same_for_chunk_sizes(const PointCloud& cloud, PointsBuildSettings settings, std::initializer_list<size_t> chunks,
+                                 const std::string& name) {
+    const std::string in_core = test::scratch(name + "_in_core.cpq");
+    const PointsBuildReport reference = build_points(cloud, in_core, settings);
+    EXPECT_FALSE(reference.out_of_core);
+    const std::string expected = file_bytes(in_core);
+    for (size_t chunk : chunks) {
+        settings.chunk_points = chunk;
+        const std::string path = test::scratch(name + "_chunks_" + std::to_string(chunk) + ".cpq");
+        const PointsBuildReport report = build_points(cloud, path, settings);
+        EXPECT_TRUE(report.out_of_core);
+        if (chunk < cloud.size()) {
+            EXPECT_GT(report.chunks, 1u) << "chunks of " << chunk;
+            EXPECT_GE(report.split_passes, 3u);
+        }
+        EXPECT_EQ(report.nodes, reference.nodes);
+        EXPECT_TRUE(file_bytes(path) == expected) << name << ": chunks of " << chunk << " points give another dataset";
+    }
+}
+
+TEST(PointsOutOfCore, GivesTheInCoreDatasetForEveryChunkSize) {
+    const PointCloud cloud = test::sphere_cloud(40000, 1.0, {0.3, -0.2, 0.1}, 11);
+    expect_same_for_chunk_sizes(cloud, quiet(), {2048, 5000, 17000, 40000}, "sphere");
+}
+
+TEST(PointsOutOfCore, GivesTheInCoreDatasetWithTheMidpointRule) {
+    const PointCloud cloud = test::sphere_cloud(30000, 1.0, {0, 0, 0}, 12);
+    PointsBuildSettings settings = quiet();
+    settings.split = PointSplitRule::Midpoint;
+    expect_same_for_chunk_sizes(cloud, settings, {2048, 9000}, "midpoint");
+}
+
+// Scanner coordinates are quantized: many points share a coordinate, so splits by rank must
+// break ties the same way (by input index) in the passes and in core; duplicates too.
+TEST(PointsOutOfCore, GivesTheInCoreDatasetWhenCoordinatesTie) {
+    PointCloud cloud = test::sphere_cloud(30000, 1.0, {0, 0, 0}, 13);
+    for (Vec3d& p : cloud.positions)
+        for (int a = 0; a < 3; ++a) p[a] = std::round(p[a] * 16) / 16;
+    for (size_t i = 0; i < 3000; ++i) {
+        cloud.positions.push_back(cloud.positions[i * 7]);
+        cloud.colors.push_back(cloud.colors[i]);
+    }
+    // Radii given: coincident points need no estimate.
+    cloud.radii.assign(cloud.size(), 0.05f);
+    expect_same_for_chunk_sizes(cloud, quiet(), {2048, 6000}, "ties");
+}
+
+TEST(PointsOutOfCore, GivesTheInCoreDatasetWithInputNormalsAndRadiiFarFromTheOrigin) {
+    PointCloud cloud = test::sphere_cloud(25000, 2.0, {4.5e6, -3.2e6, 1e7}, 14);
+    for (size_t i = 0; i < cloud.size(); ++i) {
+        Vec3f n;
+        for (int a = 0; a < 3; ++a) n[a] = float(cloud.positions[i][a] - (a == 0 ? 4.5e6 : a == 1 ? -3.2e6 : 1e7)) / 2.0f;
+        cloud.normals.push_back(n);
+        cloud.radii.push_back(0.01f + 0.001f * float(i % 5));
+    }
+    expect_same_for_chunk_sizes(cloud, quiet(), {2048, 11000}, "offset");
+}
+
+// A budget below the in-core estimate converts out of core (before, such clouds were refused).
+TEST(PointsOutOfCore, ABudgetBelowTheInCoreEstimateConvertsOutOfCore) {
+    const PointCloud cloud = test::sphere_cloud(20000, 1.0, {0, 0, 0}, 15);
+    PointsBuildSettings settings = quiet();
+    const std::string in_core = test::scratch("budget_in_core.cpq"), budget = test::scratch("budget.cpq");
+    build_points(cloud, in_core, settings);
+    settings.memory_budget = points_memory_estimate(cloud.size()) - 1;
+    const PointsBuildReport report = build_points(cloud, budget, settings);
+    EXPECT_TRUE(report.out_of_core);
+    EXPECT_TRUE(file_bytes(budget) == file_bytes(in_core));
+}
+
+}  // namespace
+}  // namespace catpaq
