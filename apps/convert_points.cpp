@@ -8,6 +8,7 @@
 #include "apps/convert_formats.h"
 #include "base/error.h"
 #include "base/output_path.h"
+#include "base/temp_file.h"
 #include "mesh/io.h"
 #include "mesh/up_axis.h"
 #include "points/builder.h"
@@ -46,6 +47,9 @@ void print_json(const PointsBuildReport& r, const ConvertJob& job, size_t surfac
         {"seconds", r.seconds},
         {"peak_rss", r.peak_rss},
         {"memory_estimate", r.memory_estimate},
+        {"out_of_core", r.out_of_core},
+        {"chunks", r.chunks},
+        {"split_passes", r.split_passes},
         {"dropped_input", r.dropped_input},
         {"levels", levels}};
     std::printf("%s\n", out.dump().c_str());
@@ -63,6 +67,10 @@ void print_table(const PointsBuildReport& r, const ConvertJob& job, size_t surfa
                 r.max_leaf_points);
     std::printf("build:      %.2f s (reading included), %.0f input points/s, peak memory %.1f MiB\n", r.seconds,
                 r.seconds > 0 ? double(r.input_points) / r.seconds : 0.0, double(r.peak_rss) / (1 << 20));
+    if (r.out_of_core)
+        std::printf("memory:     out of core (the in-core estimate, %.0f MiB, exceeds the budget): %zu chunks, %zu "
+                    "passes over the input above them\n",
+                    double(r.memory_estimate) / (1 << 20), r.chunks, r.split_passes);
     std::printf("size:       %.2f bytes per stored point (%llu stored), %.2f per input point; position error at "
                 "most %.3g of the node's smallest radius\n",
                 r.stored_points ? double(r.payload_bytes) / double(r.stored_points) : 0.0,
@@ -101,7 +109,9 @@ int convert_points(Options& options, const ConvertJob& job) {
         usage_error("--normals: '%s' is not one of auto, outward, up", normals.c_str());
     const size_t surface_samples = size_t(options.integer("surface-samples", 0, 1, int64_t(1) << 32));
     s.threads = unsigned(options.integer("threads", 0, 0, 1024));
-    s.memory_budget = options.bytes("memory", 0);
+    // As for catp: half the physical memory unless told; a cloud whose in-core estimate exceeds
+    // the budget is converted out of core.
+    s.memory_budget = options.bytes("memory", physical_memory_bytes() / 2);
     // The up axis: --up, else the input's convention (LAS: z), else y as for catp and aqp.
     UpAxis up = UpAxis::Unknown;
     if (options.has("up") && !parse_up_axis(options.get("up", ""), up))
@@ -121,11 +131,9 @@ int convert_points(Options& options, const ConvertJob& job) {
         r = build_points(sample_surface(mesh, surface_samples, 1, true, true), job.output, s);
         r.dropped_input = dropped;
     } else {
-        PointReadInfo info;
-        PointCloud cloud = read_point_cloud(job.input, &info);
-        s.up_axis = uint8_t(up != UpAxis::Unknown ? up : info.z_up ? UpAxis::PosZ : UpAxis::PosY);
-        r = build_points(std::move(cloud), job.output, s, info.z_up);
-        r.dropped_input = info.dropped;
+        PointFileReader reader(job.input);
+        s.up_axis = uint8_t(up != UpAxis::Unknown ? up : reader.info().z_up ? UpAxis::PosZ : UpAxis::PosY);
+        r = build_points_stream(reader, job.output, s);
     }
     for (const std::string& d : r.dropped_input)
         std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", job.input.c_str(), d.c_str());

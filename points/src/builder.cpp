@@ -643,6 +643,7 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
                               out_of_core_buffer_bytes(settings), scope.progress.get());
         if (scope.progress) scope.progress->phase("storing", cloud.size(), "pt");
         store.add(cloud);
+        if (scope.progress) scope.progress->add(cloud.size());
         cloud = PointCloud();  // the store holds it now
         report = builder.run_out_of_core(store, output_path);
     }
@@ -651,14 +652,64 @@ PointsBuildReport build_points(PointCloud cloud, const std::string& output_path,
     return report;
 }
 
+PointsBuildReport build_points_stream(PointFileReader& reader, const std::string& output_path,
+                                      const PointsBuildSettings& settings) {
+    check_output_file(output_path, "output");  // before the input is read, however long that takes
+    check_settings(settings);
+    ConversionScope scope(settings);
+    Progress* progress = scope.progress.get();
+    const double start = now_seconds();
+    const bool z_up = reader.info().z_up;
+    // Out of core from the start when the header's count says so; else in core while the
+    // points read so far fit the budget (text files announce no count), moving to the store
+    // when they stop fitting.
+    std::unique_ptr<OutOfCorePoints> store;
+    auto open_store = [&] {
+        store = std::make_unique<OutOfCorePoints>(output_path, partition_settings_of(settings),
+                                                  out_of_core_chunk_points(settings), out_of_core_buffer_bytes(settings), progress);
+    };
+    const uint64_t expected = reader.expected_points();
+    if (settings.chunk_points || (expected && use_out_of_core(expected, settings))) open_store();
+    if (progress) progress->phase("reading", expected, "pt");
+    PointCloud cloud, batch;
+    if (!store && expected) {
+        cloud.positions.reserve(expected);
+        if (reader.has_normals()) cloud.normals.reserve(expected);
+        if (reader.has_colors()) cloud.colors.reserve(expected);
+        if (reader.has_radii()) cloud.radii.reserve(expected);
+    }
+    constexpr size_t kBatch = size_t(1) << 18;
+    while (reader.next(batch, kBatch)) {
+        if (progress) progress->add(batch.size());
+        if (store) {
+            store->add(batch);
+            continue;
+        }
+        cloud.positions.insert(cloud.positions.end(), batch.positions.begin(), batch.positions.end());
+        cloud.normals.insert(cloud.normals.end(), batch.normals.begin(), batch.normals.end());
+        cloud.colors.insert(cloud.colors.end(), batch.colors.begin(), batch.colors.end());
+        cloud.radii.insert(cloud.radii.end(), batch.radii.begin(), batch.radii.end());
+        if (use_out_of_core(cloud.size(), settings)) {
+            open_store();
+            store->add(cloud);
+            cloud = PointCloud();
+        }
+    }
+    Builder builder(settings, z_up, progress);
+    PointsBuildReport report = store ? builder.run_out_of_core(*store, output_path) : builder.run_in_core(cloud, output_path);
+    report.memory_estimate = points_memory_estimate(report.input_points);
+    report.dropped_input = reader.info().dropped;
+    report.seconds_read = now_seconds() - start - report.seconds;
+    report.seconds = now_seconds() - start;
+    if (progress) progress->finish();
+    return report;
+}
+
 PointsBuildReport build_points_file(const std::string& input_path, const std::string& output_path,
                                     const PointsBuildSettings& settings) {
-    check_output_file(output_path, "output");  // before the input is read, however long that takes
-    PointReadInfo info;
-    PointCloud cloud = read_point_cloud(input_path, &info);
-    PointsBuildReport report = build_points(std::move(cloud), output_path, settings, info.z_up);
-    report.dropped_input = info.dropped;
-    return report;
+    check_output_file(output_path, "output");
+    PointFileReader reader(input_path);
+    return build_points_stream(reader, output_path, settings);
 }
 
 }  // namespace catpaq

@@ -91,7 +91,6 @@ void OutOfCorePoints::add(const PointCloud& batch) {
     for (const Vec3d& p : batch.positions) summary_.bounds.add(p);
     for (float r : batch.radii) summary_.largest_radius = std::max(summary_.largest_radius, r);
     summary_.count += n;
-    if (progress_) progress_->add(n);
 }
 
 // Calls visit(p, index) for every input point in input order: p its position relative to the

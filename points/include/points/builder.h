@@ -29,7 +29,10 @@
 // Memory: in core, about 72 bytes per input point at the peak (10M points: 684 MiB, reading
 // included: the points in double precision with normals, colours and radii, the partition's
 // items, a float copy for the neighbour searches), plus node_points splats per level of the tree
-// per thread. Bounding it by processing one subtree at a time is not done yet.
+// per thread. A cloud whose estimate exceeds the memory budget is converted out of core
+// (points/src/out_of_core.h): read into scratch files, the top of the tree decided by passes
+// over them, the rest built one chunk (a subtree that fits the budget) at a time. The dataset
+// is byte-identical either way.
 #include <cstdint>
 #include <string>
 #include <vector>
@@ -106,7 +109,8 @@ struct PointsBuildReport {
     // keeps it at most settings.error_fraction).
     double worst_error_to_radius = 0;
     // seconds_search_tree: what the neighbour searches need beforehand (the float copy, node boxes).
-    double seconds = 0, seconds_partition = 0, seconds_search_tree = 0, seconds_nodes = 0, seconds_write = 0;
+    // seconds: the whole conversion, reading included when the converter reads (build_points_stream).
+    double seconds = 0, seconds_read = 0, seconds_partition = 0, seconds_search_tree = 0, seconds_nodes = 0, seconds_write = 0;
     uint64_t peak_rss = 0;
     bool out_of_core = false;
     size_t chunks = 0;        // out of core: the parts partitioned and built one at a time
@@ -123,7 +127,14 @@ struct PointsBuildReport {
 PointsBuildReport build_points(PointCloud cloud, const std::string& output_path, const PointsBuildSettings& settings,
                                bool z_up = false);
 
-// Reads a point file (points/point_cloud.h) and converts it.
+// Converts what `reader` reads (points/point_cloud.h), batch by batch: in core while the points
+// fit the memory budget (settings.memory_budget, against points_memory_estimate), else out of
+// core, so that a cloud of any size converts within the budget. The report's dropped_input is
+// the reader's.
+PointsBuildReport build_points_stream(PointFileReader& reader, const std::string& output_path,
+                                      const PointsBuildSettings& settings);
+
+// Reads a point file (points/point_cloud.h) and converts it (build_points_stream).
 PointsBuildReport build_points_file(const std::string& input_path, const std::string& output_path,
                                     const PointsBuildSettings& settings);
 
