@@ -1,7 +1,8 @@
 // LAS 1.0-1.4 reader and a LAS writer for tests (points/point_cloud.h). The layout follows the
 // ASPRS LAS specifications 1.2 and 1.4 R15: a public header block, variable length records,
 // then fixed-size point records whose first 12 bytes are X, Y, Z as int32 (coordinate =
-// integer * scale + offset) and whose RGB, where the format has it, is three uint16.
+// integer * scale + offset) and whose RGB, where the format has it, is three uint16. Records
+// are read with pread in blocks of about 1 MiB, batch by batch (point_source.h).
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
@@ -13,6 +14,7 @@
 #include "base/atomic_file.h"
 #include "base/bytes.h"
 #include "base/error.h"
+#include "point_source.h"
 #include "points/point_cloud.h"
 
 namespace catpaq {
@@ -112,54 +114,97 @@ LasHeader parse_header(const File& file, const std::string& path) {
     return h;
 }
 
-}  // namespace
+// The point records in file order. Whether colours are scaled from 16 to 8 bits depends on every
+// record (files whose colours all fit in 0..255 keep them as is), so the constructor reads the
+// RGB fields of all records first, block by block; the batches then read the records again.
+class LasSource final : public PointSource {
+public:
+    explicit LasSource(const std::string& path) : PointSource(path), file_(path), header_(parse_header(file_, path)) {
+        const LasHeader& h = header_;
+        if (h.count == 0) fail("'%s': the LAS header counts no points", path.c_str());
+        const uint64_t available = file_.size() > h.point_offset ? (file_.size() - h.point_offset) / h.record_size : 0;
+        if (available < h.count)
+            fail("'%s': truncated: the LAS header says %llu points, the file holds %llu", path.c_str(), ull(h.count), ull(available));
+        block_records_ = std::max<size_t>(1, kBlockBytes / h.record_size);
+        rgb_at_ = kRgbOffset[h.format];
+        const uint16_t largest_rgb = rgb_at_ ? largest_color() : 0;
+        colors = largest_rgb > 0;  // all black: treated as absent
+        shift_ = largest_rgb > 255 ? 8 : 0;
+        expected = h.count;
+        info.format = strprintf("LAS %d.%d format %d", h.major, h.minor, h.format);
+        info.z_up = true;
+        info.dropped.push_back("intensity, classification, returns and other LAS attributes (not kept)");
+        if (rgb_at_ && largest_rgb == 0) info.dropped.push_back("colours (all black: treated as absent)");
+    }
 
-PointCloud read_las(const std::string& path, PointReadInfo* info) {
-    File file(path);
-    LasHeader h = parse_header(file, path);
-    if (h.count == 0) fail("'%s': the LAS header counts no points", path.c_str());
-    const uint64_t available = file.size() > h.point_offset ? (file.size() - h.point_offset) / h.record_size : 0;
-    if (available < h.count)
-        fail("'%s': truncated: the LAS header says %llu points, the file holds %llu", path.c_str(), ull(h.count), ull(available));
-    PointCloud cloud;
-    cloud.positions.resize(size_t(h.count));
-    const uint16_t rgb_at = kRgbOffset[h.format];
-    std::vector<uint16_t> rgb16(rgb_at ? 3 * size_t(h.count) : 0);
-    uint16_t largest_rgb = 0;
-    const size_t batch = std::max<size_t>(1, (size_t(1) << 20) / h.record_size);
-    std::vector<uint8_t> buffer(batch * h.record_size);
-    for (uint64_t first = 0; first < h.count; first += batch) {
-        size_t n = size_t(std::min<uint64_t>(batch, h.count - first));
-        file.read(h.point_offset + first * h.record_size, buffer.data(), n * h.record_size);
-        for (size_t i = 0; i < n; ++i) {
-            ByteReader r(buffer.data() + i * h.record_size, h.record_size);
-            Vec3d& p = cloud.positions[size_t(first) + i];
-            for (int a = 0; a < 3; ++a) p[a] = double(int32_t(r.u32())) * h.scale[a] + h.offset[a];
-            if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
-                fail("'%s': point %llu has a non-finite coordinate", path.c_str(), ull(first + i));
-            if (rgb_at) {
-                ByteReader c(buffer.data() + i * h.record_size + rgb_at, 6);
-                for (int k = 0; k < 3; ++k) {
-                    uint16_t v = c.u16();
-                    rgb16[3 * (size_t(first) + i) + k] = v;
-                    largest_rgb = std::max(largest_rgb, v);
+    size_t read(PointCloud& batch, size_t max) override {
+        const LasHeader& h = header_;
+        const size_t n = size_t(std::min<uint64_t>(max, h.count - next_));
+        for (size_t done = 0; done < n;) {
+            const size_t k = read_block(next_, n - done);
+            for (size_t i = 0; i < k; ++i) {
+                const uint8_t* record = buffer_.data() + i * h.record_size;
+                ByteReader r(record, h.record_size);
+                Vec3d p;
+                for (int a = 0; a < 3; ++a) p[a] = double(int32_t(r.u32())) * h.scale[a] + h.offset[a];
+                if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
+                    fail("'%s': point %llu has a non-finite coordinate", path().c_str(), ull(next_ + i));
+                batch.positions.push_back(p);
+                if (colors) {
+                    ByteReader c(record + rgb_at_, 6);
+                    Rgb8 color;
+                    for (int channel = 0; channel < 3; ++channel) color[channel] = uint8_t(c.u16() >> shift_);
+                    batch.colors.push_back(color);
                 }
             }
+            done += k;
+            next_ += k;
         }
+        return n;
     }
-    if (rgb_at && largest_rgb > 0) {
-        const int shift = largest_rgb > 255 ? 8 : 0;
-        cloud.colors.resize(size_t(h.count));
-        for (size_t i = 0; i < cloud.colors.size(); ++i)
-            for (int k = 0; k < 3; ++k) cloud.colors[i][k] = uint8_t(rgb16[3 * i + k] >> shift);
+
+private:
+    static constexpr size_t kBlockBytes = size_t(1) << 20;
+
+    // Reads up to `max` records from record `first` into the buffer (at most one block); returns
+    // how many.
+    size_t read_block(uint64_t first, size_t max) {
+        const size_t k = std::min(max, block_records_);
+        buffer_.resize(k * header_.record_size);
+        file_.read(header_.point_offset + first * header_.record_size, buffer_.data(), buffer_.size());
+        return k;
     }
-    if (info) {
-        info->format = strprintf("LAS %d.%d format %d", h.major, h.minor, h.format);
-        info->z_up = true;
-        info->dropped.push_back("intensity, classification, returns and other LAS attributes (not kept)");
-        if (rgb_at && largest_rgb == 0) info->dropped.push_back("colours (all black: treated as absent)");
+
+    // The pre-scan: the largest 16-bit colour component of all records.
+    uint16_t largest_color() {
+        uint16_t largest = 0;
+        for (uint64_t first = 0; first < header_.count;) {
+            const size_t k = read_block(first, size_t(std::min<uint64_t>(block_records_, header_.count - first)));
+            for (size_t i = 0; i < k; ++i) {
+                ByteReader c(buffer_.data() + i * header_.record_size + rgb_at_, 6);
+                for (int channel = 0; channel < 3; ++channel) largest = std::max(largest, c.u16());
+            }
+            first += k;
+        }
+        return largest;
     }
-    return cloud;
+
+    File file_;
+    LasHeader header_;
+    size_t block_records_ = 1;
+    uint16_t rgb_at_ = 0;  // where a record's RGB starts, 0 if the format has none
+    int shift_ = 0;        // 8 to scale 16-bit colours to 8 bits, 0 to keep 8-bit ones
+    uint64_t next_ = 0;    // the next record to hand out
+    std::vector<uint8_t> buffer_;
+};
+
+}  // namespace
+
+std::unique_ptr<PointSource> open_las_source(const std::string& path) { return std::make_unique<LasSource>(path); }
+
+PointCloud read_las(const std::string& path, PointReadInfo* info) {
+    PointFileReader reader(open_las_source(path));
+    return read_whole_file(reader, info);
 }
 
 void write_las(const std::string& path, const PointCloud& cloud, int point_format, double scale) {

@@ -1,4 +1,5 @@
-// XYZ and PTS text point files (points/point_cloud.h).
+// XYZ and PTS text point files (points/point_cloud.h): streamed line by line through a buffer of
+// a few MiB, batch by batch (point_source.h).
 #include <charconv>
 #include <cmath>
 #include <cstring>
@@ -8,6 +9,7 @@
 #include <unistd.h>
 
 #include "base/error.h"
+#include "point_source.h"
 #include "points/point_cloud.h"
 
 namespace catpaq {
@@ -117,10 +119,12 @@ bool only_blanks(std::string_view line) {
     return true;
 }
 
-// Reads point lines of 3, 4, 6 or 7 numbers (the first line fixes the layout).
+// Reads point lines of 3, 4, 6 or 7 numbers (the first line fixes the layout, for every batch).
 class PointLines {
 public:
-    explicit PointLines(LineReader& file) : file_(file) {}
+    PointLines(LineReader& file, PointReadInfo& info) : file_(file), info_(info) {}
+
+    bool has_colors() const { return columns_ >= 6; }  // once the first point is read
 
     // Appends the point on `line` to the cloud (the line is not blank).
     void add(std::string_view line, PointCloud& cloud) {
@@ -130,6 +134,7 @@ public:
             if (n != 3 && n != 4 && n != 6 && n != 7)
                 file_.fail_line(strprintf("expected x y z [intensity] [r g b] (3, 4, 6 or 7 numbers), found %zu", n));
             columns_ = n;
+            if (columns_ == 4 || columns_ == 7) info_.dropped.push_back("intensity (not kept)");
         } else if (n != columns_) {
             file_.fail_line(strprintf("expected %zu numbers like the first point, found %s", columns_,
                                       n > 7 ? "more than 7" : std::to_string(n).c_str()));
@@ -148,69 +153,147 @@ public:
             cloud.colors.push_back(color);
         }
     }
-    void report(PointReadInfo* info) const {
-        if (info && (columns_ == 4 || columns_ == 7)) info->dropped.push_back("intensity (not kept)");
-    }
 
 private:
     LineReader& file_;
+    PointReadInfo& info_;
     size_t columns_ = 0;
+};
+
+// A text point file: the lines, the point layout, and the first point, which the constructor of
+// each format reads ahead so that colours (6 or 7 columns) are known before the first batch.
+class TextSource : public PointSource {
+public:
+    TextSource(const std::string& path, const char* format) : PointSource(path), file_(path), lines_(file_, info) {
+        if (file_.size() == 0) fail("'%s': empty file (no points)", path.c_str());
+        info.format = format;
+    }
+
+    size_t read(PointCloud& batch, size_t max) override {
+        size_t n = 0;
+        if (!first_.positions.empty()) {
+            batch.positions.push_back(first_.positions[0]);
+            if (colors) batch.colors.push_back(first_.colors[0]);
+            first_ = {};
+            n = 1;
+        }
+        if (n < max && !exhausted_) {
+            const size_t more = read_lines(batch, max - n);
+            exhausted_ = more < max - n;  // only the end of the file stops a read short
+            n += more;
+        }
+        return n;
+    }
+
+protected:
+    // Appends up to `max` points from the lines that follow; fewer only at the end of the file,
+    // after the format's end-of-file checks.
+    virtual size_t read_lines(PointCloud& batch, size_t max) = 0;
+
+    // The derived constructor's last step: reads the first point (or, in a file with none, runs
+    // the end-of-file checks, which throw).
+    void read_first_point() {
+        exhausted_ = read_lines(first_, 1) == 0;
+        colors = lines_.has_colors();
+    }
+
+    LineReader file_;
+    PointLines lines_;
+
+private:
+    PointCloud first_;  // the point read ahead, until the first batch takes it
+    bool exhausted_ = false;
+};
+
+class XyzSource final : public TextSource {
+public:
+    explicit XyzSource(const std::string& path) : TextSource(path, "XYZ") { read_first_point(); }
+
+private:
+    size_t read_lines(PointCloud& batch, size_t max) override {
+        size_t n = 0;
+        std::string_view line;
+        while (n < max && file_.next(line)) {
+            line = strip_comment(line);
+            if (only_blanks(line)) continue;
+            lines_.add(line, batch);
+            ++n;
+            ++seen_;
+        }
+        if (n < max && seen_ == 0) fail("'%s': no points (only blank or comment lines)", path().c_str());
+        return n;
+    }
+
+    uint64_t seen_ = 0;
+};
+
+// PTS: a count line, then that many point lines, possibly several times; the scan being read
+// carries over from one batch to the next.
+class PtsSource final : public TextSource {
+public:
+    explicit PtsSource(const std::string& path) : TextSource(path, "PTS") { read_first_point(); }
+
+private:
+    size_t read_lines(PointCloud& batch, size_t max) override {
+        size_t n = 0;
+        std::string_view line;
+        while (n < max && file_.next(line)) {
+            line = strip_comment(line);
+            if (only_blanks(line)) continue;
+            if (!have_count_ || seen_ == expected_) {
+                read_count(line);
+                continue;
+            }
+            lines_.add(line, batch);
+            ++n;
+            ++seen_;
+            ++total_;
+        }
+        if (n < max) check_end();
+        return n;
+    }
+
+    // The line that starts a scan: its point count, or an error if the previous scan is full.
+    void read_count(std::string_view line) {
+        double v[2];
+        if (parse_numbers(file_, line, v, 1) != 1 || !(v[0] >= 0) || v[0] != std::floor(v[0]) || v[0] > 1e15) {
+            if (!have_count_) file_.fail_line("expected the point count (PTS starts with a count line)");
+            file_.fail_line(strprintf("more points than the count on line %zu says (%llu)", count_line_, ull(expected_)));
+        }
+        expected_ = uint64_t(v[0]);
+        seen_ = 0;
+        count_line_ = file_.line_number();
+        have_count_ = true;
+    }
+
+    void check_end() const {
+        const char* name = path().c_str();
+        if (!have_count_) fail("'%s': no point count (only blank or comment lines)", name);
+        if (seen_ != expected_)
+            fail("'%s': truncated: line %zu counts %llu points but the file holds %llu", name, count_line_,
+                 ull(expected_), ull(seen_));
+        if (total_ == 0) fail("'%s': no points (the counts are zero)", name);
+    }
+
+    uint64_t expected_ = 0, seen_ = 0;  // of the current scan
+    uint64_t total_ = 0;
+    size_t count_line_ = 0;
+    bool have_count_ = false;
 };
 
 }  // namespace
 
+std::unique_ptr<PointSource> open_xyz_source(const std::string& path) { return std::make_unique<XyzSource>(path); }
+std::unique_ptr<PointSource> open_pts_source(const std::string& path) { return std::make_unique<PtsSource>(path); }
+
 PointCloud read_xyz(const std::string& path, PointReadInfo* info) {
-    LineReader file(path);
-    if (file.size() == 0) fail("'%s': empty file (no points)", path.c_str());
-    PointCloud cloud;
-    PointLines lines(file);
-    std::string_view line;
-    while (file.next(line)) {
-        line = strip_comment(line);
-        if (only_blanks(line)) continue;
-        lines.add(line, cloud);
-    }
-    if (cloud.positions.empty()) fail("'%s': no points (only blank or comment lines)", path.c_str());
-    if (info) info->format = "XYZ";
-    lines.report(info);
-    return cloud;
+    PointFileReader reader(open_xyz_source(path));
+    return read_whole_file(reader, info);
 }
 
 PointCloud read_pts(const std::string& path, PointReadInfo* info) {
-    LineReader file(path);
-    if (file.size() == 0) fail("'%s': empty file (no points)", path.c_str());
-    PointCloud cloud;
-    PointLines lines(file);
-    std::string_view line;
-    uint64_t expected = 0, seen = 0;  // of the current scan
-    size_t count_line = 0;
-    bool have_count = false;
-    while (file.next(line)) {
-        line = strip_comment(line);
-        if (only_blanks(line)) continue;
-        if (!have_count || seen == expected) {
-            double v[2];
-            if (parse_numbers(file, line, v, 1) != 1 || !(v[0] >= 0) || v[0] != std::floor(v[0]) || v[0] > 1e15) {
-                if (!have_count) file.fail_line("expected the point count (PTS starts with a count line)");
-                file.fail_line(strprintf("more points than the count on line %zu says (%llu)", count_line, ull(expected)));
-            }
-            expected = uint64_t(v[0]);
-            seen = 0;
-            count_line = file.line_number();
-            have_count = true;
-            continue;
-        }
-        lines.add(line, cloud);
-        ++seen;
-    }
-    if (!have_count) fail("'%s': no point count (only blank or comment lines)", path.c_str());
-    if (seen != expected)
-        fail("'%s': truncated: line %zu counts %llu points but the file holds %llu", path.c_str(), count_line,
-             ull(expected), ull(seen));
-    if (cloud.positions.empty()) fail("'%s': no points (the counts are zero)", path.c_str());
-    if (info) info->format = "PTS";
-    lines.report(info);
-    return cloud;
+    PointFileReader reader(open_pts_source(path));
+    return read_whole_file(reader, info);
 }
 
 }  // namespace catpaq
