@@ -596,9 +596,18 @@ void check_settings(const PointsBuildSettings& settings) {
         fail("radius neighbour %zu is out of range (1 .. 63)", settings.radius_neighbour);
 }
 
-// Out of core when asked, or when the in-core estimate exceeds the budget.
+// Out of core when asked, or when the in-core estimate exceeds the budget; then the budget
+// must leave room for the process itself (libraries, thread stacks, the reader's buffers: about
+// 25 MiB) and for a chunk.
 bool use_out_of_core(uint64_t points, const PointsBuildSettings& settings) {
-    return settings.chunk_points || (settings.memory_budget && points_memory_estimate(points) > settings.memory_budget);
+    if (settings.chunk_points) return true;
+    if (!settings.memory_budget || points_memory_estimate(points) <= settings.memory_budget) return false;
+    if (settings.memory_budget < kPointsMinimumBudget)
+        fail("%llu points need about %llu MiB in core, more than the memory budget of %llu MiB, and out of core the "
+             "point converter needs at least %llu MiB",
+             (unsigned long long)points, (unsigned long long)(points_memory_estimate(points) >> 20),
+             (unsigned long long)(settings.memory_budget >> 20), (unsigned long long)(kPointsMinimumBudget >> 20));
+    return true;
 }
 
 // What the top splits' histograms and the distribution's buffers may take.
@@ -678,7 +687,7 @@ PointsBuildReport build_points_stream(PointFileReader& reader, const std::string
         if (reader.has_colors()) cloud.colors.reserve(expected);
         if (reader.has_radii()) cloud.radii.reserve(expected);
     }
-    constexpr size_t kBatch = size_t(1) << 18;
+    constexpr size_t kBatch = size_t(1) << 16;  // 2.8 MiB of points with every attribute
     while (reader.next(batch, kBatch)) {
         if (progress) progress->add(batch.size());
         if (store) {

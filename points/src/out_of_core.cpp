@@ -94,19 +94,31 @@ void OutOfCorePoints::add(const PointCloud& batch) {
 }
 
 // Calls visit(p, index) for every input point in input order: p its position relative to the
-// origin as the in-core partition's items hold it (float of the double difference).
+// origin as the in-core partition's items hold it (the float of the double difference, written
+// once to split_positions_ so that the passes read half the bytes).
 template <class Visit>
 void OutOfCorePoints::for_each_input(Visit visit) {
+    std::vector<float> block(3 * kBlockPoints);
+    for (size_t first = 0; first < summary_.count; first += kBlockPoints) {
+        const size_t m = std::min(kBlockPoints, summary_.count - first);
+        split_positions_->read_at(first * 12, block.data(), m * 12);
+        for (size_t i = 0; i < m; ++i) visit(&block[3 * i], uint32_t(first + i));
+        if (progress_) progress_->add(m);
+    }
+    ++split_passes_;
+}
+
+// The floats the passes read, from the doubles in input order.
+void OutOfCorePoints::write_split_positions() {
+    split_positions_ = std::make_unique<TempFile>(near_path_);
     std::vector<Vec3d> block(kBlockPoints);
+    std::vector<float> out(3 * kBlockPoints);
     for (size_t first = 0; first < summary_.count; first += kBlockPoints) {
         const size_t m = std::min(kBlockPoints, summary_.count - first);
         in_positions_->read_at(first * sizeof(Vec3d), block.data(), m * sizeof(Vec3d));
-        for (size_t i = 0; i < m; ++i) {
-            float p[3];
-            for (int a = 0; a < 3; ++a) p[a] = float(block[i][a] - origin_[a]);
-            visit(p, uint32_t(first + i));
-        }
-        if (progress_) progress_->add(m);
+        for (size_t i = 0; i < m; ++i)
+            for (int a = 0; a < 3; ++a) out[3 * i + a] = float(block[i][a] - origin_[a]);
+        split_positions_->write_at(first * 12, out.data(), m * 12);
     }
 }
 
@@ -122,210 +134,211 @@ uint32_t OutOfCorePoints::classify(const float p[3], uint32_t index) const {
     return t;
 }
 
+namespace {
+
+// The value of rank `rank` among 32-bit values, found `width` bits a pass from the top: each
+// pass histograms the next bits of the values that share the bits found so far.
+struct DigitSelect {
+    uint64_t rank = 0;    // within the values that share the prefix
+    uint32_t prefix = 0;  // the top `known` bits of the value
+    int known = 0;
+    bool done() const { return known == 32; }
+    int step(int width) const { return std::min(width, 32 - known); }
+    // The histogram bucket of v, or -1 if v does not share the prefix.
+    int64_t bucket(uint32_t v, int width) const {
+        if (known > 0 && (v >> (32 - known)) != prefix) return -1;
+        const int bits = step(width);
+        return int64_t((v >> (32 - known - bits)) & ((uint32_t(1) << bits) - 1));
+    }
+    void advance(const uint32_t* counts, int width) {
+        uint64_t before = 0;
+        const int bits = step(width);
+        const uint32_t b = bucket_of_rank(counts, rank, &before);
+        prefix = known == 0 ? b : (prefix << bits | b);
+        rank -= before;
+        known += bits;
+    }
+};
+
+}  // namespace
+
 // Decides the splits of a group of undecided top nodes by passes over the input: the same
 // decisions partition.h's Partitioner takes from the same points (tight box, medians, counts
 // below planes, and for splits by rank the input index that completes the threshold).
-void OutOfCorePoints::decide_group(const std::vector<uint32_t>& group) {
-    const size_t g = group.size();
+void OutOfCorePoints::decide_group(const std::vector<uint32_t>& group, int width) {
+    const size_t g = group.size(), buckets = size_t(1) << width;
     std::vector<int32_t> slot_of(top_.size(), -1);
     for (size_t s = 0; s < g; ++s) slot_of[group[s]] = int32_t(s);
-    struct Slot {
-        uint64_t n = 0;
-        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-        uint32_t high[3] = {0, 0, 0};      // the median key's top 16 bits, per axis
-        uint64_t before[3] = {0, 0, 0};    // points below that bucket
-        uint32_t median[3] = {0, 0, 0};    // the median's order key
-        uint64_t less[3] = {0, 0, 0};      // points whose key is below the median's
-        // Planes whose counts below are wanted (at most the three axes and the midpoint's).
-        int count_axis[4] = {0, 0, 0, 0};
-        float count_plane[4] = {0, 0, 0, 0};
-        uint64_t below[4] = {0, 0, 0, 0};
-        int counts = 0;
-        uint32_t tie_high = 0;
-        uint64_t tie_before = 0;
-    };
-    std::vector<Slot> slots(g);
     auto slot_for = [&](const float p[3], uint32_t index) -> int32_t {
         const uint32_t t = classify(p, index);
         return t < slot_of.size() ? slot_of[t] : -1;
     };
-    std::vector<uint32_t> hist(g * 3 * kBuckets, 0);
-    auto counts_of = [&](size_t s, int axis) { return &hist[(s * 3 + size_t(axis)) * kBuckets]; };
+    struct Slot {
+        uint64_t n = 0;
+        float lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+        DigitSelect median[3];  // the order key of rank n/2, per axis
+        // Planes whose counts below are wanted (at most the three axes' and the midpoint's).
+        int count_axis[4] = {0, 0, 0, 0};
+        float count_plane[4] = {0, 0, 0, 0};
+        uint64_t below[4] = {0, 0, 0, 0};
+        int counts = 0;
+        int rank_axis = -1;  // a split by rank on this axis
+        DigitSelect tie;     // its threshold's input index, among the points of the median's key
+        uint64_t left_count = 0;
+    };
+    std::vector<Slot> slots(g);
+    for (size_t s = 0; s < g; ++s)
+        for (int a = 0; a < 3; ++a) slots[s].median[a].rank = top_[group[s]].count / 2;
+    std::vector<uint32_t> hist(g * 3 * buckets);
+    auto counts_of = [&](size_t s, int j) { return &hist[(s * 3 + size_t(j)) * buckets]; };
 
-    // A: the tight boxes and the top 16 bits of every coordinate's key.
-    for_each_input([&](const float p[3], uint32_t index) {
-        const int32_t s = slot_for(p, index);
-        if (s < 0) return;
-        Slot& slot = slots[size_t(s)];
-        ++slot.n;
-        for (int a = 0; a < 3; ++a) {
-            slot.lo[a] = std::min(slot.lo[a], p[a]);
-            slot.hi[a] = std::max(slot.hi[a], p[a]);
-            ++counts_of(size_t(s), a)[float_order_key(p[a]) >> 16];
-        }
-    });
-    ++split_passes_;
-    for (size_t s = 0; s < g; ++s) {
-        if (slots[s].n != top_[group[s]].count) fail("out-of-core partition: a node's points changed between passes");
-        for (int a = 0; a < 3; ++a) slots[s].high[a] = bucket_of_rank(counts_of(s, a), slots[s].n / 2, &slots[s].before[a]);
-    }
-    // B: the low 16 bits within the median's bucket: the median's key exactly.
-    std::fill(hist.begin(), hist.end(), 0u);
-    for_each_input([&](const float p[3], uint32_t index) {
-        const int32_t s = slot_for(p, index);
-        if (s < 0) return;
-        const Slot& slot = slots[size_t(s)];
-        for (int a = 0; a < 3; ++a) {
-            const uint32_t key = float_order_key(p[a]);
-            if (key >> 16 == slot.high[a]) ++counts_of(size_t(s), a)[key & 0xffff];
-        }
-    });
-    ++split_passes_;
-    for (size_t s = 0; s < g; ++s) {
-        Slot& slot = slots[s];
-        for (int a = 0; a < 3; ++a) {
-            uint64_t before = 0;
-            const uint32_t low = bucket_of_rank(counts_of(s, a), slot.n / 2 - slot.before[a], &before);
-            slot.median[a] = slot.high[a] << 16 | low;
-            slot.less[a] = slot.before[a] + before;
+    // The medians' keys, `width` bits a pass; the first pass also finds the tight boxes.
+    for (bool first = true; !slots[0].median[0].done(); first = false) {
+        std::fill(hist.begin(), hist.end(), 0u);
+        for_each_input([&](const float p[3], uint32_t index) {
+            const int32_t s = slot_for(p, index);
+            if (s < 0) return;
+            Slot& slot = slots[size_t(s)];
+            if (first) {
+                ++slot.n;
+                for (int a = 0; a < 3; ++a) {
+                    slot.lo[a] = std::min(slot.lo[a], p[a]);
+                    slot.hi[a] = std::max(slot.hi[a], p[a]);
+                }
+            }
+            for (int a = 0; a < 3; ++a) {
+                const int64_t b = slot.median[a].bucket(float_order_key(p[a]), width);
+                if (b >= 0) ++counts_of(size_t(s), a)[b];
+            }
+        });
+        for (size_t s = 0; s < g; ++s) {
+            if (first && slots[s].n != top_[group[s]].count)
+                fail("out-of-core partition: a node's points changed between passes");
+            for (int a = 0; a < 3; ++a) slots[s].median[a].advance(counts_of(s, a), width);
         }
     }
 
-    // The planes each rule would try, whose counts below decide between them.
+    // The planes each rule would try; their counts below decide between them.
     struct Plan {
         bool rank_only = false;  // deep nodes split by rank on x
         bool balanced = false;
         float planes[3] = {0, 0, 0};
         bool evaluated[3] = {false, false, false};
         bool exact_median[3] = {false, false, false};
+        int count_index[4] = {-1, -1, -1, -1};  // per axis, and the midpoint's [3]
         int mid_axis = 0;
         float mid_plane = 0;
     };
     std::vector<Plan> plans(g);
-    auto want_count = [&](Slot& slot, int axis, float plane) {
+    auto want_count = [](Slot& slot, int axis, float plane) {
         slot.count_axis[slot.counts] = axis;
         slot.count_plane[slot.counts] = plane;
         return slot.counts++;
     };
-    std::vector<std::array<int, 4>> count_index(g);
     for (size_t s = 0; s < g; ++s) {
         Slot& slot = slots[s];
         Plan& plan = plans[s];
-        const TopNode& node = top_[group[s]];
-        count_index[s].fill(-1);
-        if (node.depth >= kMidpointMaxDepth) {
+        if (top_[group[s]].depth >= kMidpointMaxDepth) {
             plan.rank_only = true;
             continue;
         }
         plan.mid_axis = longest_axis(slot.lo, slot.hi);
         plan.mid_plane = 0.5f * (slot.lo[plan.mid_axis] + slot.hi[plan.mid_axis]);
-        count_index[s][3] = want_count(slot, plan.mid_axis, plan.mid_plane);
+        plan.count_index[3] = want_count(slot, plan.mid_axis, plan.mid_plane);
         if (settings_.split != PointSplitRule::Balanced) continue;
         plan.balanced = true;
         const float margin = balanced_margin(slot.lo, slot.hi, settings_.max_aspect);
         for (int a = 0; a < 3; ++a) {
             if (slot.hi[a] - slot.lo[a] < 2 * margin) continue;
-            const float median = float_from_order_key(slot.median[a]);
+            const float median = float_from_order_key(slot.median[a].prefix);
             const float plane = std::clamp(median, slot.lo[a] + margin, slot.hi[a] - margin);
             plan.evaluated[a] = true;
             plan.planes[a] = plane;
             plan.exact_median[a] = plane == median;
-            if (!plan.exact_median[a]) count_index[s][size_t(a)] = want_count(slot, a, plane);
+            if (!plan.exact_median[a]) plan.count_index[a] = want_count(slot, a, plane);
         }
     }
-    // C: the counts below those planes.
     for_each_input([&](const float p[3], uint32_t index) {
         const int32_t s = slot_for(p, index);
         if (s < 0) return;
         Slot& slot = slots[size_t(s)];
         for (int c = 0; c < slot.counts; ++c) slot.below[c] += p[slot.count_axis[c]] < slot.count_plane[c];
     });
-    ++split_passes_;
 
     // The decisions; splits by rank still need their threshold's input index.
-    std::vector<int> rank_axis(g, -1);
-    std::vector<uint64_t> left_count(g, 0);  // set with the children only: classify() must not descend yet
     for (size_t s = 0; s < g; ++s) {
         Slot& slot = slots[s];
         const Plan& plan = plans[s];
         TopNode& node = top_[group[s]];
         auto by_plane = [&](int axis, float plane, uint64_t below) {
             if (below == 0 || below == slot.n) {
-                rank_axis[s] = axis;
+                slot.rank_axis = axis;
                 return;
             }
             node.axis = axis;
             node.plane = plane;
             node.by_rank = false;
-            left_count[s] = below;
+            slot.left_count = below;
         };
         if (plan.rank_only) {
-            rank_axis[s] = 0;
+            slot.rank_axis = 0;
         } else if (plan.balanced) {
             uint64_t imbalance[3] = {UINT64_MAX, UINT64_MAX, UINT64_MAX};
             for (int a = 0; a < 3; ++a)
                 if (plan.evaluated[a])
-                    imbalance[a] = plan.exact_median[a] ? 0 : split_imbalance(slot.below[count_index[s][size_t(a)]], slot.n);
+                    imbalance[a] = plan.exact_median[a] ? 0 : split_imbalance(slot.below[plan.count_index[a]], slot.n);
             const int axis = balanced_axis(slot.lo, slot.hi, imbalance);
             if (axis < 0)
-                by_plane(plan.mid_axis, plan.mid_plane, slot.below[count_index[s][3]]);
+                by_plane(plan.mid_axis, plan.mid_plane, slot.below[plan.count_index[3]]);
             else if (imbalance[axis] == 0)
-                rank_axis[s] = axis;
+                slot.rank_axis = axis;
             else
-                by_plane(axis, plan.planes[axis], slot.below[count_index[s][size_t(axis)]]);
+                by_plane(axis, plan.planes[axis], slot.below[plan.count_index[axis]]);
         } else {
-            by_plane(plan.mid_axis, plan.mid_plane, slot.below[count_index[s][3]]);
+            by_plane(plan.mid_axis, plan.mid_plane, slot.below[plan.count_index[3]]);
         }
+        // The threshold is the point of rank n/2 in (key, index): among the points whose key is
+        // the median's, the one of rank n/2 - (points whose key is below the median's).
+        if (slot.rank_axis >= 0) slot.tie.rank = slot.median[slot.rank_axis].rank;
     }
-    // D and E: among the points whose key equals the median's, the input index of rank
-    // n/2 - less: 16 bits a pass.
-    const bool any_rank = std::any_of(rank_axis.begin(), rank_axis.end(), [](int a) { return a >= 0; });
-    if (any_rank) {
+    auto ranked = [&](size_t s) { return slots[s].rank_axis >= 0; };
+    bool any_rank = false;
+    for (size_t s = 0; s < g; ++s) any_rank |= ranked(s);
+    while (any_rank) {
         std::fill(hist.begin(), hist.end(), 0u);
         for_each_input([&](const float p[3], uint32_t index) {
             const int32_t s = slot_for(p, index);
-            if (s < 0 || rank_axis[size_t(s)] < 0) return;
-            const int a = rank_axis[size_t(s)];
-            if (float_order_key(p[a]) == slots[size_t(s)].median[a]) ++counts_of(size_t(s), 0)[index >> 16];
-        });
-        ++split_passes_;
-        for (size_t s = 0; s < g; ++s)
-            if (rank_axis[s] >= 0) {
-                const int a = rank_axis[s];
-                slots[s].tie_high = bucket_of_rank(counts_of(s, 0), slots[s].n / 2 - slots[s].less[a], &slots[s].tie_before);
-            }
-        std::fill(hist.begin(), hist.end(), 0u);
-        for_each_input([&](const float p[3], uint32_t index) {
-            const int32_t s = slot_for(p, index);
-            if (s < 0 || rank_axis[size_t(s)] < 0) return;
-            const int a = rank_axis[size_t(s)];
+            if (s < 0 || !ranked(size_t(s))) return;
             const Slot& slot = slots[size_t(s)];
-            if (float_order_key(p[a]) == slot.median[a] && index >> 16 == slot.tie_high)
-                ++counts_of(size_t(s), 0)[index & 0xffff];
+            const int a = slot.rank_axis;
+            if (float_order_key(p[a]) != slot.median[a].prefix) return;
+            const int64_t b = slot.tie.bucket(index, width);
+            if (b >= 0) ++counts_of(size_t(s), 0)[b];
         });
-        ++split_passes_;
+        bool done = true;
         for (size_t s = 0; s < g; ++s)
-            if (rank_axis[s] >= 0) {
-                const int a = rank_axis[s];
-                Slot& slot = slots[s];
-                uint64_t before = 0;
-                const uint32_t low = bucket_of_rank(counts_of(s, 0), slot.n / 2 - slot.less[a] - slot.tie_before, &before);
-                TopNode& node = top_[group[s]];
-                node.axis = a;
-                node.by_rank = true;
-                node.threshold = uint64_t(slot.median[a]) << 32 | (slot.tie_high << 16 | low);
-                left_count[s] = slot.n / 2;
+            if (ranked(s)) {
+                slots[s].tie.advance(counts_of(s, 0), width);
+                done &= slots[s].tie.done();
             }
+        if (done) break;
     }
     // The children.
     for (size_t s = 0; s < g; ++s) {
+        const Slot& slot = slots[s];
         const uint32_t t = group[s];
-        const uint64_t n = top_[t].count;
+        if (slot.rank_axis >= 0) {
+            TopNode& node = top_[t];
+            node.axis = slot.rank_axis;
+            node.by_rank = true;
+            node.threshold = uint64_t(slot.median[slot.rank_axis].prefix) << 32 | slot.tie.prefix;
+        }
+        const uint64_t left_count = slot.rank_axis >= 0 ? slot.n / 2 : slot.left_count;
         for (int side = 0; side < 2; ++side) {
             TopNode child;
             child.key = 2 * top_[t].key + uint64_t(side);
             child.depth = top_[t].depth + 1;
-            child.count = side == 0 ? left_count[s] : n - left_count[s];
+            child.count = side == 0 ? left_count : top_[t].count - left_count;
             child.chunk = child.count <= chunk_points_;
             top_.push_back(child);
         }
@@ -334,7 +347,8 @@ void OutOfCorePoints::decide_group(const std::vector<uint32_t>& group) {
     }
 }
 
-// Level by level, in groups whose histograms fit the allowance.
+// Level by level, in groups whose histograms fit the allowance: 16-bit digits (two passes a
+// 32-bit value) when a whole level fits so, else 11-bit digits (three passes) for larger groups.
 void OutOfCorePoints::decide_top_splits() {
     TopNode root;
     root.count = summary_.count;
@@ -342,14 +356,15 @@ void OutOfCorePoints::decide_top_splits() {
     top_.push_back(root);
     std::vector<uint32_t> pending;
     if (!root.chunk) pending.push_back(0);
-    const size_t per_node = 3 * kBuckets * sizeof(uint32_t);
-    const size_t group_size = size_t(std::max<uint64_t>(1, histogram_bytes_ / per_node));
     while (!pending.empty()) {
         for (const uint32_t t : pending)
             if (top_[t].depth >= kPointMaxDepth) fail("the point hierarchy would be deeper than %d levels", kPointMaxDepth);
+        const uint64_t wide = 3 * (uint64_t(1) << 16) * sizeof(uint32_t), narrow = 3 * (uint64_t(1) << 11) * sizeof(uint32_t);
+        const int width = pending.size() * wide <= histogram_bytes_ ? 16 : 11;
+        const size_t group_size = size_t(std::max<uint64_t>(1, histogram_bytes_ / (width == 16 ? wide : narrow)));
         for (size_t first = 0; first < pending.size(); first += group_size) {
             const size_t last = std::min(pending.size(), first + group_size);
-            decide_group(std::vector<uint32_t>(pending.begin() + ptrdiff_t(first), pending.begin() + ptrdiff_t(last)));
+            decide_group(std::vector<uint32_t>(pending.begin() + ptrdiff_t(first), pending.begin() + ptrdiff_t(last)), width);
         }
         std::vector<uint32_t> next;
         for (const uint32_t t : pending)
@@ -525,7 +540,9 @@ void OutOfCorePoints::emit(uint32_t t, std::vector<HNode>& out, uint32_t& next_b
 void OutOfCorePoints::partition(const double origin[3]) {
     std::copy(origin, origin + 3, origin_);
     if (progress_) progress_->phase("splitting", 0, "pt");
+    if (summary_.count > chunk_points_) write_split_positions();
     decide_top_splits();
+    split_positions_.reset();
     if (progress_) progress_->phase("distributing", summary_.count, "pt");
     distribute();
     positions_ = std::make_unique<TempFile>(near_path_);

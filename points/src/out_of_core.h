@@ -77,7 +77,8 @@ private:
     template <class Visit>
     void for_each_input(Visit visit);
     void decide_top_splits();
-    void decide_group(const std::vector<uint32_t>& group);
+    void write_split_positions();
+    void decide_group(const std::vector<uint32_t>& group, int width);
     void distribute();
     void partition_chunk(uint32_t top, uint32_t begin, std::vector<HNode>& out);
     void emit(uint32_t top, std::vector<HNode>& out, uint32_t& next_begin);
@@ -93,6 +94,7 @@ private:
     double origin_[3] = {0, 0, 0};
     // Input order.
     std::unique_ptr<TempFile> in_positions_, in_normals_, in_colors_, in_radii_;
+    std::unique_ptr<TempFile> split_positions_;  // floats relative to the origin, for the split passes
     // Chunk order (input order within a chunk), with the points' input indices.
     std::unique_ptr<TempFile> chunk_positions_, chunk_indices_, chunk_normals_, chunk_colors_, chunk_radii_;
     // Partition order: what arrays() maps.

@@ -135,17 +135,26 @@ TEST(CliFormats, OptionsOfAnotherFormatAreRefusedByName) {
 
 // The point converter works in core: a cloud whose estimate exceeds --memory is refused with
 // the estimate and the budget, and nothing is written; under a budget that holds it converts.
-TEST(CliFormats, PointsRefuseACloudBeyondTheMemoryBudget) {
-    fs::path in = scratch() / "budget.ply", out = scratch() / "budget.cpq";
-    write_ply(in.string(), make_sphere(60000, 3));  // 30,002 vertices: about 10 MiB estimated
+// A cloud whose in-core estimate exceeds the budget converts out of core, within the budget, to
+// the dataset the in-core converter writes; a budget too small even for that is refused.
+TEST(CliFormats, PointsBeyondTheMemoryBudgetConvertOutOfCoreWithinIt) {
+    fs::path in = scratch() / "budget.ply", out = scratch() / "budget.cpq", in_core = scratch() / "budget_in_core.cpq";
+    write_ply(in.string(), make_sphere(1300000, 3));  // 650,002 vertices: about 53 MiB estimated in core
     expect_failure("convert " + in.string() + " -o " + out.string() + " --format points --memory 9M",
-                   "30002 points need about 10 MiB in core, more than the memory budget of 9 MiB");
+                   "650002 points need about 52 MiB in core, more than the memory budget of 9 MiB, and out of core "
+                   "the point converter needs at least 48 MiB");
     expect_nothing_written(out);
-    ToolRun ok = run("convert " + in.string() + " -o " + out.string() + " --format points --memory 64M --json --quiet", true);
+    ToolRun whole = run("convert " + in.string() + " -o " + in_core.string() + " --format points --memory 4G --json --quiet", true);
+    ASSERT_EQ(whole.status, 0) << whole.output;
+    EXPECT_FALSE(nlohmann::json::parse(whole.output).at("out_of_core").get<bool>());
+    ToolRun ok = run("convert " + in.string() + " -o " + out.string() + " --format points --memory 48M --json --quiet", true);
     ASSERT_EQ(ok.status, 0) << ok.output;
     const nlohmann::json j = nlohmann::json::parse(ok.output);
-    EXPECT_EQ(j.at("memory_estimate").get<uint64_t>(), points_memory_estimate(30002));
-    EXPECT_LE(j.at("peak_rss").get<uint64_t>(), uint64_t(64) << 20);
+    EXPECT_EQ(j.at("memory_estimate").get<uint64_t>(), points_memory_estimate(650002));
+    EXPECT_TRUE(j.at("out_of_core").get<bool>());
+    EXPECT_GT(j.at("chunks").get<size_t>(), 1u);
+    EXPECT_LE(j.at("peak_rss").get<uint64_t>(), uint64_t(48) << 20);
+    EXPECT_TRUE(read_bytes(out) == read_bytes(in_core)) << "out of core wrote another dataset";
 }
 
 // What AQP cannot map is refused with a message and leaves nothing behind: a mesh without

@@ -74,13 +74,17 @@ struct PointsBuildSettings {
     // exceeds it is converted out of core, in chunks sized from the budget.
     uint64_t memory_budget = 0;
     // Out of core with chunks of at most this many points (at least 4 node sizes), whatever the
-    // budget; 0: chosen as above. The dataset is the same either way, and for every chunk size.
+    // budget (which then only sizes the split passes' histograms); 0: chosen as above. The
+    // dataset is the same either way, and for every chunk size.
     size_t chunk_points = 0;
 };
 
 // Out of core, the bytes a chunk's point takes at the peak (its data read, its partition's items
 // and permutation, its arrays in partition order while its nodes are built, the halo around it).
 constexpr uint64_t kOutOfCorePointBytes = 160;
+// The smallest budget the converter works out of core with (clouds whose in-core estimate
+// exceeds a smaller budget are refused).
+constexpr uint64_t kPointsMinimumBudget = uint64_t(48) << 20;
 
 // Peak memory of build_points on `points` input points, reading included: 72 bytes a point and
 // 8 MiB (measured peaks: 73 MiB at 1M points, 684 MiB at 10M, 6790 MiB at 100M; RESULTS section 7).
