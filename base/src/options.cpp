@@ -122,7 +122,11 @@ int64_t Options::integer(const std::string& name, int64_t fallback, int64_t min,
 
 uint64_t Options::bytes(const std::string& name, uint64_t fallback) {
     if (!has(name)) return fallback;
-    std::string text = values_[name];
+    return parse_size(values_[name], "option --" + name);
+}
+
+uint64_t parse_size(const std::string& given, const std::string& what) {
+    std::string text = given;
     uint64_t scale = 1;
     if (!text.empty()) {
         char unit = char(std::toupper((unsigned char)text.back()));
@@ -136,7 +140,7 @@ uint64_t Options::bytes(const std::string& name, uint64_t fallback) {
     errno = 0;
     double v = std::strtod(text.c_str(), &end);
     if (text.empty() || *end != 0 || errno != 0 || !(v > 0) || !std::isfinite(v))
-        usage_error("option --%s: '%s' is not a size (like 512M or 2G)", name.c_str(), values_[name].c_str());
+        usage_error("%s: '%s' is not a size (like 512M or 2G)", what.c_str(), given.c_str());
     return uint64_t(v * double(scale));
 }
 

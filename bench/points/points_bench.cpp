@@ -17,9 +17,13 @@
 //                bytes per point, CPU seconds
 //   rate/error   bytes per point against the colour precision and the position error (as a
 //                fraction of the node's smallest splat radius), on the smallest size
+//   out of core  with --budgets, the largest cloud again under each budget: peak memory against
+//                the budget, time against the in-core conversion, and whether the dataset is the
+//                same (it must be)
 //
 // usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]
 //                     [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]
+//                     [--budgets 128M,256M]
 //        points_bench --decode-only DATASET [--decode-runs 5]
 //        points_bench --compare DATASET DATASET
 // (--skip-rate skips the split and rate parts; sizes like 3e7 work for larger runs; --decode-only
@@ -30,6 +34,8 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <fstream>
+#include <iterator>
 #include <sstream>
 #include <string>
 #include <sys/resource.h>
@@ -87,13 +93,13 @@ struct Conversion {
     double share[5] = {};  // position, normal, colour, radius, header: fractions of the payload
     double phases[4] = {};  // partition, search tree, nodes, write: seconds
     double min_leaf = 0, mean_leaf = 0;
+    double out_of_core = 0, chunks = 0, split_passes = 0;
 };
 
 // The child's side: reads the cloud written by the parent, converts it, prints its figures.
 int child_convert(const std::string& input, const std::string& output, const PointsBuildSettings& settings) {
-    PointCloud cloud = read_point_cloud(input);
     double cpu0 = cpu_seconds();
-    PointsBuildReport r = build_points(std::move(cloud), output, settings);
+    PointsBuildReport r = build_points_file(input, output, settings);  // reading included
     Conversion c;
     c.cpu_seconds = cpu_seconds() - cpu0;
     c.seconds = r.seconds;
@@ -111,6 +117,9 @@ int child_convert(const std::string& input, const std::string& output, const Poi
     std::copy(phases, phases + 4, c.phases);
     c.min_leaf = double(r.min_leaf_points);
     c.mean_leaf = r.mean_leaf_points;
+    c.out_of_core = r.out_of_core;
+    c.chunks = double(r.chunks);
+    c.split_passes = double(r.split_passes);
     std::printf("RESULT");
     const double* fields = &c.seconds;
     for (size_t i = 0; i < sizeof(Conversion) / sizeof(double); ++i) std::printf(" %.17g", fields[i]);
@@ -127,6 +136,7 @@ Conversion convert_in_child(const std::string& self, const std::string& cloud_pa
                                      "--luma", std::to_string(settings.color_bits.luma), "--chroma",
                                      std::to_string(settings.color_bits.chroma), "--error-fraction",
                                      std::to_string(settings.error_fraction)};
+    if (settings.memory_budget) argv.insert(argv.end(), {"--memory", std::to_string(settings.memory_budget)});
     ChildRun run = run_measured(argv, output + ".log");
     size_t at = run.output.find("RESULT");
     if (run.status != 0 || at == std::string::npos) fail("the conversion child failed: %s", run.output.c_str());
@@ -155,6 +165,34 @@ double simplify_points_baseline(const PointCloud& cloud) {
     std::vector<unsigned> kept(cloud.size());
     double t = best_of(1, [&] { meshopt_simplifyPoints(kept.data(), xyz.data(), cloud.size(), 12, cloud.size() / 2); });
     return double(cloud.size()) / t;
+}
+
+std::string file_contents(const std::string& path) {
+    std::ifstream in(path, std::ios::binary);
+    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+}
+
+// The largest cloud again under each budget below its in-core peak: out of core, its peak
+// against the budget, its time against the in-core conversion's (same run), and whether it
+// wrote the same dataset.
+void print_out_of_core(const std::string& self, const std::string& cloud_path, const std::string& in_core_dataset,
+                       const PointsBuildSettings& settings, const Conversion& in_core, const std::vector<uint64_t>& budgets) {
+    std::printf("\n== out of core (the largest cloud; the in-core conversion above: %.2f s, peak %.0f MiB)\n", in_core.seconds,
+                in_core.peak_mib);
+    std::printf("%10s %8s %8s %10s %9s %11s %7s %7s %11s %5s\n", "budget MiB", "wall s", "cpu s", "Mpt/s", "peak MiB",
+                "peak/budget", "chunks", "passes", "time ratio", "same");
+    const std::string expected = file_contents(in_core_dataset);
+    for (uint64_t budget : budgets) {
+        PointsBuildSettings s = settings;
+        s.memory_budget = budget;
+        const std::string output = in_core_dataset + ".budget.cpq";
+        const Conversion c = convert_in_child(self, cloud_path, output, s);
+        std::printf("%10.0f %8.2f %8.2f %10.3f %9.0f %11.3f %7.0f %7.0f %11.2f %5s\n", double(budget) / (1 << 20), c.seconds,
+                    c.cpu_seconds, c.points_per_second / 1e6, c.peak_mib, c.peak_mib * (1 << 20) / double(budget), c.chunks,
+                    c.split_passes, c.seconds / in_core.seconds, file_contents(output) == expected ? "yes" : "NO");
+        std::fflush(stdout);
+        fs::remove(output);
+    }
 }
 
 struct DecodeResult {
@@ -275,6 +313,7 @@ int main(int argc, char** argv) {
         Options options(argc, argv,
                         "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]\n"
                         "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n"
+                        "                    [--budgets 128M,256M]\n"
                         "       points_bench --decode-only DATASET [--decode-runs 5]\n"
                         "       points_bench --compare DATASET DATASET\n",
                         {"with-normals", "skip-rate"});
@@ -291,6 +330,7 @@ int main(int argc, char** argv) {
             settings.color_bits.luma = uint8_t(options.integer("luma", 8, 1, 8));
             settings.color_bits.chroma = uint8_t(options.integer("chroma", 9, 1, 9));
             settings.error_fraction = options.number("error-fraction", 0.25, 1e-3, 1.0);
+            settings.memory_budget = options.bytes("memory", 0);
             options.finish();
             return child_convert(input, output, settings);
         }
@@ -298,6 +338,11 @@ int main(int argc, char** argv) {
         std::vector<size_t> sizes = parse_sizes(options.get("sizes", "1000000,10000000"));
         const bool with_normals = options.flag("with-normals");
         const bool skip_rate = options.flag("skip-rate");
+        std::vector<uint64_t> budgets;
+        {
+            std::stringstream list(options.get("budgets", ""));
+            for (std::string b; std::getline(list, b, ',');) budgets.push_back(parse_size(b, "--budgets"));
+        }
         PointsBuildSettings settings;
         settings.progress = false;
         settings.node_points = size_t(options.integer("node-points", 4096, 16, 1 << 20));
@@ -342,6 +387,7 @@ int main(int argc, char** argv) {
                         c.phases[1], c.phases[2], c.phases[3]);
             std::fflush(stdout);
             if (last_dataset.empty()) last_dataset = output;
+            if (n == sizes.back() && !budgets.empty()) print_out_of_core(self, cloud_path, output, settings, c, budgets);
         }
 
         print_decode(last_dataset, runs);

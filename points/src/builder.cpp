@@ -106,6 +106,11 @@ private:
     PointArrays arrays_;      // the points in partition order (in core: the cloud's and xyz_)
     float cloud_extent_ = 0;
     std::unique_ptr<ArchiveWriter> writer_;
+    // Out of core: the store whose mapped pages are dropped once resident memory passes
+    // release_above_ (a chunk's leaves read their neighbours' pages too, and what is mapped stays
+    // resident until dropped).
+    OutOfCorePoints* store_ = nullptr;
+    uint64_t release_above_ = 0;
 };
 
 // The input points of a leaf as splats (normals and radii estimated where missing).
@@ -234,7 +239,13 @@ std::vector<Splat> Builder::finish_node(size_t index, std::vector<Splat> splats,
 
 std::vector<Splat> Builder::build_node(size_t index) {
     const HNode node = nodes_[index];
-    if (node.left < 0) return finish_node(index, leaf_splats(node), 0.0f, nullptr, nullptr);
+    if (node.left < 0) {
+        std::vector<Splat> splats = finish_node(index, leaf_splats(node), 0.0f, nullptr, nullptr);
+        // Dropping pages is always safe: the data stays in the shared files, and a page touched
+        // again is mapped again from the page cache.
+        if (store_ && current_rss_bytes() > release_above_) store_->release_pages();
+        return splats;
+    }
     std::vector<Splat> left, right;
     tbb::parallel_invoke([&] { left = build_node(size_t(node.left)); }, [&] { right = build_node(size_t(node.right)); });
     return merge_children(index, std::move(left), std::move(right));
@@ -550,6 +561,8 @@ PointsBuildReport Builder::run_out_of_core(OutOfCorePoints& store, const std::st
     store.partition(origin_);
     nodes_ = std::move(store.nodes());
     arrays_ = store.arrays();
+    store_ = &store;
+    release_above_ = settings_.memory_budget ? settings_.memory_budget / 4 * 3 : UINT64_MAX;
     report.out_of_core = true;
     report.chunks = store.chunks();
     report.split_passes = store.split_passes();

@@ -86,16 +86,42 @@ TEST(PointsOutOfCore, GivesTheInCoreDatasetWithInputNormalsAndRadiiFarFromTheOri
     expect_same_for_chunk_sizes(cloud, quiet(), {2048, 11000}, "offset");
 }
 
-// A budget below the in-core estimate converts out of core (before, such clouds were refused).
-TEST(PointsOutOfCore, ABudgetBelowTheInCoreEstimateConvertsOutOfCore) {
+// A budget below the in-core estimate converts out of core (tests/tools: CliFormats.
+// PointsBeyondTheMemoryBudgetConvertOutOfCoreWithinIt), unless it is too small even for that.
+TEST(PointsOutOfCore, ABudgetTooSmallEvenOutOfCoreIsRefusedBeforeAnythingIsWritten) {
     const PointCloud cloud = test::sphere_cloud(20000, 1.0, {0, 0, 0}, 15);
     PointsBuildSettings settings = quiet();
-    const std::string in_core = test::scratch("budget_in_core.cpq"), budget = test::scratch("budget.cpq");
-    build_points(cloud, in_core, settings);
     settings.memory_budget = points_memory_estimate(cloud.size()) - 1;
-    const PointsBuildReport report = build_points(cloud, budget, settings);
+    const std::string path = test::scratch("budget.cpq");
+    EXPECT_TRUE(test::fails_with([&] { build_points(cloud, path, settings); },
+                                 {"20000 points need about 9 MiB in core", "needs at least 48 MiB"}));
+    EXPECT_FALSE(std::filesystem::exists(path));
+    settings.memory_budget = points_memory_estimate(cloud.size());  // fits: in core
+    EXPECT_FALSE(build_points(cloud, path, settings).out_of_core);
+}
+
+// A text file announces no count: its points are read in core until they stop fitting the
+// budget, then moved to the store and the rest streamed there; the dataset is the in-core one.
+TEST(PointsOutOfCore, ATextFileMovesOutOfCoreWhenItsPointsStopFittingTheBudget) {
+    const PointCloud cloud = test::sphere_cloud(600000, 1.0, {10, 20, 30}, 16);
+    std::string text;
+    text.reserve(cloud.size() * 60);
+    char line[128];
+    for (size_t i = 0; i < cloud.size(); ++i) {
+        const Vec3d& p = cloud.positions[i];
+        const Rgb8& c = cloud.colors[i];
+        std::snprintf(line, sizeof line, "%.17g %.17g %.17g %u %u %u\n", p[0], p[1], p[2], c[0], c[1], c[2]);
+        text += line;
+    }
+    const std::string input = test::write_text("budget.xyz", text);
+    PointsBuildSettings settings = quiet(4096);
+    const std::string in_core = test::scratch("budget_text_in_core.cpq"), out = test::scratch("budget_text.cpq");
+    EXPECT_FALSE(build_points(read_point_cloud(input), in_core, settings).out_of_core);
+    settings.memory_budget = kPointsMinimumBudget;  // below the 600k points' 49 MiB
+    const PointsBuildReport report = build_points_file(input, out, settings);
     EXPECT_TRUE(report.out_of_core);
-    EXPECT_TRUE(file_bytes(budget) == file_bytes(in_core));
+    EXPECT_EQ(report.input_points, cloud.size());
+    EXPECT_TRUE(file_bytes(out) == file_bytes(in_core));
 }
 
 }  // namespace

@@ -45,4 +45,8 @@ private:
     bool help_ = false;
 };
 
+// A size like 512M or 2G (K, M, G, T: powers of 1024; a plain number is bytes). Throws
+// UsageError naming `what` if `text` is not one.
+uint64_t parse_size(const std::string& text, const std::string& what);
+
 }  // namespace catpaq
