@@ -34,8 +34,6 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
-#include <iterator>
 #include <sstream>
 #include <string>
 #include <sys/resource.h>
@@ -47,6 +45,7 @@
 
 #include <meshoptimizer.h>
 
+#include "base/atomic_file.h"
 #include "base/child_process.h"
 #include "base/error.h"
 #include "mesh/io.h"
@@ -167,11 +166,6 @@ double simplify_points_baseline(const PointCloud& cloud) {
     return double(cloud.size()) / t;
 }
 
-std::string file_contents(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
-
 // The largest cloud again under each budget below its in-core peak: out of core, its peak
 // against the budget, its time against the in-core conversion's (same run), and whether it
 // wrote the same dataset.
@@ -181,7 +175,7 @@ void print_out_of_core(const std::string& self, const std::string& cloud_path, c
                 in_core.peak_mib);
     std::printf("%10s %8s %8s %10s %9s %11s %7s %7s %11s %5s\n", "budget MiB", "wall s", "cpu s", "Mpt/s", "peak MiB",
                 "peak/budget", "chunks", "passes", "time ratio", "same");
-    const std::string expected = file_contents(in_core_dataset);
+    const std::string expected = read_file(in_core_dataset);
     for (uint64_t budget : budgets) {
         PointsBuildSettings s = settings;
         s.memory_budget = budget;
@@ -189,7 +183,7 @@ void print_out_of_core(const std::string& self, const std::string& cloud_path, c
         const Conversion c = convert_in_child(self, cloud_path, output, s);
         std::printf("%10.0f %8.2f %8.2f %10.3f %9.0f %11.3f %7.0f %7.0f %11.2f %5s\n", double(budget) / (1 << 20), c.seconds,
                     c.cpu_seconds, c.points_per_second / 1e6, c.peak_mib, c.peak_mib * (1 << 20) / double(budget), c.chunks,
-                    c.split_passes, c.seconds / in_core.seconds, file_contents(output) == expected ? "yes" : "NO");
+                    c.split_passes, c.seconds / in_core.seconds, read_file(output) == expected ? "yes" : "NO");
         std::fflush(stdout);
         fs::remove(output);
     }

@@ -3,19 +3,12 @@
 // in-core converter writes, for every chunk size.
 #include <gtest/gtest.h>
 
-#include <fstream>
-#include <iterator>
-
+#include "base/atomic_file.h"
 #include "points/builder.h"
 #include "support.h"
 
 namespace catpaq {
 namespace {
-
-std::string file_bytes(const std::string& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
 
 PointsBuildSettings quiet(size_t node_points = 512) {
     PointsBuildSettings settings;
@@ -30,7 +23,7 @@ void expect_same_for_chunk_sizes(const PointCloud& cloud, PointsBuildSettings se
     const std::string in_core = test::scratch(name + "_in_core.cpq");
     const PointsBuildReport reference = build_points(cloud, in_core, settings);
     EXPECT_FALSE(reference.out_of_core);
-    const std::string expected = file_bytes(in_core);
+    const std::string expected = read_file(in_core);
     for (size_t chunk : chunks) {
         settings.chunk_points = chunk;
         // A tiny budget leaves the split passes 2 MiB of histograms: a level of more than two
@@ -44,7 +37,7 @@ void expect_same_for_chunk_sizes(const PointCloud& cloud, PointsBuildSettings se
             EXPECT_GE(report.split_passes, 3u);
         }
         EXPECT_EQ(report.nodes, reference.nodes);
-        EXPECT_TRUE(file_bytes(path) == expected) << name << ": chunks of " << chunk << " points give another dataset";
+        EXPECT_TRUE(read_file(path) == expected) << name << ": chunks of " << chunk << " points give another dataset";
     }
 }
 
@@ -121,7 +114,7 @@ TEST(PointsOutOfCore, ATextFileMovesOutOfCoreWhenItsPointsStopFittingTheBudget) 
     const PointsBuildReport report = build_points_file(input, out, settings);
     EXPECT_TRUE(report.out_of_core);
     EXPECT_EQ(report.input_points, cloud.size());
-    EXPECT_TRUE(file_bytes(out) == file_bytes(in_core));
+    EXPECT_TRUE(read_file(out) == read_file(in_core));
 }
 
 }  // namespace

@@ -6,7 +6,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <iterator>
 #include <string>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -44,10 +43,6 @@ inline ToolRun run(const std::string& args, bool stdout_only = false) {
 }
 
 inline void write_text(const fs::path& path, const std::string& text) { std::ofstream(path) << text; }
-inline std::string read_bytes(const fs::path& path) {
-    std::ifstream in(path, std::ios::binary);
-    return std::string(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
-}
 
 // No output and no temporary left next to it.
 inline void expect_nothing_written(const fs::path& output) {

@@ -5,6 +5,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "base/atomic_file.h"
 #include "cli_support.h"
 #include "common_codec/archive.h"
 #include "mesh/generators.h"
@@ -154,7 +155,7 @@ TEST(CliFormats, PointsBeyondTheMemoryBudgetConvertOutOfCoreWithinIt) {
     EXPECT_TRUE(j.at("out_of_core").get<bool>());
     EXPECT_GT(j.at("chunks").get<size_t>(), 1u);
     EXPECT_LE(j.at("peak_rss").get<uint64_t>(), uint64_t(48) << 20);
-    EXPECT_TRUE(read_bytes(out) == read_bytes(in_core)) << "out of core wrote another dataset";
+    EXPECT_TRUE(read_file(out.string()) == read_file(in_core.string())) << "out of core wrote another dataset";
 }
 
 // What AQP cannot map is refused with a message and leaves nothing behind: a mesh without
