@@ -28,6 +28,11 @@ struct EstimateInput {
     bool orient_up = false;         // else outward from the origin (the bounds' centre)
 };
 
+// The eigenvector of the symmetric `cov` (its six distinct entries: xx, xy, xz, yy, yz, zz) with
+// the smallest eigenvalue, and the three eigenvalues ascending: exactly the bits of Eigen's
+// SelfAdjointEigenSolver::computeDirect (eigenvectors().col(0), eigenvalues()).
+void smallest_eigenvector(const double cov[6], double vector[3], double values[3]);
+
 // Estimates normals (when `normals` is not null) and radii (when `radii` is not null) of the
 // points [begin, end), which are one leaf of the hierarchy: orientation is made consistent
 // within the leaf. Writes normals[begin, end) and radii[begin, end). The neighbours are exact:
