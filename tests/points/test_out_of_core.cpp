@@ -79,6 +79,23 @@ TEST(PointsOutOfCore, GivesTheInCoreDatasetWithInputNormalsAndRadiiFarFromTheOri
     expect_same_for_chunk_sizes(cloud, quiet(), {2048, 11000}, "offset");
 }
 
+// Degenerate clouds split mostly by rank (planes leave a side empty, or there is no extent to
+// split): on a line, on a plane, and all at one point (with radii, which need no estimate).
+TEST(PointsOutOfCore, GivesTheInCoreDatasetOnALineOnAPlaneAndAtOnePoint) {
+    PointCloud line, plane, point;
+    uint64_t state = 17;
+    for (size_t i = 0; i < 20000; ++i) {
+        const double t = test::random_unit(state), u = test::random_unit(state);
+        line.positions.push_back({1 + 2 * t, 1 + 2 * t, 1 + 2 * t});
+        plane.positions.push_back({t, u, 0.5});
+        point.positions.push_back({3, -2, 7});
+    }
+    point.radii.assign(point.size(), 0.01f);
+    expect_same_for_chunk_sizes(line, quiet(), {2048, 2049}, "line");
+    expect_same_for_chunk_sizes(plane, quiet(), {2048, 2049}, "plane");
+    expect_same_for_chunk_sizes(point, quiet(), {2048, 2049}, "point");
+}
+
 // A budget below the in-core estimate converts out of core (tests/tools: CliFormats.
 // PointsBeyondTheMemoryBudgetConvertOutOfCoreWithinIt), unless it is too small even for that.
 TEST(PointsOutOfCore, ABudgetTooSmallEvenOutOfCoreIsRefusedBeforeAnythingIsWritten) {
