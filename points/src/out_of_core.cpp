@@ -6,6 +6,11 @@
 #include <cassert>
 #include <cmath>
 
+#include <tbb/blocked_range.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
+#include <tbb/task_arena.h>
+
 #include "base/error.h"
 #include "base/progress.h"
 #include "base/temp_file.h"
@@ -96,16 +101,23 @@ void OutOfCorePoints::add(const PointCloud& batch) {
 // Calls visit(p, index) for every input point in input order: p its position relative to the
 // origin as the in-core partition's items hold it (the float of the double difference, written
 // once to split_positions_ so that the passes read half the bytes).
-template <class Visit>
-void OutOfCorePoints::for_each_input(Visit visit) {
+// Each block's points are visited in parallel, visit(tally, p, index) counting into a tally of
+// its thread's (make_tally() makes one); returns the tallies, for the caller to add up.
+template <class Tally, class MakeTally, class Visit>
+std::vector<Tally> OutOfCorePoints::for_each_input(MakeTally make_tally, Visit visit) {
+    tbb::enumerable_thread_specific<Tally> tallies(make_tally);
     std::vector<float> block(3 * kBlockPoints);
     for (size_t first = 0; first < summary_.count; first += kBlockPoints) {
         const size_t m = std::min(kBlockPoints, summary_.count - first);
         split_positions_->read_at(first * 12, block.data(), m * 12);
-        for (size_t i = 0; i < m; ++i) visit(&block[3 * i], uint32_t(first + i));
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
+            Tally& tally = tallies.local();
+            for (size_t i = r.begin(); i < r.end(); ++i) visit(tally, &block[3 * i], uint32_t(first + i));
+        });
         if (progress_) progress_->add(m);
     }
     ++split_passes_;
+    return std::vector<Tally>(tallies.begin(), tallies.end());
 }
 
 // The floats the passes read, from the doubles in input order.
@@ -189,28 +201,58 @@ void OutOfCorePoints::decide_group(const std::vector<uint32_t>& group, int width
     std::vector<Slot> slots(g);
     for (size_t s = 0; s < g; ++s)
         for (int a = 0; a < 3; ++a) slots[s].median[a].rank = top_[group[s]].count / 2;
+    // What a pass counts, per thread (added up after it): histograms of the group's selections
+    // (three per node), and in the first pass the nodes' counts and tight boxes.
+    struct Tally {
+        std::vector<uint32_t> hist;
+        std::vector<uint64_t> n;
+        std::vector<std::array<float, 6>> box;  // lo, hi
+        std::vector<std::array<uint64_t, 4>> below;
+    };
+    auto make_tally = [&] {
+        Tally t;
+        t.hist.assign(g * 3 * buckets, 0);
+        t.n.assign(g, 0);
+        t.box.assign(g, {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY});
+        t.below.assign(g, {0, 0, 0, 0});
+        return t;
+    };
     std::vector<uint32_t> hist(g * 3 * buckets);
     auto counts_of = [&](size_t s, int j) { return &hist[(s * 3 + size_t(j)) * buckets]; };
+    auto add_histograms = [&](const std::vector<Tally>& tallies) {
+        std::fill(hist.begin(), hist.end(), 0u);
+        for (const Tally& t : tallies)
+            for (size_t i = 0; i < hist.size(); ++i) hist[i] += t.hist[i];
+    };
 
     // The medians' keys, `width` bits a pass; the first pass also finds the tight boxes.
     for (bool first = true; !slots[0].median[0].done(); first = false) {
-        std::fill(hist.begin(), hist.end(), 0u);
-        for_each_input([&](const float p[3], uint32_t index) {
+        const std::vector<Tally> tallies = for_each_input<Tally>(make_tally, [&](Tally& t, const float p[3], uint32_t index) {
             const int32_t s = slot_for(p, index);
             if (s < 0) return;
-            Slot& slot = slots[size_t(s)];
+            const Slot& slot = slots[size_t(s)];
             if (first) {
-                ++slot.n;
+                ++t.n[size_t(s)];
                 for (int a = 0; a < 3; ++a) {
-                    slot.lo[a] = std::min(slot.lo[a], p[a]);
-                    slot.hi[a] = std::max(slot.hi[a], p[a]);
+                    t.box[size_t(s)][a] = std::min(t.box[size_t(s)][a], p[a]);
+                    t.box[size_t(s)][3 + a] = std::max(t.box[size_t(s)][3 + a], p[a]);
                 }
             }
             for (int a = 0; a < 3; ++a) {
                 const int64_t b = slot.median[a].bucket(float_order_key(p[a]), width);
-                if (b >= 0) ++counts_of(size_t(s), a)[b];
+                if (b >= 0) ++t.hist[(size_t(s) * 3 + size_t(a)) * buckets + size_t(b)];
             }
         });
+        add_histograms(tallies);
+        if (first)
+            for (const Tally& t : tallies)
+                for (size_t s = 0; s < g; ++s) {
+                    slots[s].n += t.n[s];
+                    for (int a = 0; a < 3; ++a) {
+                        slots[s].lo[a] = std::min(slots[s].lo[a], t.box[s][a]);
+                        slots[s].hi[a] = std::max(slots[s].hi[a], t.box[s][3 + a]);
+                    }
+                }
         for (size_t s = 0; s < g; ++s) {
             if (first && slots[s].n != top_[group[s]].count)
                 fail("out-of-core partition: a node's points changed between passes");
@@ -258,12 +300,14 @@ void OutOfCorePoints::decide_group(const std::vector<uint32_t>& group, int width
             if (!plan.exact_median[a]) plan.count_index[a] = want_count(slot, a, plane);
         }
     }
-    for_each_input([&](const float p[3], uint32_t index) {
-        const int32_t s = slot_for(p, index);
-        if (s < 0) return;
-        Slot& slot = slots[size_t(s)];
-        for (int c = 0; c < slot.counts; ++c) slot.below[c] += p[slot.count_axis[c]] < slot.count_plane[c];
-    });
+    for (const Tally& t : for_each_input<Tally>(make_tally, [&](Tally& t, const float p[3], uint32_t index) {
+             const int32_t s = slot_for(p, index);
+             if (s < 0) return;
+             const Slot& slot = slots[size_t(s)];
+             for (int c = 0; c < slot.counts; ++c) t.below[size_t(s)][c] += p[slot.count_axis[c]] < slot.count_plane[c];
+         }))
+        for (size_t s = 0; s < g; ++s)
+            for (int c = 0; c < 4; ++c) slots[s].below[c] += t.below[s][c];
 
     // The decisions; splits by rank still need their threshold's input index.
     for (size_t s = 0; s < g; ++s) {
@@ -305,16 +349,15 @@ void OutOfCorePoints::decide_group(const std::vector<uint32_t>& group, int width
     bool any_rank = false;
     for (size_t s = 0; s < g; ++s) any_rank |= ranked(s);
     while (any_rank) {
-        std::fill(hist.begin(), hist.end(), 0u);
-        for_each_input([&](const float p[3], uint32_t index) {
+        add_histograms(for_each_input<Tally>(make_tally, [&](Tally& t, const float p[3], uint32_t index) {
             const int32_t s = slot_for(p, index);
             if (s < 0 || !ranked(size_t(s))) return;
             const Slot& slot = slots[size_t(s)];
             const int a = slot.rank_axis;
             if (float_order_key(p[a]) != slot.median[a].prefix) return;
             const int64_t b = slot.tie.bucket(index, width);
-            if (b >= 0) ++counts_of(size_t(s), 0)[b];
-        });
+            if (b >= 0) ++t.hist[size_t(s) * 3 * buckets + size_t(b)];
+        }));
         bool done = true;
         for (size_t s = 0; s < g; ++s)
             if (ranked(s)) {
@@ -360,8 +403,10 @@ void OutOfCorePoints::decide_top_splits() {
         for (const uint32_t t : pending)
             if (top_[t].depth >= kPointMaxDepth) fail("the point hierarchy would be deeper than %d levels", kPointMaxDepth);
         const uint64_t wide = 3 * (uint64_t(1) << 16) * sizeof(uint32_t), narrow = 3 * (uint64_t(1) << 11) * sizeof(uint32_t);
-        const int width = pending.size() * wide <= histogram_bytes_ ? 16 : 11;
-        const size_t group_size = size_t(std::max<uint64_t>(1, histogram_bytes_ / (width == 16 ? wide : narrow)));
+        // A histogram per thread of the passes and one for their sum.
+        const uint64_t copies = uint64_t(tbb::this_task_arena::max_concurrency()) + 1;
+        const int width = pending.size() * wide * copies <= histogram_bytes_ ? 16 : 11;
+        const size_t group_size = size_t(std::max<uint64_t>(1, histogram_bytes_ / ((width == 16 ? wide : narrow) * copies)));
         for (size_t first = 0; first < pending.size(); first += group_size) {
             const size_t last = std::min(pending.size(), first + group_size);
             decide_group(std::vector<uint32_t>(pending.begin() + ptrdiff_t(first), pending.begin() + ptrdiff_t(last)), width);
@@ -425,21 +470,26 @@ void OutOfCorePoints::distribute() {
         cursor[c] += b.positions.size();
         b.positions.clear(), b.indices.clear(), b.normals.clear(), b.colors.clear(), b.radii.clear();
     };
+    std::vector<uint32_t> chunk_ids(kBlockPoints);
     for (size_t first = 0; first < summary_.count; first += kBlockPoints) {
         const size_t m = std::min(kBlockPoints, summary_.count - first);
         const std::vector<Vec3d> positions = read_array<Vec3d>(in_positions_.get(), first, m);
         const std::vector<Vec3f> normals = read_array<Vec3f>(in_normals_.get(), first, m);
         const std::vector<Rgb8> colors = read_array<Rgb8>(in_colors_.get(), first, m);
         const std::vector<float> radii = read_array<float>(in_radii_.get(), first, m);
+        // Where each point goes, in parallel; then appended in input order.
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 4096), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i < r.end(); ++i) {
+                float f[3];
+                for (int a = 0; a < 3; ++a) f[a] = float(positions[i][a] - origin_[a]);
+                chunk_ids[i] = uint32_t(chunk_of[classify(f, uint32_t(first + i))]);
+            }
+        });
         for (size_t i = 0; i < m; ++i) {
             Vec3d p;
-            float f[3];
-            for (int a = 0; a < 3; ++a) {
-                p[a] = positions[i][a] - origin_[a];
-                f[a] = float(p[a]);
-            }
+            for (int a = 0; a < 3; ++a) p[a] = positions[i][a] - origin_[a];
             const uint32_t index = uint32_t(first + i);
-            const size_t c = size_t(chunk_of[classify(f, index)]);
+            const size_t c = chunk_ids[i];
             Buffer& b = buffers[c];
             b.positions.push_back(p);
             b.indices.push_back(index);

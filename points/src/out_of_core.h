@@ -74,8 +74,8 @@ public:
 private:
     struct TopNode;
     struct InputBlock;
-    template <class Visit>
-    void for_each_input(Visit visit);
+    template <class Tally, class MakeTally, class Visit>
+    std::vector<Tally> for_each_input(MakeTally make_tally, Visit visit);
     void decide_top_splits();
     void write_split_positions();
     void decide_group(const std::vector<uint32_t>& group, int width);
