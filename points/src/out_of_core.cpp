@@ -3,7 +3,6 @@
 
 #include <algorithm>
 #include <array>
-#include <cassert>
 #include <cmath>
 
 #include <tbb/blocked_range.h>
@@ -166,7 +165,7 @@ struct DigitSelect {
         uint64_t before = 0;
         const int bits = step(width);
         const uint32_t b = bucket_of_rank(counts, rank, &before);
-        prefix = known == 0 ? b : (prefix << bits | b);
+        prefix = prefix << bits | b;  // prefix is 0 before the first digit
         rank -= before;
         known += bits;
     }

@@ -197,6 +197,15 @@ protected:
         colors = lines_.has_colors();
     }
 
+    // The next line that holds something: comments stripped, blank lines skipped.
+    bool next_content_line(std::string_view& line) {
+        while (file_.next(line)) {
+            line = strip_comment(line);
+            if (!only_blanks(line)) return true;
+        }
+        return false;
+    }
+
     LineReader file_;
     PointLines lines_;
 
@@ -213,9 +222,7 @@ private:
     size_t read_lines(PointCloud& batch, size_t max) override {
         size_t n = 0;
         std::string_view line;
-        while (n < max && file_.next(line)) {
-            line = strip_comment(line);
-            if (only_blanks(line)) continue;
+        while (n < max && next_content_line(line)) {
             lines_.add(line, batch);
             ++n;
             ++seen_;
@@ -237,9 +244,7 @@ private:
     size_t read_lines(PointCloud& batch, size_t max) override {
         size_t n = 0;
         std::string_view line;
-        while (n < max && file_.next(line)) {
-            line = strip_comment(line);
-            if (only_blanks(line)) continue;
+        while (n < max && next_content_line(line)) {
             if (!have_count_ || seen_ == expected_) {
                 read_count(line);
                 continue;
