@@ -21,6 +21,8 @@
 #include <cmath>
 #include <queue>
 
+#include <tbb/parallel_invoke.h>
+
 #include "aqp/domain.h"
 #include "base/error.h"
 #include "base/progress.h"
@@ -33,6 +35,15 @@ namespace {
 
 using Tri = std::array<uint32_t, 3>;
 constexpr double kPi = 3.14159265358979323846;
+// The halves (simplify_halves) stop at this many times their share of the target, or at a 16th
+// of their triangles if that is more: the whole then evens out the band, which the halves leave
+// at full resolution. (Stopping at 8 times the target, the 1M scan's band stayed a strip of small
+// triangles beside the large ones, and its base domain folded; at 1/8, 1/16 and 1/32 the 1M
+// scans' distortions matched the sequential run's.)
+constexpr size_t kHalvesTargetFactor = 8;
+constexpr size_t kHalvesReduction = 16;
+// A half leaves at least this many of its side's vertices of any component to the whole.
+constexpr size_t kHalfComponentFloor = 64;
 
 Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
 Vec3d cross(const Vec3d& a, const Vec3d& b) {
@@ -89,7 +100,9 @@ std::array<double, 3> flat_bary(const Vec2& p, const Vec2& a, const Vec2& b, con
 class DomainSimplifier {
 public:
     explicit DomainSimplifier(const Mesh& mesh);
-    void simplify(size_t target, Progress* progress, DomainReport& report);
+    // Simplifies to `target` triangles: the two halves of a large surface first, at once, then
+    // the whole (see simplify_halves).
+    void simplify(size_t target, size_t halves_min_vertices, Progress* progress, DomainReport& report);
     Parameterization finish() const;
     size_t alive_triangles() const { return alive_triangles_; }
     // Triangles of the components too small to simplify (kept whole).
@@ -110,22 +123,47 @@ private:
         bool operator<(const Entry& o) const { return cost > o.cost; }  // smallest cost first
     };
 
+    // What one simplifying thread keeps to itself. The halves' two workers (side 1 and 2) write
+    // only the mesh data of their own side's vertices and triangles, so they run at once and
+    // each does what it would do alone; the last worker (side 0) takes every vertex.
+    struct Worker {
+        uint8_t side = 0;
+        std::priority_queue<Entry> queue;
+        uint32_t mark_id = 0;  // the halves' workers count from disjoint ranges
+        size_t alive_triangles = 0;  // side 0: all; else those of the side's own vertices
+        size_t rejected = 0;
+        // Side 1 and 2: the side's own vertices left in each component, and those removed.
+        std::vector<uint32_t> component_left, component_removed;
+        // Scratch.
+        Ring ring;
+        std::vector<Vec2> flat;
+        std::vector<std::pair<double, size_t>> order;
+    };
+    // The count the collapse rules see for a component: its vertices left, or for a half's
+    // worker its own side's (see simplify_halves: a half keeps more than 12 of a component, so
+    // the rules decide as they would on the whole count).
+    size_t component_size(const Worker& w, uint32_t c) const {
+        return w.side ? w.component_left[c] : component_vertices_[c];
+    }
+    void simplify_halves(size_t target, Progress* progress);
+    void run(Worker& w, size_t target, Progress* progress);
+
     bool ring_of(uint32_t v, Ring& r) const;
     bool flatten(uint32_t v, const Ring& r, std::vector<Vec2>& flat) const;
     // Whether v may collapse into u = r.w[j], in two halves: the rules that need neither the
     // flattening nor the positions (border, component size, valences, link condition; they
     // refuse most candidates, so update() flattens a ring only once one passes them), then the
     // flattened fan and the shapes, and the cost. collapse_cost runs both.
-    bool collapse_topology_ok(uint32_t v, const Ring& r, size_t j, double& valence_change);
+    bool collapse_topology_ok(Worker& w, uint32_t v, const Ring& r, size_t j, double& valence_change);
     bool collapse_geometry_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double valence_change,
                                 double& cost) const;
-    bool collapse_cost(uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double& cost) {
+    bool collapse_cost(Worker& w, uint32_t v, const Ring& r, const std::vector<Vec2>& flat, size_t j, double& cost) {
         double valence_change = 0;
-        return collapse_topology_ok(v, r, j, valence_change) &&
+        return collapse_topology_ok(w, v, r, j, valence_change) &&
                collapse_geometry_cost(v, r, flat, j, valence_change, cost);
     }
-    void update(uint32_t v);
-    void collapse(uint32_t v, uint32_t u);
+    void update(Worker& w, uint32_t v);
+    void collapse(Worker& w, uint32_t v, uint32_t u);
     double keep_penalty(uint32_t u) const;
     double ring_quality(uint32_t v, const Ring& r) const;
     int corner(uint32_t t, uint32_t v) const {
@@ -147,14 +185,10 @@ private:
     std::vector<std::vector<uint32_t>> tri_points_;  // removed vertices lying in each triangle
     std::vector<uint32_t> stamp_, target_;
     std::vector<uint32_t> mark_;
-    uint32_t mark_id_ = 0;
-    std::priority_queue<Entry> queue_;
+    uint32_t mark_id_ = 0;  // the next worker's first
+    std::vector<uint8_t> side_;  // while the halves simplify: 1 or 2, 0 for the band between them
     size_t alive_triangles_ = 0, frozen_triangles_ = 0;
     size_t rejected_ = 0;
-    // Scratch.
-    Ring ring_;
-    std::vector<Vec2> flat_;
-    std::vector<std::pair<double, size_t>> order_;
 };
 
 DomainSimplifier::DomainSimplifier(const Mesh& mesh) : mesh_(mesh) {
@@ -315,14 +349,16 @@ bool DomainSimplifier::flatten(uint32_t v, const Ring& r, std::vector<Vec2>& fla
     return true;
 }
 
-bool DomainSimplifier::collapse_topology_ok(uint32_t v, const Ring& r, size_t j, double& valence_change) {
+bool DomainSimplifier::collapse_topology_ok(Worker& worker, uint32_t v, const Ring& r, size_t j, double& valence_change) {
     const uint32_t u = r.w[j];
     const size_t n = r.w.size(), d = r.t.size();
     // Border vertices move only along the border; an ear (one triangle) has nowhere to put its
     // points.
     if (r.open && ((j != 0 && j != n - 1) || d < 2)) return false;
     const uint32_t c = component_[v];
-    if (component_frozen_[c] || component_vertices_[c] <= (component_open_[c] ? 3u : 4u)) return false;
+    const size_t size = component_size(worker, c);
+    if (component_frozen_[c] || size <= (component_open_[c] ? 3u : 4u)) return false;
+    if (worker.side && size <= kHalfComponentFloor) return false;
     // Valences near 6 (4 on the border): a base vertex of valence 3 is a cone of 180 degrees in
     // the domain, where the surface around it must be squeezed to half its angle.
     auto valence = [&](uint32_t w) { return int(vtris_[w].size()) + border_[w]; };
@@ -331,29 +367,29 @@ bool DomainSimplifier::collapse_topology_ok(uint32_t v, const Ring& r, size_t j,
         return double((val - target) * (val - target));
     };
     const int u_after = valence(u) + int(n) - (r.open ? 3 : 4);
-    if (u_after < (border_[u] ? 2 : 4) && component_vertices_[c] > 12) return false;
+    if (u_after < (border_[u] ? 2 : 4) && size > 12) return false;
     // Around a base vertex the surface's triangles share a cone of 60 degrees per base triangle:
     // with more base triangles than surface triangles there (a valence 8 base vertex with 6
     // surface triangles spans 480 degrees) they are stretched past what the second ring of
     // surface triangles can follow (folds seen on the bunny and a 200k scan).
-    if (u_after > int(original_degree_[u]) + kValenceOverDegree && component_vertices_[c] > 12) return false;
+    if (u_after > int(original_degree_[u]) + kValenceOverDegree && size > 12) return false;
     valence_change = deviation(u, u_after) - deviation(u, valence(u)) - deviation(v, int(n));
     for (size_t o : {j == 0 ? (r.open ? n : n - 1) : j - 1, j + 1}) {
         if (o >= n) continue;  // (the open ring's ends have one neighbour on the edge's side)
         const uint32_t x = r.w[o];
         const int after = valence(x) - 1;
-        if (after < (border_[x] ? 2 : 4) && component_vertices_[c] > 12) return false;
+        if (after < (border_[x] ? 2 : 4) && size > 12) return false;
         valence_change += deviation(x, after) - deviation(x, valence(x));
     }
     // Link condition: u and v share exactly the vertices of the triangles on edge uv.
-    ++mark_id_;
-    for (uint32_t w : r.w) mark_[w] = mark_id_;
+    const uint32_t mark = ++worker.mark_id;
+    for (uint32_t w : r.w) mark_[w] = mark;
     size_t common = 0;
     for (uint32_t t : vtris_[u])
         for (uint32_t w : tris_[t])
-            if (w != u && w != v && mark_[w] == mark_id_) {
+            if (w != u && w != v && mark_[w] == mark) {
                 ++common;
-                mark_[w] = mark_id_ - 1;  // count each once
+                mark_[w] = mark - 1;  // count each once
             }
     const bool border_edge = r.open;  // (j is an end of an open ring)
     return common == (border_edge ? 1u : 2u);
@@ -413,39 +449,47 @@ double DomainSimplifier::keep_penalty(uint32_t u) const {
     return degree <= 4 ? 8.0 : degree == 5 ? 2.0 : 1.0;
 }
 
-void DomainSimplifier::update(uint32_t v) {
+void DomainSimplifier::update(Worker& w, uint32_t v) {
+    // A half's worker touches only its side's vertices, and collapses only those whose ring is
+    // all of its side: the band's vertices and their data stay as they are until the end.
+    if (w.side && side_[v] != w.side) return;
     ++stamp_[v];
     target_[v] = kNone;
-    if (!alive_[v] || !ring_of(v, ring_)) return;
+    Ring& ring = w.ring;
+    if (!alive_[v] || !ring_of(v, ring)) return;
+    if (w.side)
+        for (uint32_t x : ring.w)
+            if (side_[x] != w.side) return;
+    std::vector<std::pair<double, size_t>>& order = w.order;
     // Candidates by increasing edge length: a collapse costs at least its squared length (the
     // other terms only add or multiply by at least 1), so once that passes the best cost found,
     // no longer edge can win.
     const Vec3d& p = mesh_.positions[v];
-    order_.clear();
-    for (size_t j = 0; j < ring_.w.size(); ++j) {
-        const Vec3d e = sub(mesh_.positions[ring_.w[j]], p);
-        order_.push_back({dot(e, e), j});
+    order.clear();
+    for (size_t j = 0; j < ring.w.size(); ++j) {
+        const Vec3d e = sub(mesh_.positions[ring.w[j]], p);
+        order.push_back({dot(e, e), j});
     }
-    std::sort(order_.begin(), order_.end());
+    std::sort(order.begin(), order.end());
     double best = INFINITY;
     bool flattened = false;
-    for (const auto& [length2, j] : order_) {
+    for (const auto& [length2, j] : order) {
         if (length2 >= best) break;
         double valence_change = 0, cost = 0;
-        if (!collapse_topology_ok(v, ring_, j, valence_change)) continue;
+        if (!collapse_topology_ok(w, v, ring, j, valence_change)) continue;
         if (!flattened) {
-            if (!flatten(v, ring_, flat_)) return;  // no collapse of v is possible
+            if (!flatten(v, ring, w.flat)) return;  // no collapse of v is possible
             flattened = true;
         }
-        if (collapse_geometry_cost(v, ring_, flat_, j, valence_change, cost) && cost < best) {
+        if (collapse_geometry_cost(v, ring, w.flat, j, valence_change, cost) && cost < best) {
             best = cost;
-            target_[v] = ring_.w[j];
+            target_[v] = ring.w[j];
         }
     }
-    if (target_[v] != kNone) queue_.push({best, v, stamp_[v]});
+    if (target_[v] != kNone) w.queue.push({best, v, stamp_[v]});
 }
 
-void DomainSimplifier::collapse(uint32_t v, uint32_t u) {
+void DomainSimplifier::collapse(Worker& worker, uint32_t v, uint32_t u) {
     Ring r;
     std::vector<Vec2> flat;
     bool ok = ring_of(v, r) && flatten(v, r, flat);
@@ -560,7 +604,7 @@ void DomainSimplifier::collapse(uint32_t v, uint32_t u) {
         uint32_t t = r.t[i];
         if (i == j || r.next(i) == j) {
             tri_alive_[t] = 0;
-            --alive_triangles_;
+            --worker.alive_triangles;
             for (uint32_t w : tris_[t]) {
                 auto& list = vtris_[w];
                 list.erase(std::find(list.begin(), list.end(), t));
@@ -572,43 +616,133 @@ void DomainSimplifier::collapse(uint32_t v, uint32_t u) {
     }
     vtris_[v].clear();
     alive_[v] = 0;
-    --component_vertices_[component_[v]];
+    if (worker.side) {
+        --worker.component_left[component_[v]];
+        ++worker.component_removed[component_[v]];
+    } else {
+        --component_vertices_[component_[v]];
+    }
     quadric_[u].add(quadric_[v]);
 
     // Costs around u changed: u, its neighbours and theirs (the link condition looks that far).
-    ++mark_id_;
+    const uint32_t mark = ++worker.mark_id;
     std::vector<uint32_t> around;
     for (uint32_t t : vtris_[u])
         for (uint32_t w : tris_[t])
-            if (mark_[w] != mark_id_) mark_[w] = mark_id_, around.push_back(w);
-    for (uint32_t w : around) update(w);
+            if (mark_[w] != mark) mark_[w] = mark, around.push_back(w);
+    for (uint32_t w : around) update(worker, w);
 }
 
-void DomainSimplifier::simplify(size_t target, Progress* progress, DomainReport& report) {
+// Collapses the worker's cheapest candidates until its triangles are down to `target` or it
+// has none left.
+void DomainSimplifier::run(Worker& w, size_t target, Progress* progress) {
     for (uint32_t v = 0; v < alive_.size(); ++v)
-        if (!vtris_[v].empty()) update(v);
+        if (!vtris_[v].empty()) update(w, v);
     size_t done = 0;
-    while (alive_triangles_ > target && !queue_.empty()) {
-        Entry e = queue_.top();
-        queue_.pop();
+    while (w.alive_triangles > target && !w.queue.empty()) {
+        Entry e = w.queue.top();
+        w.queue.pop();
         if (!alive_[e.v] || e.stamp != stamp_[e.v]) continue;
         uint32_t u = target_[e.v];
         // Neighbours may have changed since the cost was computed: check again.
         double cost;
         size_t j = 0;
-        if (!ring_of(e.v, ring_) || !flatten(e.v, ring_, flat_)) {
-            ++rejected_;
+        if (!ring_of(e.v, w.ring) || !flatten(e.v, w.ring, w.flat)) {
+            ++w.rejected;
             continue;
         }
-        while (j < ring_.w.size() && ring_.w[j] != u) ++j;
-        if (j == ring_.w.size() || !collapse_cost(e.v, ring_, flat_, j, cost)) {
-            ++rejected_;
-            update(e.v);
+        while (j < w.ring.w.size() && w.ring.w[j] != u) ++j;
+        if (j == w.ring.w.size() || !collapse_cost(w, e.v, w.ring, w.flat, j, cost)) {
+            ++w.rejected;
+            update(w, e.v);
             continue;
         }
-        collapse(e.v, u);
+        collapse(w, e.v, u);
         if (progress && (++done & 1023) == 0) progress->add(1024);
     }
+}
+
+// The first and largest part of the simplification on both cores: the vertices are split at the
+// median across the longest side of their box, and a band of the vertices within two edges of
+// the other side is kept out. Each side's worker then collapses only vertices whose rings are
+// all of its side, so it reads the band but never changes it, and the two never touch the same
+// data: each does exactly what it would do alone (the result does not depend on the threads).
+// A band vertex cannot neighbour both sides (their vertices would be two edges apart, and so in
+// the band), and a collapse only links vertices of one ring, so that stays so. The halves stop
+// at kHalvesTargetFactor times their share of the target; the whole is then simplified as one,
+// the band and the last, shape-deciding collapses included.
+void DomainSimplifier::simplify_halves(size_t target, Progress* progress) {
+    const size_t nv = alive_.size();
+    const Mesh& mesh = mesh_;
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t v = 0; v < nv; ++v)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], mesh.positions[v][a]);
+            hi[a] = std::max(hi[a], mesh.positions[v][a]);
+        }
+    int axis = 0;
+    for (int a = 1; a < 3; ++a)
+        if (hi[a] - lo[a] > hi[axis] - lo[axis]) axis = a;
+    std::vector<uint32_t> order(nv);
+    for (uint32_t v = 0; v < nv; ++v) order[v] = v;
+    auto by_coordinate = [&](uint32_t a, uint32_t b) {
+        const double x = mesh.positions[a][axis], y = mesh.positions[b][axis];
+        return x != y ? x < y : a < b;
+    };
+    std::nth_element(order.begin(), order.begin() + ptrdiff_t(nv / 2), order.end(), by_coordinate);
+    side_.assign(nv, 2);
+    for (size_t i = 0; i < nv / 2; ++i) side_[order[i]] = 1;
+    // The band: the ends of edges between the sides, and their neighbours.
+    std::vector<uint8_t> band(nv, 0);
+    for (const Tri& t : tris_)
+        if (side_[t[0]] != side_[t[1]] || side_[t[1]] != side_[t[2]])
+            for (uint32_t v : t) band[v] = 1;
+    std::vector<uint8_t> wide = band;
+    for (const Tri& t : tris_)
+        if (band[t[0]] || band[t[1]] || band[t[2]])
+            for (uint32_t v : t) wide[v] = 1;
+    for (uint32_t v = 0; v < nv; ++v)
+        if (wide[v]) side_[v] = 0;
+
+    Worker halves[2];
+    for (int h = 0; h < 2; ++h) {
+        Worker& w = halves[h];
+        w.side = uint8_t(h + 1);
+        w.mark_id = mark_id_ + uint32_t(h) * (1u << 30);
+        w.component_left.assign(component_vertices_.size(), 0);
+        w.component_removed.assign(component_vertices_.size(), 0);
+        for (uint32_t v = 0; v < nv; ++v)
+            if (side_[v] == w.side) ++w.component_left[component_[v]];
+        for (const Tri& t : tris_) w.alive_triangles += side_[t[0]] == w.side && side_[t[1]] == w.side && side_[t[2]] == w.side;
+    }
+    const double share = double(target) * kHalvesTargetFactor / double(std::max<size_t>(tris_.size(), 1));
+    size_t targets[2];
+    for (int h = 0; h < 2; ++h)
+        targets[h] = std::max(size_t(share * double(halves[h].alive_triangles)), halves[h].alive_triangles / kHalvesReduction);
+    tbb::parallel_invoke([&] { run(halves[0], targets[0], progress); }, [&] { run(halves[1], targets[1], progress); });
+
+    size_t next_mark = mark_id_;
+    for (const Worker& w : halves) {
+        for (size_t c = 0; c < component_vertices_.size(); ++c) component_vertices_[c] -= w.component_removed[c];
+        rejected_ += w.rejected;
+        next_mark = std::max<size_t>(next_mark, w.mark_id);
+    }
+    alive_triangles_ = size_t(std::count(tri_alive_.begin(), tri_alive_.end(), uint8_t(1)));
+    mark_id_ = uint32_t(next_mark) + 1;
+    std::vector<uint8_t>().swap(side_);
+}
+
+void DomainSimplifier::simplify(size_t target, size_t halves_min_vertices, Progress* progress, DomainReport& report) {
+    if (alive_.size() >= halves_min_vertices && tris_.size() > 4 * kHalvesTargetFactor * target) {
+        simplify_halves(target, progress);
+        report.half_collapses = size_t(std::count(alive_.begin(), alive_.end(), uint8_t(0)));
+    }
+    Worker whole;
+    whole.mark_id = mark_id_;
+    whole.alive_triangles = alive_triangles_;
+    run(whole, target, progress);
+    alive_triangles_ = whole.alive_triangles;
+    rejected_ += whole.rejected;
     report.collapses = size_t(std::count(alive_.begin(), alive_.end(), uint8_t(0)));
     report.rejected_collapses = rejected_;
 }
@@ -664,7 +798,8 @@ Parameterization build_parameterization(const Mesh& surface, const DomainOptions
     auto t0 = std::chrono::steady_clock::now();
     report.target_triangles = options.target_triangles ? options.target_triangles : default_domain_triangles(surface.triangle_count());
     DomainSimplifier simplifier(surface);
-    simplifier.simplify(report.target_triangles + simplifier.frozen_triangles(), progress, report);
+    simplifier.simplify(report.target_triangles + simplifier.frozen_triangles(), options.halves_min_vertices, progress,
+                        report);
     if (simplifier.alive_triangles() > 2 * report.target_triangles + 8 + simplifier.frozen_triangles())
         fail("the surface could not be simplified to %zu base triangles (it stopped at %zu): it has handles or thin "
              "parts the domain cannot follow at that size; ask for more domain triangles",

@@ -6,6 +6,8 @@
 
 #include <random>
 
+#include <tbb/global_control.h>
+
 #include "aqp/clean.h"
 #include "aqp/domain.h"
 #include "aqp/quad_layout.h"
@@ -24,11 +26,12 @@ struct Parameterized {
     DomainReport report;
 };
 
-Parameterized parameterize(const Mesh& input, size_t domain_triangles = 0) {
+Parameterized parameterize(const Mesh& input, size_t domain_triangles = 0, size_t halves_min_vertices = SIZE_MAX) {
     Parameterized p;
     p.surface = clean_to_manifold(input, {}).mesh;
     DomainOptions options;
     options.target_triangles = domain_triangles;
+    if (halves_min_vertices != SIZE_MAX) options.halves_min_vertices = halves_min_vertices;
     p.param = build_parameterization(p.surface, options, &p.report);
     return p;
 }
@@ -108,6 +111,51 @@ TEST(AqpParameterization, DistortionStaysLowOnSmoothShapes) {
         EXPECT_LT(c.angle_distortion_mean, 1.8) << c.describe();
         EXPECT_LT(c.angle_distortion_p99, 3.5) << c.describe();
         EXPECT_LT(c.area_distortion_mean, 1.6) << c.describe();
+    }
+}
+
+// The two halves simplified at once (DomainOptions::halves_min_vertices; forced here on meshes
+// below the default size) keep every property of the sequential run: a bijective map, low
+// distortion, the surface's topology, borders.
+TEST(AqpParameterization, SimplifyingInHalvesStaysBijectiveWithLowDistortion) {
+    for (const Mesh& m : {make_sphere(20000, 3), make_torus(20000, 3), make_scan_like(40000, 5)}) {
+        Parameterized p = parameterize(m, 0, 1);
+        EXPECT_GT(p.report.half_collapses, p.surface.vertex_count() / 2);  // most of the work
+        expect_bijective(p);
+        const ParamCheck& c = p.report.check;
+        EXPECT_LT(c.angle_distortion_mean, 1.8) << c.describe();
+        EXPECT_LT(c.angle_distortion_p99, 3.5) << c.describe();
+        EXPECT_LT(c.area_distortion_mean, 1.6) << c.describe();
+        std::vector<std::array<uint32_t, 3>> surface_triangles(p.surface.triangle_count());
+        for (size_t t = 0; t < surface_triangles.size(); ++t)
+            surface_triangles[t] = {p.surface.indices[3 * t], p.surface.indices[3 * t + 1], p.surface.indices[3 * t + 2]};
+        EXPECT_EQ(euler_characteristic(p.param.domain.vertex_count(), p.param.domain.triangles),
+                  euler_characteristic(p.surface.vertex_count(), surface_triangles));
+    }
+    Parameterized open = parameterize(make_hard_case(HardCase::Holes), 0, 1);
+    EXPECT_GT(open.report.half_collapses, 0u);
+    expect_bijective(open);
+    EXPECT_GT(open.report.base_border_edges, 0u);
+    // Below the default size, one sequential simplification.
+    EXPECT_EQ(parameterize(make_sphere(20000, 3)).report.half_collapses, 0u);
+}
+
+// The halves never touch the same data, so the map is the same whatever the threads.
+TEST(AqpParameterization, SimplifyingInHalvesGivesTheSameMapOnOneThreadAsOnTwo) {
+    const Mesh mesh = make_scan_like(40000, 9);
+    auto run = [&](int threads) {
+        tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
+        return parameterize(mesh, 0, 1);
+    };
+    const Parameterized one = run(1), two = run(2);
+    ASSERT_GT(two.report.half_collapses, 0u);
+    EXPECT_EQ(one.report.half_collapses, two.report.half_collapses);
+    EXPECT_EQ(one.param.domain.triangles, two.param.domain.triangles);
+    EXPECT_EQ(one.param.domain.vertex_source, two.param.domain.vertex_source);
+    ASSERT_EQ(one.param.points.size(), two.param.points.size());
+    for (size_t v = 0; v < one.param.points.size(); ++v) {
+        EXPECT_EQ(one.param.points[v].triangle, two.param.points[v].triangle) << v;
+        EXPECT_EQ(one.param.points[v].bary, two.param.points[v].bary) << v;
     }
 }
 
