@@ -42,6 +42,10 @@ constexpr double kPi = 3.14159265358979323846;
 // scans' distortions matched the sequential run's.)
 constexpr size_t kHalvesTargetFactor = 8;
 constexpr size_t kHalvesReduction = 16;
+// Rounds of halves: the second cuts across the first's band and takes the halves a further 16
+// times down, so that less is left to the whole, whose collapses are the costliest (each moves
+// the points of its ring's triangles, more the coarser they are).
+constexpr int kHalvesRounds = 2;
 // A half leaves at least this many of its side's vertices of any component to the whole.
 constexpr size_t kHalfComponentFloor = 64;
 
@@ -145,7 +149,7 @@ private:
     size_t component_size(const Worker& w, uint32_t c) const {
         return w.side ? w.component_left[c] : component_vertices_[c];
     }
-    void simplify_halves(size_t target, Progress* progress);
+    void simplify_halves(size_t target, int round, Progress* progress);
     void run(Worker& w, size_t target, Progress* progress);
 
     bool ring_of(uint32_t v, Ring& r) const;
@@ -185,7 +189,7 @@ private:
     std::vector<std::vector<uint32_t>> tri_points_;  // removed vertices lying in each triangle
     std::vector<uint32_t> stamp_, target_;
     std::vector<uint32_t> mark_;
-    uint32_t mark_id_ = 0;  // the next worker's first
+    uint32_t mark_id_ = 0;  // the whole's worker's first
     std::vector<uint8_t> side_;  // while the halves simplify: 1 or 2, 0 for the band between them
     size_t alive_triangles_ = 0, frozen_triangles_ = 0;
     size_t rejected_ = 0;
@@ -662,79 +666,93 @@ void DomainSimplifier::run(Worker& w, size_t target, Progress* progress) {
     }
 }
 
-// The first and largest part of the simplification on both cores: the vertices are split at the
-// median across the longest side of their box, and a band of the vertices within two edges of
-// the other side is kept out. Each side's worker then collapses only vertices whose rings are
+// A round of the simplification on both cores: the vertices left are split at the median across
+// the longest side of their box (the second longest in the second round), and a band of the
+// vertices within two edges of the other side is kept out. Each side's worker then collapses only vertices whose rings are
 // all of its side, so it reads the band but never changes it, and the two never touch the same
 // data: each does exactly what it would do alone (the result does not depend on the threads).
 // A band vertex cannot neighbour both sides (their vertices would be two edges apart, and so in
 // the band), and a collapse only links vertices of one ring, so that stays so. The halves stop
-// at kHalvesTargetFactor times their share of the target; the whole is then simplified as one,
-// the band and the last, shape-deciding collapses included.
-void DomainSimplifier::simplify_halves(size_t target, Progress* progress) {
+// at kHalvesTargetFactor times their share of the target or a kHalvesReduction-th of their
+// triangles; the whole is then simplified as one, the band and the last, shape-deciding
+// collapses included.
+void DomainSimplifier::simplify_halves(size_t target, int round, Progress* progress) {
     const size_t nv = alive_.size();
     const Mesh& mesh = mesh_;
-    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    std::vector<uint32_t> order;
     for (uint32_t v = 0; v < nv; ++v)
+        if (alive_[v] && !vtris_[v].empty()) order.push_back(v);
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (uint32_t v : order)
         for (int a = 0; a < 3; ++a) {
             lo[a] = std::min(lo[a], mesh.positions[v][a]);
             hi[a] = std::max(hi[a], mesh.positions[v][a]);
         }
-    int axis = 0;
-    for (int a = 1; a < 3; ++a)
-        if (hi[a] - lo[a] > hi[axis] - lo[axis]) axis = a;
-    std::vector<uint32_t> order(nv);
-    for (uint32_t v = 0; v < nv; ++v) order[v] = v;
+    // The first round cuts across the longest side, the next across the second longest, which
+    // cuts the first round's band in two.
+    int axes[3] = {0, 1, 2};
+    std::stable_sort(axes, axes + 3, [&](int a, int b) { return hi[a] - lo[a] > hi[b] - lo[b]; });
+    const int axis = axes[round % 2];
     auto by_coordinate = [&](uint32_t a, uint32_t b) {
         const double x = mesh.positions[a][axis], y = mesh.positions[b][axis];
         return x != y ? x < y : a < b;
     };
-    std::nth_element(order.begin(), order.begin() + ptrdiff_t(nv / 2), order.end(), by_coordinate);
+    const size_t half = order.size() / 2;
+    std::nth_element(order.begin(), order.begin() + ptrdiff_t(half), order.end(), by_coordinate);
     side_.assign(nv, 2);
-    for (size_t i = 0; i < nv / 2; ++i) side_[order[i]] = 1;
+    for (size_t i = 0; i < half; ++i) side_[order[i]] = 1;
     // The band: the ends of edges between the sides, and their neighbours.
     std::vector<uint8_t> band(nv, 0);
-    for (const Tri& t : tris_)
-        if (side_[t[0]] != side_[t[1]] || side_[t[1]] != side_[t[2]])
-            for (uint32_t v : t) band[v] = 1;
+    for (size_t t = 0; t < tris_.size(); ++t) {
+        const Tri& c = tris_[t];
+        if (tri_alive_[t] && (side_[c[0]] != side_[c[1]] || side_[c[1]] != side_[c[2]]))
+            for (uint32_t v : c) band[v] = 1;
+    }
     std::vector<uint8_t> wide = band;
-    for (const Tri& t : tris_)
-        if (band[t[0]] || band[t[1]] || band[t[2]])
-            for (uint32_t v : t) wide[v] = 1;
+    for (size_t t = 0; t < tris_.size(); ++t) {
+        const Tri& c = tris_[t];
+        if (tri_alive_[t] && (band[c[0]] || band[c[1]] || band[c[2]]))
+            for (uint32_t v : c) wide[v] = 1;
+    }
     for (uint32_t v = 0; v < nv; ++v)
         if (wide[v]) side_[v] = 0;
 
+    // Marks start afresh: each worker counts from its own half of the range.
+    std::fill(mark_.begin(), mark_.end(), 0u);
     Worker halves[2];
     for (int h = 0; h < 2; ++h) {
         Worker& w = halves[h];
         w.side = uint8_t(h + 1);
-        w.mark_id = mark_id_ + uint32_t(h) * (1u << 30);
+        w.mark_id = uint32_t(h) << 31;
         w.component_left.assign(component_vertices_.size(), 0);
         w.component_removed.assign(component_vertices_.size(), 0);
         for (uint32_t v = 0; v < nv; ++v)
-            if (side_[v] == w.side) ++w.component_left[component_[v]];
-        for (const Tri& t : tris_) w.alive_triangles += side_[t[0]] == w.side && side_[t[1]] == w.side && side_[t[2]] == w.side;
+            if (side_[v] == w.side && alive_[v]) ++w.component_left[component_[v]];
+        for (size_t t = 0; t < tris_.size(); ++t) {
+            const Tri& c = tris_[t];
+            w.alive_triangles += tri_alive_[t] && side_[c[0]] == w.side && side_[c[1]] == w.side && side_[c[2]] == w.side;
+        }
     }
-    const double share = double(target) * kHalvesTargetFactor / double(std::max<size_t>(tris_.size(), 1));
+    const double share = double(target) * kHalvesTargetFactor / double(std::max<size_t>(alive_triangles_, 1));
     size_t targets[2];
     for (int h = 0; h < 2; ++h)
         targets[h] = std::max(size_t(share * double(halves[h].alive_triangles)), halves[h].alive_triangles / kHalvesReduction);
     tbb::parallel_invoke([&] { run(halves[0], targets[0], progress); }, [&] { run(halves[1], targets[1], progress); });
 
-    size_t next_mark = mark_id_;
     for (const Worker& w : halves) {
         for (size_t c = 0; c < component_vertices_.size(); ++c) component_vertices_[c] -= w.component_removed[c];
         rejected_ += w.rejected;
-        next_mark = std::max<size_t>(next_mark, w.mark_id);
     }
     alive_triangles_ = size_t(std::count(tri_alive_.begin(), tri_alive_.end(), uint8_t(1)));
-    mark_id_ = uint32_t(next_mark) + 1;
+    std::fill(mark_.begin(), mark_.end(), 0u);
+    mark_id_ = 0;
     std::vector<uint8_t>().swap(side_);
 }
 
 void DomainSimplifier::simplify(size_t target, size_t halves_min_vertices, Progress* progress, DomainReport& report) {
-    if (alive_.size() >= halves_min_vertices && tris_.size() > 4 * kHalvesTargetFactor * target) {
-        simplify_halves(target, progress);
+    if (alive_.size() >= halves_min_vertices) {
+        for (int round = 0; round < kHalvesRounds && alive_triangles_ > 4 * kHalvesTargetFactor * target; ++round)
+            simplify_halves(target, round, progress);
         report.half_collapses = size_t(std::count(alive_.begin(), alive_.end(), uint8_t(0)));
     }
     Worker whole;
