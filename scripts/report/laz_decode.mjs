@@ -56,11 +56,12 @@ function loadLazPerf(modules) {
 }
 
 // A C++ exception from the WebAssembly module arrives as a pointer or an object; its message
-// where laz-perf's build gives one.
+// where laz-perf's build keeps one (0.0.7's does not: it was built without exception catching).
 function describe(module, e) {
-  if (e instanceof Error) return e.message;
+  const text = e instanceof Error ? e.message : String(e);
+  if (/Exception catching is disabled/.test(text)) return 'laz-perf refused the file (its WebAssembly build keeps no message)';
   if (typeof e === 'number' && module.getExceptionMessage) return module.getExceptionMessage(e).join(': ');
-  return String(e);
+  return text;
 }
 
 const options = parseArguments(process.argv.slice(2));
