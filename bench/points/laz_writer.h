@@ -8,9 +8,10 @@
 // it and every LAZ reader reads it: compressor 2, items POINT10 version 2 (and RGB12 version 2),
 // a "laszip encoded" VLR (record 22204) listing them, chunks of a fixed number of points (each
 // starts with its first point raw, then LASzip's adaptive arithmetic coder), the chunk table at
-// the end and its file offset in the 8 bytes at the start of the point data. Written from the
-// LAZ format's definition; tests/points/test_laz_writer.cpp checks the files against an
-// independent decoder (laz-perf, scripts/report/laz_decode.mjs), point for point, bit for bit.
+// the end and its file offset in the 8 bytes at the start of the point data. Our own code,
+// written from the format as LASzip defines it (its public source read for the exact model
+// updates); tests/points/test_laz_writer.cpp checks the files against an independent decoder
+// (laz-perf, scripts/report/laz_decode.mjs), point for point, bit for bit.
 #include <array>
 #include <cstddef>
 #include <cstdint>
