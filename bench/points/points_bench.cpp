@@ -20,17 +20,26 @@
 //   out of core  with --budgets, the largest cloud again under each budget: peak memory against
 //                the budget, time against the in-core conversion, and whether the dataset is the
 //                same (it must be)
+//   LAZ          with --laz, the first size's cloud again as LAZ (laz_writer.h: LASzip's
+//                pointwise chunked format, POINT10 v2 + RGB12 v2) at the grid step our converter
+//                used at the leaves (the median over leaves, and the smallest), offsets at the
+//                cloud's minimum, colours as 16 bits (v * 257): its bytes per point beside ours
+//                (leaves, all levels, and our position + colour streams), its encoding time (one
+//                thread), and laz-perf's decoding of the file compared with what was written
+//                (scripts/report/laz_decode.mjs; "not checked" when node or laz-perf is missing)
 //
 // usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]
 //                     [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]
-//                     [--budgets 128M,256M]
+//                     [--budgets 128M,256M] [--laz]
 //        points_bench --decode-only DATASET [--decode-runs 5]
 //        points_bench --compare DATASET DATASET
 // (--skip-rate skips the split and rate parts; sizes like 3e7 work for larger runs; --decode-only
 // runs only the decode part on a dataset kept from an earlier run, for quick codec iterations;
 // --compare decodes every node of two conversions of the same cloud, say by builds writing
 // different node versions, and fails unless every decoded point is bit for bit the same.)
+#include <algorithm>
 #include <cinttypes>
+#include <climits>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -55,6 +64,7 @@
 #include "points/builder.h"
 #include "points/dataset.h"
 #include "points/sampling.h"
+#include "laz_writer.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
@@ -292,6 +302,156 @@ int compare_decoded(const std::string& first, const std::string& second) {
     return 0;
 }
 
+// The grid steps of the leaves (the nodes that hold the input points, quantized once) and what
+// the dataset's nodes weigh: leaves alone and all levels.
+struct LeafQuantization {
+    double median_step = 0, smallest_step = 0, largest_step = 0;
+    size_t leaves = 0, leaf_points = 0, stored_points = 0;
+    uint64_t leaf_bytes = 0, payload_bytes = 0;
+};
+
+LeafQuantization leaf_quantization(const std::string& path) {
+    PointDataset dataset(path);
+    LeafQuantization q;
+    std::vector<double> steps;
+    DecodedPoints decoded;
+    for (size_t i = 0; i < dataset.node_count(); ++i) {
+        std::string problem = dataset.decode(i, decoded);
+        if (!problem.empty()) fail("%s", problem.c_str());
+        const uint64_t key = dataset.entries()[i].key, bytes = dataset.entries()[i].size;
+        q.payload_bytes += bytes;
+        q.stored_points += decoded.count;
+        if (dataset.find(point_node_child(key, 0)) >= 0) continue;  // an inner node
+        steps.push_back(decoded.grid_step);
+        q.leaf_points += decoded.count;
+        q.leaf_bytes += bytes;
+    }
+    if (steps.empty()) fail("'%s' has no leaves", path.c_str());
+    std::sort(steps.begin(), steps.end());
+    q.leaves = steps.size();
+    q.median_step = steps[steps.size() / 2];
+    q.smallest_step = steps.front();
+    q.largest_step = steps.back();
+    return q;
+}
+
+// The bits of v (21 of them) spread to every third bit of a 64-bit Morton code.
+uint64_t spread_bits(uint64_t v) {
+    v &= 0x1FFFFF;
+    v = (v | (v << 32)) & 0x1F00000000FFFFull;
+    v = (v | (v << 16)) & 0x1F0000FF0000FFull;
+    v = (v | (v << 8)) & 0x100F00F00F00F00Full;
+    v = (v | (v << 4)) & 0x10C30C30C30C30C3ull;
+    v = (v | (v << 2)) & 0x1249249249249249ull;
+    return v;
+}
+
+// The records along a Morton curve of their integers (the top 21 bits of each axis): a spatially
+// coherent order. LAZ predicts each point from the one before, so its size depends on the order
+// of the file; the benchmark's samples come in random order, a scanner's in acquisition order,
+// which is coherent, and our converter sorts each node along a Morton curve of its own.
+std::vector<laz::LasPoint> morton_ordered(const std::vector<laz::LasPoint>& records) {
+    int32_t low[3] = {INT32_MAX, INT32_MAX, INT32_MAX}, high[3] = {INT32_MIN, INT32_MIN, INT32_MIN};
+    for (const laz::LasPoint& p : records) {
+        const int32_t v[3] = {p.x, p.y, p.z};
+        for (int a = 0; a < 3; ++a) low[a] = std::min(low[a], v[a]), high[a] = std::max(high[a], v[a]);
+    }
+    int bits = 0;
+    for (int a = 0; a < 3; ++a)
+        while (bits < 32 && (uint64_t(int64_t(high[a]) - low[a]) >> bits) != 0) ++bits;
+    const int shift = std::max(0, bits - 21);
+    std::vector<std::pair<uint64_t, uint32_t>> keys(records.size());
+    for (size_t i = 0; i < records.size(); ++i) {
+        const laz::LasPoint& p = records[i];
+        const int32_t v[3] = {p.x, p.y, p.z};
+        uint64_t code = 0;
+        for (int a = 0; a < 3; ++a) code |= spread_bits(uint64_t(int64_t(v[a]) - low[a]) >> shift) << a;
+        keys[i] = {code, uint32_t(i)};
+    }
+    std::sort(keys.begin(), keys.end());
+    std::vector<laz::LasPoint> ordered(records.size());
+    for (size_t i = 0; i < keys.size(); ++i) ordered[i] = records[keys[i].second];
+    return ordered;
+}
+
+// LAZ beside ours on the first size's cloud (made again: same arguments, same points), at the
+// leaves' median grid step and at their smallest. LAZ holds positions and colours (and POINT10's
+// other fields, constant here, which cost next to nothing); ours also hold normals and radii, so
+// the position + colour part of our payload is given beside the whole.
+void print_laz_comparison(size_t points, bool with_normals, const std::string& dataset, const Conversion& ours,
+                          const fs::path& dir) {
+    std::printf("\n== LAZ at our quantization (%zu points, the first cloud again; LASzip pointwise chunked, POINT10 v2 + "
+                "RGB12 v2, chunks of %u; colours as v * 257; offsets at the cloud's minimum)\n",
+                points, laz::kDefaultChunkPoints);
+    const LeafQuantization q = leaf_quantization(dataset);
+    std::printf("leaf grid step: median %.6g, smallest %.6g, largest %.6g (%zu leaves, %zu points)\n", q.median_step,
+                q.smallest_step, q.largest_step, q.leaves, q.leaf_points);
+    const double position_color_share = ours.share[0] + ours.share[2];
+    std::printf("ours, leaves: %.3f B/point (position, normal, colour, radius, node header)\n",
+                double(q.leaf_bytes) / double(q.leaf_points));
+    std::printf("ours, all levels: %.3f B/stored point, %.3f B/input point; position+colour %.3f B/stored point, "
+                "%.3f B/input point\n",
+                ours.stored_bytes_per_point, ours.bytes_per_point,
+                position_color_share * double(q.payload_bytes) / double(q.stored_points),
+                position_color_share * double(q.payload_bytes) / double(points));
+    std::printf("ours, payload split (all levels): position %.1f%%, normal %.1f%%, colour %.1f%%, radius %.1f%%, header "
+                "%.1f%%\n",
+                100 * ours.share[0], 100 * ours.share[1], 100 * ours.share[2], 100 * ours.share[3], 100 * ours.share[4]);
+    std::printf("ours, leaves, position+colour: about %.3f B/point (the all-level split applied to the leaves)\n",
+                position_color_share * double(q.leaf_bytes) / double(q.leaf_points));
+    std::fflush(stdout);
+
+    const PointCloud cloud = make_cloud(points, with_normals);
+    const Bounds bounds = cloud.bounds();
+    std::string decoder_problem;
+    laz::LazPerfDecoder decoder;
+    try {
+        decoder = laz::find_lazperf_decoder(CATPAQ_SOURCE_DIR);
+    } catch (const Error& e) {
+        decoder_problem = e.what();
+    }
+    std::printf("%-14s %-7s %12s %10s %16s %10s  %s\n", "LAZ step", "order", "scale", "B/point", "point data B/pt",
+                "encode s", "laz-perf");
+    struct Row {
+        const char* name;
+        double step;
+        bool morton;
+    };
+    const Row rows[] = {{"median leaf", q.median_step, false}, {"median leaf", q.median_step, true},
+                        {"smallest leaf", q.smallest_step, false}, {"smallest leaf", q.smallest_step, true}};
+    for (const auto& [name, step, morton] : rows) {
+        laz::LasLayout layout;
+        for (int a = 0; a < 3; ++a) {
+            layout.scale[a] = step;
+            layout.offset[a] = bounds.min[a];
+        }
+        std::vector<laz::LasPoint> records = laz::quantize_points(cloud.positions, cloud.colors, layout);
+        if (morton) records = morton_ordered(records);
+        std::string bytes;
+        const double seconds = best_of(1, [&] { bytes = laz::encode_laz(records, layout); });
+        const std::string path = (dir / "scan.laz").string();
+        write_file_atomic(path, bytes.data(), bytes.size());
+        uint32_t point_data_offset = 0;  // the header's offset to the point data (u32 at byte 96)
+        std::memcpy(&point_data_offset, bytes.data() + 96, 4);
+        const uint64_t point_data = bytes.size() - point_data_offset;
+        std::string check = "not checked (" + decoder_problem + ")";
+        if (decoder_problem.empty()) {
+            std::string expected;
+            expected.reserve(records.size() * laz::las_record_length(true));
+            for (const laz::LasPoint& p : records) laz::append_las_record(p, true, expected);
+            const laz::DecodedLas decoded = laz::decode_with_lazperf(decoder, path, (dir / "scan.records").string());
+            if (decoded.points != records.size() || decoded.records != expected)
+                fail("laz-perf decodes the LAZ of step %g to other points than were written", step);
+            check = "identical";
+        }
+        std::printf("%-14s %-7s %12.6g %10.3f %16.3f %10.3f  %s\n", name, morton ? "Morton" : "input", step,
+                    double(bytes.size()) / double(records.size()), double(point_data) / double(records.size()), seconds,
+                    check.c_str());
+        std::fflush(stdout);
+        fs::remove(path);
+    }
+}
+
 std::vector<size_t> parse_sizes(const std::string& text) {
     std::vector<size_t> sizes;
     std::stringstream in(text);
@@ -307,10 +467,10 @@ int main(int argc, char** argv) {
         Options options(argc, argv,
                         "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]\n"
                         "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n"
-                        "                    [--budgets 128M,256M]\n"
+                        "                    [--budgets 128M,256M] [--laz]\n"
                         "       points_bench --decode-only DATASET [--decode-runs 5]\n"
                         "       points_bench --compare DATASET DATASET\n",
-                        {"with-normals", "skip-rate"});
+                        {"with-normals", "skip-rate", "laz"});
         if (options.help()) {
             std::printf("%s", options.usage().c_str());
             return 0;
@@ -332,6 +492,7 @@ int main(int argc, char** argv) {
         std::vector<size_t> sizes = parse_sizes(options.get("sizes", "1000000,10000000"));
         const bool with_normals = options.flag("with-normals");
         const bool skip_rate = options.flag("skip-rate");
+        const bool laz_comparison = options.flag("laz");
         std::vector<uint64_t> budgets;
         {
             std::stringstream list(options.get("budgets", ""));
@@ -366,6 +527,7 @@ int main(int argc, char** argv) {
         std::printf("%10s %8s %8s %10s %9s %7s %6s %9s %9s %10s %8s  %s\n", "points", "wall s", "cpu s", "Mpt/s", "peak MiB",
                     "B/pt", "nodes", "B/stored", "err/r", "simpl Mpt/s", "ratio", "payload: pos/nrm/col/rad/hdr");
         std::string last_dataset;
+        Conversion first_conversion;
         for (size_t n : sizes) {
             PointCloud cloud = make_cloud(n, with_normals);
             double baseline = simplify_points_baseline(cloud);
@@ -380,11 +542,15 @@ int main(int argc, char** argv) {
             std::printf("%10s phases (wall s): partition %.2f, search tree %.2f, nodes %.2f, write %.2f\n", "", c.phases[0],
                         c.phases[1], c.phases[2], c.phases[3]);
             std::fflush(stdout);
-            if (last_dataset.empty()) last_dataset = output;
+            if (last_dataset.empty()) {
+                last_dataset = output;
+                first_conversion = c;
+            }
             if (n == sizes.back() && !budgets.empty()) print_out_of_core(self, cloud_path, output, settings, c, budgets);
         }
 
         print_decode(last_dataset, runs);
+        if (laz_comparison) print_laz_comparison(sizes.front(), with_normals, last_dataset, first_conversion, dir);
 
         if (!skip_rate) {
             std::printf("\n== split rules (%zu points; CPU s of the whole conversion)\n", sizes.front());

@@ -105,7 +105,39 @@ def parse_points_bench(text):
                                        "chunks": int(r[6]), "passes": int(r[7]), "ratio": float(r[8]),
                                        "same": r[9] == "yes"})
         need(out["out_of_core"], "points_bench: an out-of-core heading without rows")
+    out["laz"] = parse_points_bench_laz(text)
     return out
+
+
+def parse_points_bench_laz(text):
+    """points_bench --laz: the LAZ rows, the leaves' grid steps and our bytes beside them (None
+    without the part)."""
+    head = re.search(r"^== LAZ at our quantization \((\d+) points", text, re.M)
+    if not head:
+        return None
+    steps = re.search(r"^leaf grid step: median (%s), smallest (%s), largest (%s) \((\d+) leaves, (\d+) points\)$"
+                      % (NUM, NUM, NUM), text, re.M)
+    leaves = re.search(r"^ours, leaves: (%s) B/point" % NUM, text, re.M)
+    levels = re.search(r"^ours, all levels: (%s) B/stored point, (%s) B/input point; position\+colour (%s) B/stored "
+                       r"point, (%s) B/input point$" % ((NUM,) * 4), text, re.M)
+    split = re.search(r"^ours, payload split \(all levels\): position (%s)%%, normal (%s)%%, colour (%s)%%, radius "
+                      r"(%s)%%, header (%s)%%$" % ((NUM,) * 5), text, re.M)
+    leaf_pc = re.search(r"^ours, leaves, position\+colour: about (%s) B/point" % NUM, text, re.M)
+    need(steps and leaves and levels and split and leaf_pc, "points_bench: an incomplete LAZ part")
+    rows = []
+    for r in re.findall(r"^(median leaf|smallest leaf)\s+(input|Morton)\s+(%s)\s+(%s)\s+(%s)\s+(%s)\s+(.+)$"
+                        % ((NUM,) * 4), text, re.M):
+        rows.append({"step": r[0], "order": r[1], "scale": float(r[2]), "bpt": float(r[3]), "data_bpt": float(r[4]),
+                     "seconds": float(r[5]), "check": r[6].strip()})
+    need(rows, "points_bench: a LAZ heading without rows")
+    for r in rows:
+        need(r["check"] == "identical" or r["check"].startswith("not checked"),
+             "points_bench: laz-perf check '%s'" % r["check"])
+    return {"points": int(head.group(1)), "median_step": float(steps.group(1)), "smallest_step": float(steps.group(2)),
+            "largest_step": float(steps.group(3)), "leaves": int(steps.group(4)), "leaf_points": int(steps.group(5)),
+            "leaf_bpt": float(leaves.group(1)), "stored_bpt": float(levels.group(1)), "input_bpt": float(levels.group(2)),
+            "pc_stored_bpt": float(levels.group(3)), "pc_input_bpt": float(levels.group(4)),
+            "split": [float(split.group(i)) for i in range(1, 6)], "leaf_pc_bpt": float(leaf_pc.group(1)), "rows": rows}
 
 
 def aqp_section(raw, catp_verify_levels, catp_bunny_bytes, catp_convert_s, bunny_vertices, w):
@@ -218,6 +250,8 @@ def points_section(raw, w):
       "at %.2f bytes: ours is %.2f times its speed at %.2f times its size." %
       (d["ours"], d["ours_b"], d["meshopt"], d["meshopt_b"], d["ours"] / d["meshopt"], d["ours_b"] / d["meshopt_b"]))
     w("")
+    if pb["laz"]:
+        laz_table(pb["laz"], w)
     if pb["splits"]:
         w("Split rules (seed 002's midpoint against seed 000's balanced split):")
         w("")
@@ -255,6 +289,42 @@ def points_section(raw, w):
       ("met" if best >= 1 else "not met", best,
        "met" if min(c["b_stored"] for c in pb["conversion"]) <= 3.6 else "not met with lossless colour",
        min(c["b_stored"] for c in pb["conversion"]), "met" if d["ours"] >= 100 else "not met", d["ours"]))
+    w("")
+
+
+def laz_table(z, w):
+    """Section 7's LAZ comparison (points_bench --laz)."""
+    w("LAZ at the same quantization, same run: the first cloud (%s points) written as LAZ by our own "
+      "writer (`bench/points/laz_writer.cpp`: LASzip's pointwise-chunked format, POINT10 v2 and RGB12 v2 "
+      "items, chunks of 50,000 points, point format 2), with the scale set to the grid step our converter "
+      "used at the leaves (the median over the %d leaves, %.3g, and the smallest, %.3g; the largest is "
+      "%.3g), offsets at the cloud's minimum and colours as 16-bit v * 257. Each file is decoded by "
+      "laz-perf (npm laz-perf 0.0.7, hobuinc's LASzip decoder in WebAssembly, "
+      "`scripts/report/laz_decode.mjs`) and compared with the records written: *identical* means every "
+      "point, bit for bit. LASzip itself (laspy with lazrs) cannot be installed here (no PyPI): our "
+      "writer stands in for it and laz-perf checks it. LAZ predicts each point from the one before it in "
+      "the file, so its size depends on the order: *input* is the samples' random order, *Morton* the "
+      "same points sorted along a Morton curve of their integers first (a coherent order, as a "
+      "scanner's acquisition order is; our converter sorts each node along a Morton curve too). "
+      "Encoding time is one thread's wall time in memory." %
+      (f"{z['points']:,}", z["leaves"], z["median_step"], z["smallest_step"], z["largest_step"]))
+    w("")
+    w(md_table(["LAZ scale", "point order", "scale", "LAZ bytes / point", "encode s", "laz-perf"],
+               [[r["step"] + " step", r["order"], "%.4g" % r["scale"], "%.3f" % r["bpt"], "%.3f" % r["seconds"],
+                 r["check"]] for r in z["rows"]]))
+    w("")
+    morton = [r for r in z["rows"] if r["step"] == "median leaf" and r["order"] == "Morton"]
+    s = z["split"]
+    w("Ours on the same cloud: the leaves (which hold the %s input points, quantized at the steps above) "
+      "take %.3f bytes per point, and they also carry normals and radii (the payload split over all "
+      "levels: position %.0f%%, normal %.0f%%, colour %.0f%%, radius %.0f%%, node headers %.1f%%); the "
+      "position and colour part, that split applied to the leaves, is about %.3f bytes per point%s. The "
+      "whole dataset (every level: the file a client streams) takes %.3f bytes per stored point and "
+      "%.3f per input point, of which position and colour %.3f and %.3f." %
+      (f"{z['leaf_points']:,}", z["leaf_bpt"], s[0], s[1], s[2], s[3], s[4], z["leaf_pc_bpt"],
+       (", %.2f times LAZ's in Morton order at the median step (%.3f)" % (z["leaf_pc_bpt"] / morton[0]["bpt"],
+                                                                          morton[0]["bpt"]) if morton else ""),
+       z["stored_bpt"], z["input_bpt"], z["pc_stored_bpt"], z["pc_input_bpt"]))
     w("")
 
 

@@ -335,12 +335,13 @@ required "aqp_render_bench" "$RAW/aqp_render_bench.txt" "$BUILD/bench/client/aqp
 # The point converter and codec on random samples of the scan-like surface (points_bench: each
 # conversion in a child process for its own peak memory; meshoptimizer as the same-run baseline).
 # Full mode goes up to 100M points (about 12 minutes and 7 GiB for that size alone), and converts
-# that cloud again out of core at --memory 1G (about 5 minutes).
+# that cloud again out of core at --memory 1G (about 5 minutes). --laz: the first cloud as LAZ at
+# the leaves' grid step, decoded by laz-perf (scripts/report/laz_decode.mjs) in the same run.
 if [[ $MODE == short ]]; then PT_SIZES=200000; PT_RUNS=2; PT_BUDGETS=(); else
     PT_SIZES=1000000,10000000,100000000; PT_RUNS=5; PT_BUDGETS=(--budgets 1G); fi
 log "points_bench --sizes $PT_SIZES ${PT_BUDGETS[*]}"
 required "points_bench" "$RAW/points_bench.txt" "$BUILD/bench/points/points_bench" --sizes "$PT_SIZES" \
-    --decode-runs "$PT_RUNS" "${PT_BUDGETS[@]}"
+    --decode-runs "$PT_RUNS" --laz "${PT_BUDGETS[@]}"
 
 T1=$(date +%s)
 echo "total_seconds: $((T1 - T0))" >> "$RAW/machine.txt"
