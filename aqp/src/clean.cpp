@@ -9,6 +9,9 @@
 #include <numeric>
 #include <unordered_map>
 
+#include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
+
 #include "base/error.h"
 #include "common_codec/exact_predicates.h"
 
@@ -44,30 +47,49 @@ struct EdgeUse {
 // Made in (face, k) order and sorted stably by key alone, which is the same order. The sort is
 // an LSD radix sort in 16-bit digits (a digit every key shares skipped): std::sort on (key,
 // face, k) was a quarter of the cleaning's time on a 1M-triangle scan (the uses are sorted
-// once per pass over the mesh, five times for a clean input).
+// once per pass over the mesh, three times for a clean input). Each pass counts and scatters
+// kSortBlocks consecutive blocks of the uses in parallel, every block to its own offsets (the
+// digit's earlier blocks first), so the order is the sequential sort's. (With the flat
+// neighbour lists of orient_components and the sorted weld and duplicate search, the 1M scan's
+// cleaning went from 1.31 to 0.90 s on 2 cores, the same output.)
 std::vector<EdgeUse> edge_uses(const std::vector<Tri>& tris) {
-    std::vector<EdgeUse> uses;
-    uses.reserve(tris.size() * 3);
-    for (uint32_t f = 0; f < tris.size(); ++f)
-        for (uint8_t k = 0; k < 3; ++k) uses.push_back({edge_key(tris[f][k], tris[f][(k + 1) % 3]), f, k});
-    const size_t n = uses.size();
+    const size_t n = tris.size() * 3;
+    std::vector<EdgeUse> uses(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, tris.size(), 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t f = r.begin(); f < r.end(); ++f)
+            for (uint8_t k = 0; k < 3; ++k)
+                uses[3 * f + k] = {edge_key(tris[f][k], tris[f][(k + 1) % 3]), uint32_t(f), k};
+    });
     if (n < 4096) {
         std::stable_sort(uses.begin(), uses.end(), [](const EdgeUse& a, const EdgeUse& b) { return a.key < b.key; });
         return uses;
     }
+    constexpr size_t kSortBlocks = 4, kBuckets = size_t(1) << 16;
+    auto block_begin = [n](size_t b) { return n * b / kSortBlocks; };
     std::vector<EdgeUse> scratch(n);
-    std::vector<uint32_t> start(size_t(1) << 16);
+    std::vector<uint32_t> counts(kSortBlocks * kBuckets);
     for (int shift = 0; shift < 64; shift += 16) {
-        std::fill(start.begin(), start.end(), 0u);
-        for (const EdgeUse& u : uses) ++start[(u.key >> shift) & 0xffff];
-        if (start[(uses[0].key >> shift) & 0xffff] == n) continue;
+        tbb::parallel_for(size_t(0), kSortBlocks, [&](size_t b) {
+            uint32_t* c = &counts[b * kBuckets];
+            std::fill(c, c + kBuckets, 0u);
+            for (size_t i = block_begin(b); i < block_begin(b + 1); ++i) ++c[(uses[i].key >> shift) & 0xffff];
+        });
+        const size_t first = (uses[0].key >> shift) & 0xffff;
+        size_t same = 0;
+        for (size_t b = 0; b < kSortBlocks; ++b) same += counts[b * kBuckets + first];
+        if (same == n) continue;
         uint32_t sum = 0;
-        for (uint32_t& c : start) {
-            const uint32_t count = c;
-            c = sum;
-            sum += count;
-        }
-        for (const EdgeUse& u : uses) scratch[start[(u.key >> shift) & 0xffff]++] = u;
+        for (size_t d = 0; d < kBuckets; ++d)
+            for (size_t b = 0; b < kSortBlocks; ++b) {
+                uint32_t& c = counts[b * kBuckets + d];
+                const uint32_t count = c;
+                c = sum;
+                sum += count;
+            }
+        tbb::parallel_for(size_t(0), kSortBlocks, [&](size_t b) {
+            uint32_t* c = &counts[b * kBuckets];
+            for (size_t i = block_begin(b); i < block_begin(b + 1); ++i) scratch[c[(uses[i].key >> shift) & 0xffff]++] = uses[i];
+        });
         uses.swap(scratch);
     }
     return uses;
@@ -198,31 +220,37 @@ bool exactly_collinear(const Vec3d& a, const Vec3d& b, const Vec3d& c) {
 
 // Welds bit-equal positions: returns the representative of every input vertex.
 std::vector<uint32_t> weld_equal_positions(const Mesh& input, size_t& welded) {
-    struct Key {
+    // Every vertex goes to the first with the same position bits: the vertices sorted by (bits,
+    // index), in parallel, each run to its first. (A hash map of first vertices did the same in
+    // 2.5 times the time on a 1M-triangle scan.)
+    struct Keyed {
         uint64_t bits[3];
-        bool operator==(const Key& o) const { return std::memcmp(bits, o.bits, sizeof bits) == 0; }
-    };
-    struct Hash {
-        size_t operator()(const Key& k) const {
-            uint64_t h = k.bits[0] * 0x9E3779B97F4A7C15ull;
-            h ^= (k.bits[1] + 0x632BE59BD9B4E019ull) * 0xC2B2AE3D27D4EB4Full;
-            h ^= (k.bits[2] + 0x165667B19E3779F9ull) * 0x85EBCA77C2B2AE63ull;
-            return size_t(h ^ (h >> 29));
+        uint32_t vertex;
+        bool operator<(const Keyed& o) const {
+            for (int i = 0; i < 3; ++i)
+                if (bits[i] != o.bits[i]) return bits[i] < o.bits[i];
+            return vertex < o.vertex;
         }
+        bool same_place(const Keyed& o) const { return std::memcmp(bits, o.bits, sizeof bits) == 0; }
     };
-    std::unordered_map<Key, uint32_t, Hash> first;
-    first.reserve(input.positions.size());
-    std::vector<uint32_t> rep(input.positions.size());
+    const size_t n = input.positions.size();
+    std::vector<Keyed> keyed(n);
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t v = r.begin(); v < r.end(); ++v) {
+            for (int i = 0; i < 3; ++i) {
+                double x = input.positions[v][i] + 0.0;  // -0 becomes +0
+                std::memcpy(&keyed[v].bits[i], &x, 8);
+            }
+            keyed[v].vertex = uint32_t(v);
+        }
+    });
+    tbb::parallel_sort(keyed.begin(), keyed.end());
+    std::vector<uint32_t> rep(n);
     welded = 0;
-    for (uint32_t v = 0; v < input.positions.size(); ++v) {
-        Key key;
-        for (int i = 0; i < 3; ++i) {
-            double x = input.positions[v][i] + 0.0;  // -0 becomes +0
-            std::memcpy(&key.bits[i], &x, 8);
-        }
-        auto [it, inserted] = first.emplace(key, v);
-        rep[v] = it->second;
-        if (!inserted) ++welded;
+    for (size_t i = 0; i < n; ++i) {
+        const bool first = i == 0 || !keyed[i].same_place(keyed[i - 1]);
+        rep[keyed[i].vertex] = first ? keyed[i].vertex : rep[keyed[i - 1].vertex];
+        welded += !first;
     }
     return rep;
 }
@@ -232,12 +260,21 @@ std::vector<uint32_t> weld_equal_positions(const Mesh& input, size_t& welded) {
 // non-orientable component.
 std::vector<uint32_t> orient_components(std::vector<Tri>& tris, size_t& flipped, size_t& components) {
     std::vector<EdgeUse> uses = edge_uses(tris);
-    std::vector<std::vector<std::pair<uint32_t, bool>>> next(tris.size());  // neighbour, same direction
+    // Each triangle's neighbours across its (at most three) two-triangle edges, and whether they
+    // run them the same way, in the order of the sorted edges. (Flat: a list per triangle was a
+    // million allocations on a 1M-triangle scan.)
+    struct Neighbour {
+        uint32_t face;
+        bool same;
+    };
+    std::vector<std::array<Neighbour, 3>> next(tris.size());
+    std::vector<uint8_t> next_count(tris.size(), 0);
     for_each_edge(uses, [&](size_t i, size_t j) {
         if (j - i != 2) return;
         bool same = edge_start(tris, uses[i]) == edge_start(tris, uses[i + 1]);
-        next[uses[i].face].push_back({uses[i + 1].face, same});
-        next[uses[i + 1].face].push_back({uses[i].face, same});
+        const uint32_t a = uses[i].face, b = uses[i + 1].face;
+        next[a][next_count[a]++] = {b, same};
+        next[b][next_count[b]++] = {a, same};
     });
     std::vector<uint32_t> component(tris.size(), UINT32_MAX);
     std::vector<uint8_t> flip(tris.size(), 0);
@@ -252,7 +289,8 @@ std::vector<uint32_t> orient_components(std::vector<Tri>& tris, size_t& flipped,
         for (size_t q = 0; q < queue.size(); ++q) {
             uint32_t f = queue[q];
             members.push_back(f);
-            for (auto [g, same] : next[f]) {
+            for (uint8_t e = 0; e < next_count[f]; ++e) {
+                const auto [g, same] = next[f][e];
                 uint8_t want = flip[f] ^ uint8_t(same);
                 if (component[g] == UINT32_MAX) {
                     component[g] = id;
@@ -347,33 +385,45 @@ CleanMesh clean_to_manifold(const Mesh& input, const CleanOptions& options, Clea
     std::vector<uint32_t> rep = weld_equal_positions(input, r.welded_vertices);
     std::vector<uint32_t> source(input.vertex_count());
     std::iota(source.begin(), source.end(), 0u);
+    // A triangle is degenerate, the first with its corners (kept), or a duplicate of that one:
+    // decided in parallel, the duplicates by sorting the triangles by (sorted corners, index).
+    const size_t input_triangles = input.triangle_count();
+    enum : uint8_t { kKept, kDegenerate, kDuplicate };
+    std::vector<uint8_t> fate(input_triangles, kKept);
+    struct Corners {
+        Tri sorted;
+        uint32_t triangle;
+        bool operator<(const Corners& o) const { return sorted != o.sorted ? sorted < o.sorted : triangle < o.triangle; }
+    };
+    std::vector<Corners> corners(input_triangles);
+    auto welded_triangle = [&](size_t t) {
+        return Tri{rep[input.indices[3 * t]], rep[input.indices[3 * t + 1]], rep[input.indices[3 * t + 2]]};
+    };
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, input_triangles, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t t = r.begin(); t < r.end(); ++t) {
+            const Tri tri = welded_triangle(t);
+            Tri sorted = tri;
+            std::sort(sorted.begin(), sorted.end());
+            corners[t] = {sorted, uint32_t(t)};
+            if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] ||
+                exactly_collinear(input.positions[tri[0]], input.positions[tri[1]], input.positions[tri[2]])) {
+                fate[t] = kDegenerate;
+                corners[t].sorted = {UINT32_MAX, UINT32_MAX, UINT32_MAX};  // (sorted last, never compared)
+            }
+        }
+    });
+    tbb::parallel_sort(corners.begin(), corners.end());
+    for (size_t i = 1; i < input_triangles; ++i)
+        if (fate[corners[i].triangle] != kDegenerate && corners[i].sorted == corners[i - 1].sorted)
+            fate[corners[i].triangle] = kDuplicate;
+    std::vector<Corners>().swap(corners);
     std::vector<Tri> tris;
-    tris.reserve(input.triangle_count());
-    std::unordered_map<uint64_t, std::vector<uint32_t>> seen;  // smallest corner -> triangles
-    for (size_t t = 0; t < input.triangle_count(); ++t) {
-        Tri tri{rep[input.indices[3 * t]], rep[input.indices[3 * t + 1]], rep[input.indices[3 * t + 2]]};
-        if (tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] ||
-            exactly_collinear(input.positions[tri[0]], input.positions[tri[1]], input.positions[tri[2]])) {
-            ++r.degenerate_triangles;
-            continue;
-        }
-        Tri sorted = tri;
-        std::sort(sorted.begin(), sorted.end());
-        std::vector<uint32_t>& same_first = seen[sorted[0]];
-        bool duplicate = false;
-        for (uint32_t other : same_first) {
-            Tri o = tris[other];
-            std::sort(o.begin(), o.end());
-            if (o == sorted) duplicate = true;
-        }
-        if (duplicate) {
-            ++r.duplicate_triangles;
-            continue;
-        }
-        same_first.push_back(uint32_t(tris.size()));
-        tris.push_back(tri);
+    tris.reserve(input_triangles);
+    for (size_t t = 0; t < input_triangles; ++t) {
+        r.degenerate_triangles += fate[t] == kDegenerate;
+        r.duplicate_triangles += fate[t] == kDuplicate;
+        if (fate[t] == kKept) tris.push_back(welded_triangle(t));
     }
-    seen.clear();
     if (tris.empty()) fail("the input mesh has no triangle with area (all %zu are degenerate)", r.input_triangles);
 
     // 4: split fans until no edge has more than two triangles, then remove what still does.
