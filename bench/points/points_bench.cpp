@@ -27,19 +27,22 @@
 //                (leaves, all levels, and our position + colour streams), its encoding time (one
 //                thread), and laz-perf's decoding of the file compared with what was written
 //                (scripts/report/laz_decode.mjs; "not checked" when node or laz-perf is missing)
+//   normals      the first size's cloud converted without its normals: the estimated normals of
+//                the leaves against the surface's (angle between their lines, share flipped)
 //
 // usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]
 //                     [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]
-//                     [--budgets 128M,256M] [--laz]
+//                     [--budgets 128M,256M] [--laz] [--normals]
 //        points_bench --decode-only DATASET [--decode-runs 5]
 //        points_bench --compare DATASET DATASET
-// (--skip-rate skips the split and rate parts; sizes like 3e7 work for larger runs; --decode-only
+// (--skip-rate skips the split, rate and normals parts, --normals runs the normals part anyway; sizes like 3e7 work for larger runs; --decode-only
 // runs only the decode part on a dataset kept from an earlier run, for quick codec iterations;
 // --compare decodes every node of two conversions of the same cloud, say by builds writing
 // different node versions, and fails unless every decoded point is bit for bit the same.)
 #include <algorithm>
 #include <cinttypes>
 #include <climits>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -49,6 +52,7 @@
 #include <sys/wait.h>
 #include <thread>
 #include <tuple>
+#include <unordered_map>
 #include <unistd.h>
 #include <vector>
 
@@ -64,6 +68,7 @@
 #include "points/builder.h"
 #include "points/dataset.h"
 #include "points/sampling.h"
+#include "common_codec/octahedral.h"
 #include "laz_writer.h"
 
 using namespace catpaq;
@@ -335,6 +340,81 @@ LeafQuantization leaf_quantization(const std::string& path) {
     return q;
 }
 
+// The normals the converter estimated at the leaves against the surface's own: the same cloud
+// is converted without its normals, each leaf point matched to the input point nearest to it
+// (the leaves quantize the input points within a quarter of a splat radius, far below their
+// spacing), and their normals compared: the angle between the two lines (sign aside: what PCA
+// estimates), and the share pointing the other way (the orientation's failures: the surface is
+// closed and its normals point out).
+void print_normal_quality(const std::string& self, size_t points, const fs::path& dir, const PointsBuildSettings& settings) {
+    PointCloud cloud = make_cloud(points, true);
+    const std::vector<Vec3d> truth_positions = cloud.positions;
+    const std::vector<Vec3f> truth_normals = cloud.normals;
+    cloud.normals.clear();
+    const std::string cloud_path = write_cloud(cloud, dir, "normals.ply");
+    cloud = PointCloud();
+    const std::string output = (dir / "normals.cpq").string();
+    const Conversion c = convert_in_child(self, cloud_path, output, settings);
+    PointDataset dataset(output);
+    const LeafQuantization q = leaf_quantization(output);
+    // The input points in a hash grid of cells four leaf steps wide: a leaf point's original is
+    // within a step of it, so in its cell or a neighbour's.
+    const double h = 4 * q.largest_step;
+    auto cell_key = [h](const double p[3]) {
+        uint64_t key = 0;
+        for (int a = 0; a < 3; ++a) key = key * 0x9E3779B97F4A7C15ull + uint64_t(int64_t(std::floor(p[a] / h)));
+        return key;
+    };
+    std::unordered_multimap<uint64_t, uint32_t> grid;
+    grid.reserve(truth_positions.size());
+    for (size_t i = 0; i < truth_positions.size(); ++i) grid.emplace(cell_key(truth_positions[i].data()), uint32_t(i));
+    const double* origin = dataset.meta().origin;
+    DecodedPoints decoded;
+    double angle_sum = 0;
+    std::vector<double> angles;
+    size_t flipped = 0, matched = 0;
+    for (size_t i = 0; i < dataset.node_count(); ++i) {
+        const uint64_t key = dataset.entries()[i].key;
+        if (dataset.find(point_node_child(key, 0)) >= 0) continue;  // an inner node
+        std::string problem = dataset.decode(i, decoded);
+        if (!problem.empty()) fail("%s", problem.c_str());
+        for (size_t k = 0; k < decoded.count; ++k) {
+            double p[3];
+            for (int a = 0; a < 3; ++a) p[a] = origin[a] + double(decoded.positions[3 * k + a]);
+            double best = INFINITY;
+            uint32_t nearest = UINT32_MAX;
+            for (int dx = -1; dx <= 1; ++dx)
+                for (int dy = -1; dy <= 1; ++dy)
+                    for (int dz = -1; dz <= 1; ++dz) {
+                        const double cell[3] = {p[0] + dx * h, p[1] + dy * h, p[2] + dz * h};
+                        auto range = grid.equal_range(cell_key(cell));
+                        for (auto it = range.first; it != range.second; ++it) {
+                            const Vec3d& t = truth_positions[it->second];
+                            const double d2 = (t[0] - p[0]) * (t[0] - p[0]) + (t[1] - p[1]) * (t[1] - p[1]) +
+                                              (t[2] - p[2]) * (t[2] - p[2]);
+                            if (d2 < best) best = d2, nearest = it->second;
+                        }
+                    }
+            if (nearest == UINT32_MAX) continue;
+            float n[3];
+            oct_decode(decoded.normals[k], n);
+            const Vec3f& t = truth_normals[nearest];
+            const double dot = double(n[0]) * t[0] + double(n[1]) * t[1] + double(n[2]) * t[2];
+            const double angle = std::acos(std::min(std::fabs(dot), 1.0)) * 180.0 / M_PI;
+            angles.push_back(angle);
+            angle_sum += angle;
+            flipped += dot < 0;
+            ++matched;
+        }
+    }
+    if (matched == 0) fail("no leaf point of '%s' matched an input point", output.c_str());
+    std::sort(angles.begin(), angles.end());
+    std::printf("\n== estimated normals against the surface's (%zu points, %zu leaf points matched)\n", points, matched);
+    std::printf("%12s %12s %12s %12s %8s\n", "mean deg", "median deg", "p95 deg", "flipped %", "cpu s");
+    std::printf("%12.3f %12.3f %12.3f %12.3f %8.2f\n", angle_sum / double(matched), angles[angles.size() / 2],
+                angles[angles.size() * 95 / 100], 100.0 * double(flipped) / double(matched), c.cpu_seconds);
+}
+
 // The bits of v (21 of them) spread to every third bit of a 64-bit Morton code.
 uint64_t spread_bits(uint64_t v) {
     v &= 0x1FFFFF;
@@ -467,10 +547,10 @@ int main(int argc, char** argv) {
         Options options(argc, argv,
                         "usage: points_bench [--sizes 1000000,10000000] [--with-normals] [--split balanced|midpoint]\n"
                         "                    [--node-points 4096] [--keep DIR] [--skip-rate] [--decode-runs 5]\n"
-                        "                    [--budgets 128M,256M] [--laz]\n"
+                        "                    [--budgets 128M,256M] [--laz] [--normals]\n"
                         "       points_bench --decode-only DATASET [--decode-runs 5]\n"
                         "       points_bench --compare DATASET DATASET\n",
-                        {"with-normals", "skip-rate", "laz"});
+                        {"with-normals", "skip-rate", "laz", "normals"});
         if (options.help()) {
             std::printf("%s", options.usage().c_str());
             return 0;
@@ -493,6 +573,7 @@ int main(int argc, char** argv) {
         const bool with_normals = options.flag("with-normals");
         const bool skip_rate = options.flag("skip-rate");
         const bool laz_comparison = options.flag("laz");
+        const bool normal_quality = options.flag("normals");
         std::vector<uint64_t> budgets;
         {
             std::stringstream list(options.get("budgets", ""));
@@ -552,6 +633,7 @@ int main(int argc, char** argv) {
         print_decode(last_dataset, runs);
         if (laz_comparison) print_laz_comparison(sizes.front(), with_normals, last_dataset, first_conversion, dir);
 
+        if (!skip_rate || normal_quality) print_normal_quality(self, sizes.front(), dir, settings);
         if (!skip_rate) {
             std::printf("\n== split rules (%zu points; CPU s of the whole conversion)\n", sizes.front());
             std::printf("%-9s %-9s %6s %6s %9s %9s %8s %8s\n", "cloud", "split", "nodes", "depth", "min leaf", "mean leaf",
