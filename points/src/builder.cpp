@@ -302,16 +302,14 @@ void Builder::prepare(const PointInputSummary& input, PointsBuildReport& report)
 // points in their order (every leaf a range).
 void Builder::partition_in_core(PointCloud& cloud) {
     const size_t n = cloud.size();
-    for (Vec3d& p : cloud.positions)
-        for (int a = 0; a < 3; ++a) p[a] -= origin_[a];
-    if (estimate_normals_) cloud.normals.assign(n, Vec3f{0, 0, 1});
-    if (estimate_radii_) cloud.radii.assign(n, 0.0f);
     std::vector<uint32_t> perm(n);
     {
         Items items(n);
         tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
             for (size_t i = r.begin(); i < r.end(); ++i) {
-                for (int a = 0; a < 3; ++a) items[i].p[a] = float(cloud.positions[i][a]);
+                Vec3d& p = cloud.positions[i];
+                for (int a = 0; a < 3; ++a) p[a] -= origin_[a];
+                for (int a = 0; a < 3; ++a) items[i].p[a] = float(p[a]);
                 items[i].index = uint32_t(i);
             }
         });
@@ -330,6 +328,10 @@ void Builder::partition_in_core(PointCloud& cloud) {
     gather(cloud.normals);
     gather(cloud.colors);
     gather(cloud.radii);
+    // What is estimated is allocated only now: not moved by the gathers, and not resident beside
+    // the partition's items.
+    if (estimate_normals_) cloud.normals.assign(n, Vec3f{0, 0, 1});
+    if (estimate_radii_) cloud.radii.assign(n, 0.0f);
     // What the leaves' neighbour searches read (only when something is estimated): the points as
     // floats (and the node boxes, node_boxes()).
     if (estimate_normals_ || estimate_radii_) {
