@@ -253,11 +253,44 @@ size_t GridKnn::nearest(const float q[3], size_t k, uint32_t* index, float* dist
     KnnList list{k, 0, INFINITY, index, distance2};
     int c[3];
     for (int a = 0; a < 3; ++a) c[a] = std::clamp(int((q[a] - lo_[a]) * inv_h_), 0, dims_[a] - 1);
+    return search_rings(q, c, 0, list);
+}
+
+// (In all_nearest, 7% of the 1M scan's estimate queries go past their block: restarting them
+// at ring 0 re-offered the whole block to the list, and these queries were 4.4% of the
+// conversion's time.)
+size_t GridKnn::nearest_beyond(const float q[3], const int c[3], size_t k, size_t found, uint32_t* index,
+                               float* distance2) const {
+    KnnList list{k, found, found == k ? distance2[k - 1] : INFINITY, index, distance2};
+    return search_rings(q, c, 2, list);
+}
+
+// Scans the rings of cells around c from first_ring out (ring r: the cells at Chebyshev
+// distance r), offering their points to the list, until no unvisited cell can hold a point
+// nearer than its k-th; the rings before first_ring must be offered already.
+size_t GridKnn::search_rings(const float q[3], const int c[3], int first_ring, KnnList& list) const {
     const size_t dy = size_t(dims_[1]), dz = size_t(dims_[2]);
     // Rounding may put a point a hair outside the cell its coordinates say: the distance bound
     // of the unvisited cells is lowered by that much.
     const float slack = h_ * 1e-4f;
-    for (int r = 0;; ++r) {
+    // The nearest an unvisited point can be after ring r: the nearest face of the visited block
+    // that is not a face of the grid (infinite: the whole grid is visited).
+    auto bound_after = [&](int r) {
+        float bound = INFINITY;
+        for (int a = 0; a < 3; ++a) {
+            if (c[a] - r > 0) bound = std::min(bound, q[a] - (lo_[a] + float(c[a] - r) * h_));
+            if (c[a] + r < dims_[a] - 1) bound = std::min(bound, lo_[a] + float(c[a] + r + 1) * h_ - q[a]);
+        }
+        return bound;
+    };
+    auto settled_after = [&](int r) {
+        float bound = bound_after(r);
+        if (bound == INFINITY) return true;
+        bound = std::max(bound - slack, 0.0f);
+        return list.found == list.k && list.worst <= bound * bound;
+    };
+    if (first_ring > 0 && settled_after(first_ring - 1)) return list.found;
+    for (int r = first_ring;; ++r) {
         const int x0 = std::max(c[0] - r, 0), x1 = std::min(c[0] + r, dims_[0] - 1);
         const int y0 = std::max(c[1] - r, 0), y1 = std::min(c[1] + r, dims_[1] - 1);
         const int z0 = std::max(c[2] - r, 0), z1 = std::min(c[2] + r, dims_[2] - 1);
@@ -273,16 +306,7 @@ size_t GridKnn::nearest(const float q[3], size_t k, uint32_t* index, float* dist
                 }
             }
         }
-        // The nearest an unvisited point can be: the nearest face of the visited block that
-        // is not a face of the grid.
-        float bound = INFINITY;
-        for (int a = 0; a < 3; ++a) {
-            if (c[a] - r > 0) bound = std::min(bound, q[a] - (lo_[a] + float(c[a] - r) * h_));
-            if (c[a] + r < dims_[a] - 1) bound = std::min(bound, lo_[a] + float(c[a] + r + 1) * h_ - q[a]);
-        }
-        if (bound == INFINITY) break;  // the whole grid is visited
-        bound = std::max(bound - slack, 0.0f);
-        if (list.found == k && list.worst <= bound * bound) break;
+        if (settled_after(r)) break;
     }
     return list.found;
 }

@@ -61,6 +61,10 @@ private:
         uint32_t id;
     };
     void scan(uint32_t first_cell, uint32_t last_cell, const float q[3], struct KnnList& list) const;
+    // nearest() for a query in cell c whose 3x3x3 block is searched already: index/distance2
+    // hold the block's `found` nearest (sorted); the rings beyond it are searched as needed.
+    size_t nearest_beyond(const float q[3], const int c[3], size_t k, size_t found, uint32_t* index, float* distance2) const;
+    size_t search_rings(const float q[3], const int c[3], int first_ring, struct KnnList& list) const;
     static size_t keep_within(const float* d2, size_t m, float bound2, int32_t* near_d2, uint32_t* near_at);
     void select_nearest(int32_t* d2_bits, size_t n, size_t want, uint32_t* chosen);
 
@@ -187,7 +191,20 @@ void GridKnn::all_nearest(size_t k, IsQuery is_query, Visit visit) {
                 }
                 found = want;
             }
-            if (found < want) found = nearest(q, k, index, distance2);  // the block does not settle it: search rings
+            if (found < want) {
+                // The block does not settle it: its `want` nearest (the block's points are all
+                // gathered and their distances known) seed a search of the rings beyond it.
+                const size_t seed = std::min(want, m);
+                keep_within(d2, m, INFINITY, near_d2, near_at);
+                uint32_t chosen[kMaxK + 1];
+                select_nearest(near_d2, m, seed, chosen);
+                for (size_t j = 0; j < seed; ++j) {
+                    const uint32_t at = near_at[chosen[j]];
+                    index[j] = points_[at_point[at]].id;
+                    distance2[j] = d2[at];
+                }
+                found = nearest_beyond(q, c, k, seed, index, distance2);
+            }
             std::copy(q, q + 3, previous);
             previous_reach = found == k ? std::sqrt(distance2[k - 1]) : -1;
             visit(point.id, q, found, index, distance2);
