@@ -103,6 +103,8 @@ private:
     std::vector<HNode> nodes_;
     std::vector<NodeRecord> records_;
     std::vector<float> xyz_;  // in core: the points as floats, 3 each, for the neighbour searches
+    std::unique_ptr<Vec3f[]> estimated_normals_;  // in core, when estimated (else the cloud's)
+    std::unique_ptr<float[]> estimated_radii_;
     PointArrays arrays_;      // the points in partition order (in core: the cloud's and xyz_)
     float cloud_extent_ = 0;
     std::unique_ptr<ArchiveWriter> writer_;
@@ -314,7 +316,18 @@ void Builder::partition_in_core(PointCloud& cloud) {
             }
         });
         nodes_ = partition_items(items, 0, uint32_t(n), 1, 0, partition_settings_of(settings_), progress_);
-        for (size_t i = 0; i < n; ++i) perm[i] = items[i].index;
+        // What the leaves' neighbour searches read (only when something is estimated): the points
+        // as floats, which the items hold already in their final order (and the node boxes,
+        // node_boxes()).
+        const bool searched = estimate_normals_ || estimate_radii_;
+        if (searched) xyz_.resize(3 * n);
+        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i < r.end(); ++i) {
+                perm[i] = items[i].index;
+                if (searched)
+                    for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = items[i].p[a];
+            }
+        });
     }
     auto gather = [&perm](auto& values) {
         if (values.empty()) return;
@@ -328,23 +341,15 @@ void Builder::partition_in_core(PointCloud& cloud) {
     gather(cloud.normals);
     gather(cloud.colors);
     gather(cloud.radii);
-    // What is estimated is allocated only now: not moved by the gathers, and not resident beside
-    // the partition's items.
-    if (estimate_normals_) cloud.normals.assign(n, Vec3f{0, 0, 1});
-    if (estimate_radii_) cloud.radii.assign(n, 0.0f);
-    // What the leaves' neighbour searches read (only when something is estimated): the points as
-    // floats (and the node boxes, node_boxes()).
-    if (estimate_normals_ || estimate_radii_) {
-        xyz_.resize(3 * n);
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
-            for (size_t i = r.begin(); i < r.end(); ++i)
-                for (int a = 0; a < 3; ++a) xyz_[3 * i + a] = float(cloud.positions[i][a]);
-        });
-    }
+    // What is estimated is allocated only now (not moved by the gathers, not resident beside the
+    // partition's items) and not initialized: the leaves' estimates write every point's, in
+    // parallel (filling 10M normals and radii took 0.1 s on one core).
+    if (estimate_normals_) estimated_normals_ = std::make_unique_for_overwrite<Vec3f[]>(n);
+    if (estimate_radii_) estimated_radii_ = std::make_unique_for_overwrite<float[]>(n);
     arrays_.positions = cloud.positions.data();
-    arrays_.normals = cloud.normals.data();
+    arrays_.normals = estimate_normals_ ? estimated_normals_.get() : cloud.normals.data();
     arrays_.colors = cloud.colors.empty() ? nullptr : cloud.colors.data();
-    arrays_.radii = cloud.radii.data();
+    arrays_.radii = estimate_radii_ ? estimated_radii_.get() : cloud.radii.data();
     arrays_.xyz = xyz_.data();
 }
 
