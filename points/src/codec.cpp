@@ -116,26 +116,6 @@ void put_parameter(BitWriter& w, uint32_t previous, uint32_t k) {
     else w.put(3u | k << 2, 7);
 }
 
-// Bits of a block's values under parameter k (parameter code aside): rice_cost summed, as the
-// quotients' unary parts capped at the escape (a loop without branches, which vectorizes) and
-// the exceptions' codes in a second loop run only when some value escapes (few blocks). The
-// sum of rice_cost per value was most of the encoder's stream time.
-uint64_t block_cost(const uint32_t* values, size_t n, uint32_t k) {
-    uint32_t unary = 0, escaped = 0;
-    for (size_t i = 0; i < n; ++i) {
-        const uint32_t q = values[i] >> k;
-        unary += std::min(q, kRiceEscape);
-        escaped |= uint32_t(q >= kRiceEscape);
-    }
-    uint64_t cost = uint64_t(unary) + uint64_t(n) * (1 + k);
-    if (escaped)
-        for (size_t i = 0; i < n; ++i) {
-            const uint32_t q = values[i] >> k;
-            if (q >= kRiceEscape) cost += escape_cost(q - kRiceEscape);
-        }
-    return cost;
-}
-
 // Chooses the block's parameter (docs/formats/points.md, "Block parameters"): from version 3 on,
 // 0 for a block of zeros, else the Rice parameter k plus one; in version 2, k. k is the cheapest
 // (values and parameter code) among those near log2 of the mean.
@@ -153,7 +133,7 @@ uint32_t choose_parameter(const uint32_t* values, size_t n, uint32_t previous, b
     uint32_t best_k = lo;
     uint64_t best = UINT64_MAX;
     for (uint32_t k = lo; k <= hi; ++k) {
-        const uint64_t cost = parameter_bits(previous, k + offset) + block_cost(values, n, k);
+        const uint64_t cost = parameter_bits(previous, k + offset) + rice_bits(values, n, k);
         if (cost < best) best = cost, best_k = k;
     }
     return best_k + offset;

@@ -9,6 +9,8 @@
 #include "common_codec/octahedral.h"
 #include "points/codec.h"
 #include "support.h"
+// The encoder's private Rice helpers (rice_bits against the scalar rice_cost).
+#include "../../points/src/rice.h"
 
 namespace catpaq {
 namespace {
@@ -149,6 +151,44 @@ TEST(PointCodec, LargeResidualsAndEscapesRoundTrip) {
     for (size_t i = 0; i < out.count; ++i) {
         ASSERT_LE(distance(&out.positions[3 * i], &node.positions[3 * order[i]]), out.position_error) << i;
         for (int c = 0; c < 3; ++c) ASSERT_EQ(out.colors[3 * i + c], node.colors[3 * order[i] + c]);
+    }
+}
+
+TEST(PointCodec, RiceBitsEqualsTheSumOfRiceCosts) {
+    // rice_bits (four values at a time, escapes without branches) against rice_cost summed, for
+    // every k on blocks of every length up to two blocks: small values, values around every
+    // escape threshold, and values of every width up to 2^32 - 1 (escape prefixes up to 30, and
+    // the excesses from 2^24 up, whose float conversion the SIMD path must not round up).
+    using namespace points_detail;
+    uint64_t state = 7;
+    std::vector<uint32_t> values(2 * kRiceBlock);
+    auto check = [&](size_t n, const char* what) {
+        for (uint32_t k = 0; k <= kRiceMaxK; ++k) {
+            uint64_t expected = 0;
+            for (size_t i = 0; i < n; ++i) expected += rice_cost(values[i], k);
+            ASSERT_EQ(rice_bits(values.data(), n, k), expected) << what << " n " << n << " k " << k;
+        }
+    };
+    for (int round = 0; round < 3000; ++round) {
+        const size_t n = size_t(test::next_random(state) % (values.size() + 1));
+        const int kind = round % 4;
+        for (uint32_t& v : values) {
+            const uint64_t r = test::next_random(state);
+            if (kind == 0) v = uint32_t(r % 64);
+            else if (kind == 1) v = uint32_t(r) >> (r >> 59);  // every width
+            else if (kind == 2) {  // near 2^m: escape thresholds (8 << k) and float rounding edges
+                const uint32_t m = uint32_t(r >> 32) % 33;
+                const int64_t near = (m == 32 ? int64_t(1) << 32 : int64_t(1) << m) + int64_t(r % 9) - 4;
+                v = uint32_t(std::clamp<int64_t>(near, 0, UINT32_MAX));
+            } else v = uint32_t(r);
+        }
+        check(n, "random");
+    }
+    for (uint32_t edge : {0u, 1u, 7u, 8u, 9u, 0xffffffu, 0x1000000u, 0x3ffffffu, 0x4000000u, 0x4000020u, 0x7fffffffu,
+                          0x80000000u, 0xfffffff7u, 0xfffffff8u, 0xffffffffu}) {
+        std::fill(values.begin(), values.end(), edge);
+        check(values.size(), "constant");
+        check(kRiceBlock - 1, "constant");
     }
 }
 
