@@ -340,6 +340,13 @@ struct StreamWriter {
 // nearest and its neighbours) that best restores RGB given that chroma.
 std::array<uint32_t, 3> quantize_color(const uint8_t* rgb, int luma_shift, int chroma_shift) {
     Ycocg c = to_ycocg(rgb[0], rgb[1], rgb[2]);
+    // At full precision (the default) the search below keeps Y itself, so it is skipped: YCoCg-R
+    // is lossless, so Y restores RGB exactly, and the search keeps the first least error, where
+    // only Y - 1 comes before Y. Y - 1 moves every channel down by one before the clamp to
+    // 0..255, which hides that only for black, whose Y - 1 is skipped. (Checked for all 2^24
+    // colours: tests/points/test_codec.cpp.) The search's three decodes per point were a third
+    // of encode_point_node's own samples on the 1M scan (point_encode_bench 341 -> 316 ms).
+    if (luma_shift == 0 && chroma_shift == 0) return {uint32_t(c.y), uint32_t(c.co), uint32_t(c.cg)};
     auto nearest = [](int v, int shift, int top) {
         return uint32_t(std::min((v + (shift ? 1 << (shift - 1) : 0)) >> shift, top >> shift));
     };

@@ -192,6 +192,28 @@ TEST(PointCodec, RiceBitsEqualsTheSumOfRiceCosts) {
     }
 }
 
+TEST(PointCodec, FullPrecisionColourSearchKeepsTheLosslessLumaForEveryColour) {
+    // The encoder's quantize_color skips its search for the luma at full precision (8-bit luma,
+    // 9-bit chroma) and keeps the YCoCg-R luma: what the search (copied here from
+    // points/src/codec.cpp, with the colour transform) keeps for every RGB colour.
+    auto clamp_byte = [](int v) { return v < 0 ? 0 : v > 255 ? 255 : v; };
+    for (int r = 0; r < 256; ++r)
+        for (int g = 0; g < 256; ++g)
+            for (int b = 0; b < 256; ++b) {
+                const int co = r - b, t = b + (co >> 1), cg = g - t, y = t + (cg >> 1);
+                int best_y = y, best_error = INT32_MAX;
+                for (int dy = -1; dy <= 1; ++dy) {
+                    const int yq = y + dy;
+                    if (yq < 0 || yq > 256) continue;
+                    const int tt = std::min(yq, 255) - (cg >> 1), gg = cg + tt, bb = tt - (co >> 1), rr = bb + co;
+                    const int error = std::max({std::abs(clamp_byte(rr) - r), std::abs(clamp_byte(gg) - g),
+                                                std::abs(clamp_byte(bb) - b)});
+                    if (error < best_error) best_error = error, best_y = yq;
+                }
+                ASSERT_EQ(best_y, y) << r << " " << g << " " << b;
+            }
+}
+
 TEST(PointCodec, BaselineAndAvx2KernelsDecodeAlike) {
     // The decoder picks its SIMD kernels at run time: both must give the same points, on small
     // residuals (specialized Rice parameters), large ones and escapes, at every colour precision.
