@@ -260,13 +260,26 @@ Grid choose_grid(const PointSamplesView& points, double max_error) {
     return grid;
 }
 
-// Grid coordinates of every point (3 per point).
+// std::nearbyint(t) for 0 <= t <= 2^52, inline: t + 2^52 has no fraction bits left, so the sum
+// is t rounded to an integer in the current rounding mode (as nearbyint rounds) and the
+// subtraction is exact. Without SSE4.1 in the baseline, std::nearbyint is a libm call.
+__attribute__((always_inline)) inline double nearbyint_nonnegative(double t) {
+    constexpr double kNoFraction = 0x1p52;
+    return (t + kNoFraction) - kNoFraction;
+}
+
+// Grid coordinates of every point (3 per point): each coordinate rounded to the nearest grid
+// index and clamped to the grid. Clamped first, then rounded: the same indices as rounding
+// first (the bounds are integers and rounding is monotonic; NaN stays NaN either way), and the
+// rounding stays in nearbyint_nonnegative's range. The libm call per coordinate took 8% of the
+// encoder's time (point_encode_bench 316 -> 305 ms).
 std::vector<uint32_t> quantize_positions(const PointSamplesView& points, const Grid& grid) {
     std::vector<uint32_t> q(3 * points.count);
+    const double top = double((1u << kMaxGridBits) - 1);
     for (size_t i = 0; i < points.count; ++i)
         for (int a = 0; a < 3; ++a) {
-            double t = std::nearbyint((points.positions[3 * i + a] - double(grid.origin[a])) / double(grid.step));
-            q[3 * i + a] = uint32_t(std::clamp(t, 0.0, double((1u << kMaxGridBits) - 1)));
+            const double t = (points.positions[3 * i + a] - double(grid.origin[a])) / double(grid.step);
+            q[3 * i + a] = uint32_t(nearbyint_nonnegative(std::clamp(t, 0.0, top)));
         }
     return q;
 }

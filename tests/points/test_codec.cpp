@@ -214,6 +214,25 @@ TEST(PointCodec, FullPrecisionColourSearchKeepsTheLosslessLumaForEveryColour) {
             }
 }
 
+TEST(PointCodec, GridRoundingEqualsNearbyintOnTheGridsRange) {
+    // quantize_positions rounds a coordinate clamped to [0, 2^24 - 1] as (t + 2^52) - 2^52
+    // (copied here) where it called std::nearbyint: equal on integers, halves (ties to even),
+    // their neighbours and random values over the range, and on the clamped special values.
+    auto rounded = [](double t) { return (t + 0x1p52) - 0x1p52; };
+    const double top = double((1u << 24) - 1);
+    uint64_t state = 11;
+    auto check = [&](double t) {
+        const double c = std::clamp(t, 0.0, top);
+        ASSERT_EQ(rounded(c), std::clamp(std::nearbyint(t), 0.0, top)) << t;
+    };
+    for (uint32_t i = 0; i <= (1u << 24); i += (i < 4096 ? 1 : 997)) {
+        for (double t : {double(i), i + 0.5, i - 0.5})
+            for (double u : {t, std::nextafter(t, -1.0), std::nextafter(t, 1e300)}) check(u);
+    }
+    for (int i = 0; i < 1000000; ++i) check((test::random_unit(state) * 1.2 - 0.1) * double(1u << 24));
+    for (double t : {-0.0, -0.4, -1e300, 1e300, double(INFINITY), -double(INFINITY), 0x1p60}) check(t);
+}
+
 TEST(PointCodec, BaselineAndAvx2KernelsDecodeAlike) {
     // The decoder picks its SIMD kernels at run time: both must give the same points, on small
     // residuals (specialized Rice parameters), large ones and escapes, at every colour precision.
