@@ -290,12 +290,50 @@ void morton_order(const std::vector<uint32_t>& q, std::vector<uint32_t>& order) 
     uint32_t largest = 0;
     for (uint32_t v : q) largest = std::max(largest, v);
     const uint32_t shift = bit_width32(largest) > kMortonBits ? bit_width32(largest) - kMortonBits : 0;
-    std::vector<std::pair<uint64_t, uint32_t>> keys(n);
-    for (size_t i = 0; i < n; ++i) {
-        uint64_t key = spread_bits21(q[3 * i] >> shift) | spread_bits21(q[3 * i + 1] >> shift) << 1 |
-                       spread_bits21(q[3 * i + 2] >> shift) << 2;
-        keys[i] = {key, uint32_t(i)};
+    auto key = [&](size_t i) {
+        return spread_bits21(q[3 * i] >> shift) | spread_bits21(q[3 * i + 1] >> shift) << 1 |
+               spread_bits21(q[3 * i + 2] >> shift) << 2;
+    };
+    // The keys are below 2^key_bits and the indices below 2^index_bits.
+    const uint32_t key_bits = 3 * std::min(bit_width32(largest), kMortonBits);
+    const uint32_t index_bits = bit_width32(uint32_t(n - 1));
+    if (n >= 256 && key_bits + index_bits <= 64) {
+        // By key, ties by index, as the sort of (key, index) pairs below: each point as one
+        // 64-bit item, its key above its index, in a stable LSD radix sort of the key bits in
+        // 11-bit digits (a digit every key shares skipped) from the index order, so that only
+        // the key's digits are counted and half the bytes move. Keys of up to 52 bits (17 per
+        // axis) fit beside a 4096-point node's indices; the 1M scan's nodes have 21 to 30.
+        // Measured: point_encode_bench 266 -> 248 ms (8-bit digits 251 ms, 12-bit 254 ms).
+        constexpr uint32_t kDigitBits = 11;
+        constexpr size_t kBuckets = size_t(1) << kDigitBits;
+        const uint32_t digits = (key_bits + kDigitBits - 1) / kDigitBits;
+        std::vector<uint64_t> items(n), scratch(n);
+        std::vector<uint32_t> counts(size_t(digits) * kBuckets, 0);
+        for (size_t i = 0; i < n; ++i) {
+            const uint64_t k = key(i);
+            items[i] = k << index_bits | i;
+            for (uint32_t d = 0; d < digits; ++d) ++counts[d * kBuckets + ((k >> (kDigitBits * d)) & (kBuckets - 1))];
+        }
+        for (uint32_t d = 0; d < digits; ++d) {
+            uint32_t* c = &counts[d * kBuckets];
+            const uint32_t at = index_bits + kDigitBits * d;
+            if (c[(items[0] >> at) & (kBuckets - 1)] == n) continue;
+            uint32_t sum = 0;
+            for (size_t v = 0; v < kBuckets; ++v) {
+                const uint32_t count = c[v];
+                c[v] = sum;
+                sum += count;
+            }
+            for (uint64_t item : items) scratch[c[(item >> at) & (kBuckets - 1)]++] = item;
+            items.swap(scratch);
+        }
+        order.resize(n);
+        const uint64_t index_mask = (uint64_t(1) << index_bits) - 1;
+        for (size_t i = 0; i < n; ++i) order[i] = uint32_t(items[i] & index_mask);
+        return;
     }
+    std::vector<std::pair<uint64_t, uint32_t>> keys(n);
+    for (size_t i = 0; i < n; ++i) keys[i] = {key(i), uint32_t(i)};
     if (n < 256) {
         std::sort(keys.begin(), keys.end());
     } else {
