@@ -96,34 +96,41 @@ inline uint64_t rice_bits(const uint32_t* values, size_t n, uint32_t k) {
     return cost;
 }
 
-// Appends bits least significant first.
+// Appends bits least significant first. Whole bytes leave the accumulator by one 8-byte store
+// at the end of what is written (the buffer is kept 8 bytes longer), where a push_back per byte
+// and its capacity check took a tenth of put_stream's samples (the unary quotients go 32 bits
+// per put; point_encode_bench 243 -> 237 ms).
 class BitWriter {
 public:
     void put(uint64_t value, uint32_t nbits) {  // nbits <= 32
         acc_ |= (value & ((uint64_t(1) << nbits) - 1)) << fill_;
-        fill_ += nbits;
-        while (fill_ >= 8) {
-            bytes_.push_back(uint8_t(acc_));
-            acc_ >>= 8;
-            fill_ -= 8;
-        }
+        fill_ += nbits;  // at most 7 + 32
+        if (used_ + 8 > bytes_.size()) bytes_.resize(2 * bytes_.size() + 64);
+        uint64_t word = acc_;
+        if constexpr (std::endian::native == std::endian::big) word = __builtin_bswap64(word);
+        std::memcpy(bytes_.data() + used_, &word, 8);  // the whole bytes, and scratch after them
+        used_ += fill_ >> 3;
+        acc_ >>= fill_ & ~7u;
+        fill_ &= 7;
     }
     // Pads to a whole byte with zeros and returns the bytes.
     std::vector<uint8_t>& finish() {
-        if (fill_ > 0) bytes_.push_back(uint8_t(acc_));
+        if (fill_ > 0) put(0, 8 - fill_);
+        bytes_.resize(used_);
         acc_ = 0;
-        fill_ = 0;
         return bytes_;
     }
     void clear() {
         bytes_.clear();
+        used_ = 0;
         acc_ = 0;
         fill_ = 0;
     }
-    uint64_t bit_count() const { return 8 * uint64_t(bytes_.size()) + fill_; }
+    uint64_t bit_count() const { return 8 * uint64_t(used_) + fill_; }
 
 private:
-    std::vector<uint8_t> bytes_;
+    std::vector<uint8_t> bytes_;  // used_ bytes written, then at least 8 more (none after finish())
+    size_t used_ = 0;
     uint64_t acc_ = 0;
     uint32_t fill_ = 0;
 };
