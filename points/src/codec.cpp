@@ -116,26 +116,6 @@ void put_parameter(BitWriter& w, uint32_t previous, uint32_t k) {
     else w.put(3u | k << 2, 7);
 }
 
-// Bits of a block's values under parameter k (parameter code aside): rice_cost summed, as the
-// quotients' unary parts capped at the escape (a loop without branches, which vectorizes) and
-// the exceptions' codes in a second loop run only when some value escapes (few blocks). The
-// sum of rice_cost per value was most of the encoder's stream time.
-uint64_t block_cost(const uint32_t* values, size_t n, uint32_t k) {
-    uint32_t unary = 0, escaped = 0;
-    for (size_t i = 0; i < n; ++i) {
-        const uint32_t q = values[i] >> k;
-        unary += std::min(q, kRiceEscape);
-        escaped |= uint32_t(q >= kRiceEscape);
-    }
-    uint64_t cost = uint64_t(unary) + uint64_t(n) * (1 + k);
-    if (escaped)
-        for (size_t i = 0; i < n; ++i) {
-            const uint32_t q = values[i] >> k;
-            if (q >= kRiceEscape) cost += escape_cost(q - kRiceEscape);
-        }
-    return cost;
-}
-
 // Chooses the block's parameter (docs/formats/points.md, "Block parameters"): from version 3 on,
 // 0 for a block of zeros, else the Rice parameter k plus one; in version 2, k. k is the cheapest
 // (values and parameter code) among those near log2 of the mean.
@@ -153,7 +133,7 @@ uint32_t choose_parameter(const uint32_t* values, size_t n, uint32_t previous, b
     uint32_t best_k = lo;
     uint64_t best = UINT64_MAX;
     for (uint32_t k = lo; k <= hi; ++k) {
-        const uint64_t cost = parameter_bits(previous, k + offset) + block_cost(values, n, k);
+        const uint64_t cost = parameter_bits(previous, k + offset) + rice_bits(values, n, k);
         if (cost < best) best = cost, best_k = k;
     }
     return best_k + offset;
@@ -164,8 +144,11 @@ uint32_t choose_parameter(const uint32_t* values, size_t n, uint32_t previous, b
 // word 4j + l), 16k bytes in all.
 void put_vertical_block(std::vector<uint8_t>& out, const uint32_t* values, uint32_t k) {
     // One spare row of words: a field's spill past the last word is zero but still written.
-    uint32_t words[4 * kRiceMaxK + 4] = {};
+    // Only the 4k + 4 words the block uses are cleared: the whole array's 512-byte memset per
+    // block was 3% of put_stream's samples (point_encode_bench 343 -> 341 ms).
+    uint32_t words[4 * kRiceMaxK + 4];
     if (k == 0) return;
+    std::memset(words, 0, sizeof(uint32_t) * 4 * (size_t(k) + 1));
     const uint32_t mask = k >= 32 ? UINT32_MAX : (uint32_t(1) << k) - 1;
     // The four lanes' m-th fields share their bit offset m k: each step packs four values with
     // the same shifts (a loop the compiler turns into SIMD), where a value at a time was most
@@ -277,13 +260,50 @@ Grid choose_grid(const PointSamplesView& points, double max_error) {
     return grid;
 }
 
-// Grid coordinates of every point (3 per point).
+// std::nearbyint(t) for 0 <= t <= 2^52, inline: t + 2^52 has no fraction bits left, so the sum
+// is t rounded to an integer in the current rounding mode (as nearbyint rounds) and the
+// subtraction is exact. Without SSE4.1 in the baseline, std::nearbyint is a libm call.
+__attribute__((always_inline)) inline double nearbyint_nonnegative(double t) {
+    constexpr double kNoFraction = 0x1p52;
+    return (t + kNoFraction) - kNoFraction;
+}
+
+// Grid coordinates of every point (3 per point): each coordinate rounded to the nearest grid
+// index and clamped to the grid. Clamped first, then rounded: the same indices as rounding
+// first (the bounds are integers and rounding is monotonic; NaN stays NaN either way), and the
+// rounding stays in nearbyint_nonnegative's range. The libm call per coordinate took 8% of the
+// encoder's time (point_encode_bench 316 -> 305 ms).
 std::vector<uint32_t> quantize_positions(const PointSamplesView& points, const Grid& grid) {
     std::vector<uint32_t> q(3 * points.count);
-    for (size_t i = 0; i < points.count; ++i)
+    const double top = double((1u << kMaxGridBits) - 1);
+    size_t i = 0;
+#ifdef __SSE2__
+    // Two points per step, their six coordinates as the pairs (x0 y0) (z0 x1) (y1 z1), with the
+    // same operations, two at a time: the divisions were the loop's time, and a divpd costs
+    // about what a divsd does (point_encode_bench 249 -> 244 ms). The clamp is max then min,
+    // which maps NaN to 0, the index the scalar loop's conversion of NaN gives.
+    const double origin[3] = {double(grid.origin[0]), double(grid.origin[1]), double(grid.origin[2])};
+    const __m128d origin_xy = _mm_setr_pd(origin[0], origin[1]), origin_zx = _mm_setr_pd(origin[2], origin[0]);
+    const __m128d origin_yz = _mm_setr_pd(origin[1], origin[2]);
+    const __m128d step = _mm_set1_pd(double(grid.step)), zero = _mm_setzero_pd(), last = _mm_set1_pd(top);
+    const __m128d no_fraction = _mm_set1_pd(0x1p52);
+    auto indices = [&](const double* at, __m128d from) {  // two coordinates -> two int32 (low half)
+        const __m128d t = _mm_div_pd(_mm_sub_pd(_mm_loadu_pd(at), from), step);
+        const __m128d clamped = _mm_min_pd(_mm_max_pd(t, zero), last);
+        return _mm_cvttpd_epi32(_mm_sub_pd(_mm_add_pd(clamped, no_fraction), no_fraction));
+    };
+    for (; i + 2 <= points.count; i += 2) {
+        const double* p = points.positions + 3 * i;
+        uint32_t* to = q.data() + 3 * i;
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(to), indices(p, origin_xy));
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(to + 2), indices(p + 2, origin_zx));
+        _mm_storel_epi64(reinterpret_cast<__m128i*>(to + 4), indices(p + 4, origin_yz));
+    }
+#endif
+    for (; i < points.count; ++i)
         for (int a = 0; a < 3; ++a) {
-            double t = std::nearbyint((points.positions[3 * i + a] - double(grid.origin[a])) / double(grid.step));
-            q[3 * i + a] = uint32_t(std::clamp(t, 0.0, double((1u << kMaxGridBits) - 1)));
+            const double t = (points.positions[3 * i + a] - double(grid.origin[a])) / double(grid.step);
+            q[3 * i + a] = uint32_t(nearbyint_nonnegative(std::clamp(t, 0.0, top)));
         }
     return q;
 }
@@ -294,12 +314,50 @@ void morton_order(const std::vector<uint32_t>& q, std::vector<uint32_t>& order) 
     uint32_t largest = 0;
     for (uint32_t v : q) largest = std::max(largest, v);
     const uint32_t shift = bit_width32(largest) > kMortonBits ? bit_width32(largest) - kMortonBits : 0;
-    std::vector<std::pair<uint64_t, uint32_t>> keys(n);
-    for (size_t i = 0; i < n; ++i) {
-        uint64_t key = spread_bits21(q[3 * i] >> shift) | spread_bits21(q[3 * i + 1] >> shift) << 1 |
-                       spread_bits21(q[3 * i + 2] >> shift) << 2;
-        keys[i] = {key, uint32_t(i)};
+    auto key = [&](size_t i) {
+        return spread_bits21(q[3 * i] >> shift) | spread_bits21(q[3 * i + 1] >> shift) << 1 |
+               spread_bits21(q[3 * i + 2] >> shift) << 2;
+    };
+    // The keys are below 2^key_bits and the indices below 2^index_bits.
+    const uint32_t key_bits = 3 * std::min(bit_width32(largest), kMortonBits);
+    const uint32_t index_bits = bit_width32(uint32_t(n - 1));
+    if (n >= 256 && key_bits + index_bits <= 64) {
+        // By key, ties by index, as the sort of (key, index) pairs below: each point as one
+        // 64-bit item, its key above its index, in a stable LSD radix sort of the key bits in
+        // 11-bit digits (a digit every key shares skipped) from the index order, so that only
+        // the key's digits are counted and half the bytes move. Keys of up to 52 bits (17 per
+        // axis) fit beside a 4096-point node's indices; the 1M scan's nodes have 21 to 30.
+        // Measured: point_encode_bench 266 -> 248 ms (8-bit digits 251 ms, 12-bit 254 ms).
+        constexpr uint32_t kDigitBits = 11;
+        constexpr size_t kBuckets = size_t(1) << kDigitBits;
+        const uint32_t digits = (key_bits + kDigitBits - 1) / kDigitBits;
+        std::vector<uint64_t> items(n), scratch(n);
+        std::vector<uint32_t> counts(size_t(digits) * kBuckets, 0);
+        for (size_t i = 0; i < n; ++i) {
+            const uint64_t k = key(i);
+            items[i] = k << index_bits | i;
+            for (uint32_t d = 0; d < digits; ++d) ++counts[d * kBuckets + ((k >> (kDigitBits * d)) & (kBuckets - 1))];
+        }
+        for (uint32_t d = 0; d < digits; ++d) {
+            uint32_t* c = &counts[d * kBuckets];
+            const uint32_t at = index_bits + kDigitBits * d;
+            if (c[(items[0] >> at) & (kBuckets - 1)] == n) continue;
+            uint32_t sum = 0;
+            for (size_t v = 0; v < kBuckets; ++v) {
+                const uint32_t count = c[v];
+                c[v] = sum;
+                sum += count;
+            }
+            for (uint64_t item : items) scratch[c[(item >> at) & (kBuckets - 1)]++] = item;
+            items.swap(scratch);
+        }
+        order.resize(n);
+        const uint64_t index_mask = (uint64_t(1) << index_bits) - 1;
+        for (size_t i = 0; i < n; ++i) order[i] = uint32_t(items[i] & index_mask);
+        return;
     }
+    std::vector<std::pair<uint64_t, uint32_t>> keys(n);
+    for (size_t i = 0; i < n; ++i) keys[i] = {key(i), uint32_t(i)};
     if (n < 256) {
         std::sort(keys.begin(), keys.end());
     } else {
@@ -357,6 +415,13 @@ struct StreamWriter {
 // nearest and its neighbours) that best restores RGB given that chroma.
 std::array<uint32_t, 3> quantize_color(const uint8_t* rgb, int luma_shift, int chroma_shift) {
     Ycocg c = to_ycocg(rgb[0], rgb[1], rgb[2]);
+    // At full precision (the default) the search below keeps Y itself, so it is skipped: YCoCg-R
+    // is lossless, so Y restores RGB exactly, and the search keeps the first least error, where
+    // only Y - 1 comes before Y. Y - 1 moves every channel down by one before the clamp to
+    // 0..255, which hides that only for black, whose Y - 1 is skipped. (Checked for all 2^24
+    // colours: tests/points/test_codec.cpp.) The search's three decodes per point were a third
+    // of encode_point_node's own samples on the 1M scan (point_encode_bench 341 -> 316 ms).
+    if (luma_shift == 0 && chroma_shift == 0) return {uint32_t(c.y), uint32_t(c.co), uint32_t(c.cg)};
     auto nearest = [](int v, int shift, int top) {
         return uint32_t(std::min((v + (shift ? 1 << (shift - 1) : 0)) >> shift, top >> shift));
     };
@@ -385,6 +450,23 @@ int32_t quantize_radius(double r, float base, float step) {
     return v;
 }
 
+// The smallest of n radii, as a double. Out of line, as is largest_error: inlined into the
+// encoder, GCC kept the running minimum and maximum in stack slots, a store and a load on the
+// chain from point to point (together 17% of encode_point_node's own samples; out of line,
+// point_encode_bench 272 -> 266 ms).
+// Taken among the floats and then widened: exact and order-keeping, so the same double as the
+// minimum of the widened radii.
+__attribute__((noinline)) double smallest_radius(const float* radii, size_t n) {
+    float smallest = INFINITY;
+    for (size_t i = 0; i < n; ++i) smallest = std::min(smallest, radii[i]);
+    return smallest;
+}
+__attribute__((noinline)) double largest_error(const std::vector<double>& error) {
+    double worst = 0;
+    for (double e : error) worst = std::max(worst, e);
+    return worst;
+}
+
 // Decodes the node in `out` (its checksum and pad not yet set), measures every point's
 // position error against the input, then sets the pad so that every decoded splat covers its
 // input splat grown by that error, and seals the node with its checksum. `decoded` receives
@@ -411,14 +493,13 @@ void seal_node(ByteWriter& out, size_t pad_at, size_t body_end, const PointSampl
         (void)problem;
     }
     std::vector<double> error(n);
-    double worst = 0;
     for (size_t i = 0; i < n; ++i) {
         const double* p = points.positions + 3 * order[i];
         double d2 = 0;
         for (int a = 0; a < 3; ++a) d2 += (double(decoded.positions[3 * i + a]) - p[a]) * (double(decoded.positions[3 * i + a]) - p[a]);
         error[i] = std::sqrt(d2);
-        worst = std::max(worst, error[i]);
     }
+    const double worst = largest_error(error);
     stats.position_error = worst;
     float pad = round_up(worst);
     float largest_radius = 0;
@@ -451,11 +532,8 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
     const ColorBits& color_bits = settings.color_bits;
     assert(color_bits.luma >= 1 && color_bits.luma <= 8 && color_bits.chroma >= 1 && color_bits.chroma <= 9);
     assert(settings.error_fraction > 0 && settings.error_fraction <= 1);
-    double min_radius = INFINITY;
-    for (size_t i = 0; i < n; ++i) {
-        assert(std::isfinite(points.radii[i]) && points.radii[i] > 0);
-        min_radius = std::min(min_radius, double(points.radii[i]));
-    }
+    for (size_t i = 0; i < n; ++i) assert(std::isfinite(points.radii[i]) && points.radii[i] > 0);
+    const double min_radius = smallest_radius(points.radii, n);
     const Grid grid = choose_grid(points, min_radius * settings.error_fraction);
     const std::vector<uint32_t> q = quantize_positions(points, grid);
     std::vector<uint32_t> local_order;
@@ -493,9 +571,9 @@ std::vector<uint8_t> encode_point_node(const PointSamplesView& points, const Poi
     for (int a = 0; a < 3; ++a)
         stats.bytes_position += streams.put_deltas([&](uint32_t i) { return int32_t(q[3 * i + a]); });
     if (has_normals) {
+        // Four normals per SSE step (point_encode_bench 305 -> 270 ms).
         std::vector<uint16_t> codes(n);
-        for (size_t i = 0; i < n; ++i)
-            codes[i] = oct_encode_precise(points.normals[3 * i], points.normals[3 * i + 1], points.normals[3 * i + 2]);
+        oct_encode_precise_batch(points.normals, n, codes.data());
         // Octahedral coordinates wrap modulo 256: a delta is the signed byte difference.
         for (int c = 0; c < 2; ++c) {
             int32_t running = 0;

@@ -145,3 +145,61 @@ TEST(Octahedral, PreciseEncoderMatchesTheScalarSearchOnEightMillionVectors) {
             for (float z : specials) check(x, y, z);
     EXPECT_EQ(checked, 8000000u + 11u * 11u * 11u);
 }
+
+TEST(Octahedral, BatchEncoderMatchesTheSingleEncoderForEveryInput) {
+    // oct_encode_precise_batch (four vectors per SSE step) against one call per vector:
+    // the kinds of vectors of the test above, shuffled so every kind meets every lane, then
+    // every triple of special values at every lane position, and arrays of every length up to
+    // 9 (the scalar tail).
+    std::mt19937_64 rng(2024);
+    std::uniform_real_distribution<float> coord(-1.0f, 1.0f), tiny(-1e-6f, 1e-6f);
+    std::uniform_int_distribution<int> code(-127, 127);
+    std::vector<float> xyz;
+    auto add = [&](float x, float y, float z) { xyz.insert(xyz.end(), {x, y, z}); };
+    for (int i = 0; i < 1000000; ++i) {
+        switch (rng() % 5) {
+        case 0: {
+            double v[3];
+            random_unit(rng, v);
+            add(float(v[0]), float(v[1]), float(v[2]));
+            break;
+        }
+        case 1: add(coord(rng) * 1000.0f, coord(rng) * 1000.0f, coord(rng) * 1e-3f); break;
+        case 2: {
+            float d[3];
+            oct_decode(uint16_t(uint8_t(int8_t(code(rng))) | (uint8_t(int8_t(code(rng))) << 8)), d);
+            add(d[0] + tiny(rng), d[1] + tiny(rng), d[2] + tiny(rng));
+            break;
+        }
+        case 3: add(coord(rng), coord(rng), tiny(rng)); break;
+        default: {  // exact decoded directions (ties) and axis-aligned vectors of any length
+            float d[3];
+            oct_decode(uint16_t(uint8_t(int8_t(code(rng))) | (uint8_t(int8_t(code(rng))) << 8)), d);
+            const float s = float(1 + rng() % 3);
+            if (rng() % 2) add(d[0] * s, d[1] * s, d[2] * s);
+            else add(float(int(rng() % 3) - 1) * s, float(int(rng() % 3) - 1) * s, float(int(rng() % 3) - 1) * s);
+        }
+        }
+    }
+    const float specials[] = {0.0f, -0.0f, 1.0f, -1.0f, 1e-38f, -1e-38f, 1e-30f, 1e38f, -1e38f, INFINITY, -INFINITY, NAN};
+    for (int lane = 0; lane < 4; ++lane)
+        for (float x : specials)
+            for (float y : specials)
+                for (float z : specials) {
+                    for (int k = 0; k < lane; ++k) add(coord(rng), coord(rng), coord(rng));
+                    add(x, y, z);
+                    for (int k = lane + 1; k < 4; ++k) add(coord(rng), coord(rng), coord(rng));
+                }
+    const size_t n = xyz.size() / 3;
+    std::vector<uint16_t> codes(n);
+    oct_encode_precise_batch(xyz.data(), n, codes.data());
+    for (size_t i = 0; i < n; ++i)
+        ASSERT_EQ(codes[i], oct_encode_precise(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2]))
+            << i << ": " << xyz[3 * i] << " " << xyz[3 * i + 1] << " " << xyz[3 * i + 2];
+    for (size_t count = 0; count <= 9; ++count) {
+        std::vector<uint16_t> some(count + 1, 0xabcd);
+        oct_encode_precise_batch(xyz.data() + 3 * 12345, count, some.data());
+        for (size_t i = 0; i < count; ++i) ASSERT_EQ(some[i], codes[12345 + i]) << count;
+        ASSERT_EQ(some[count], 0xabcd);  // nothing written past the end
+    }
+}

@@ -9,6 +9,8 @@
 #include "common_codec/octahedral.h"
 #include "points/codec.h"
 #include "support.h"
+// The encoder's private Rice helpers (rice_bits against the scalar rice_cost).
+#include "../../points/src/rice.h"
 
 namespace catpaq {
 namespace {
@@ -150,6 +152,85 @@ TEST(PointCodec, LargeResidualsAndEscapesRoundTrip) {
         ASSERT_LE(distance(&out.positions[3 * i], &node.positions[3 * order[i]]), out.position_error) << i;
         for (int c = 0; c < 3; ++c) ASSERT_EQ(out.colors[3 * i + c], node.colors[3 * order[i] + c]);
     }
+}
+
+TEST(PointCodec, RiceBitsEqualsTheSumOfRiceCosts) {
+    // rice_bits (four values at a time, escapes without branches) against rice_cost summed, for
+    // every k on blocks of every length up to two blocks: small values, values around every
+    // escape threshold, and values of every width up to 2^32 - 1 (escape prefixes up to 30, and
+    // the excesses from 2^24 up, whose float conversion the SIMD path must not round up).
+    using namespace points_detail;
+    uint64_t state = 7;
+    std::vector<uint32_t> values(2 * kRiceBlock);
+    auto check = [&](size_t n, const char* what) {
+        for (uint32_t k = 0; k <= kRiceMaxK; ++k) {
+            uint64_t expected = 0;
+            for (size_t i = 0; i < n; ++i) expected += rice_cost(values[i], k);
+            ASSERT_EQ(rice_bits(values.data(), n, k), expected) << what << " n " << n << " k " << k;
+        }
+    };
+    for (int round = 0; round < 3000; ++round) {
+        const size_t n = size_t(test::next_random(state) % (values.size() + 1));
+        const int kind = round % 4;
+        for (uint32_t& v : values) {
+            const uint64_t r = test::next_random(state);
+            if (kind == 0) v = uint32_t(r % 64);
+            else if (kind == 1) v = uint32_t(r) >> (r >> 59);  // every width
+            else if (kind == 2) {  // near 2^m: escape thresholds (8 << k) and float rounding edges
+                const uint32_t m = uint32_t(r >> 32) % 33;
+                const int64_t near = (m == 32 ? int64_t(1) << 32 : int64_t(1) << m) + int64_t(r % 9) - 4;
+                v = uint32_t(std::clamp<int64_t>(near, 0, UINT32_MAX));
+            } else v = uint32_t(r);
+        }
+        check(n, "random");
+    }
+    for (uint32_t edge : {0u, 1u, 7u, 8u, 9u, 0xffffffu, 0x1000000u, 0x3ffffffu, 0x4000000u, 0x4000020u, 0x7fffffffu,
+                          0x80000000u, 0xfffffff7u, 0xfffffff8u, 0xffffffffu}) {
+        std::fill(values.begin(), values.end(), edge);
+        check(values.size(), "constant");
+        check(kRiceBlock - 1, "constant");
+    }
+}
+
+TEST(PointCodec, FullPrecisionColourSearchKeepsTheLosslessLumaForEveryColour) {
+    // The encoder's quantize_color skips its search for the luma at full precision (8-bit luma,
+    // 9-bit chroma) and keeps the YCoCg-R luma: what the search (copied here from
+    // points/src/codec.cpp, with the colour transform) keeps for every RGB colour.
+    auto clamp_byte = [](int v) { return v < 0 ? 0 : v > 255 ? 255 : v; };
+    for (int r = 0; r < 256; ++r)
+        for (int g = 0; g < 256; ++g)
+            for (int b = 0; b < 256; ++b) {
+                const int co = r - b, t = b + (co >> 1), cg = g - t, y = t + (cg >> 1);
+                int best_y = y, best_error = INT32_MAX;
+                for (int dy = -1; dy <= 1; ++dy) {
+                    const int yq = y + dy;
+                    if (yq < 0 || yq > 256) continue;
+                    const int tt = std::min(yq, 255) - (cg >> 1), gg = cg + tt, bb = tt - (co >> 1), rr = bb + co;
+                    const int error = std::max({std::abs(clamp_byte(rr) - r), std::abs(clamp_byte(gg) - g),
+                                                std::abs(clamp_byte(bb) - b)});
+                    if (error < best_error) best_error = error, best_y = yq;
+                }
+                ASSERT_EQ(best_y, y) << r << " " << g << " " << b;
+            }
+}
+
+TEST(PointCodec, GridRoundingEqualsNearbyintOnTheGridsRange) {
+    // quantize_positions rounds a coordinate clamped to [0, 2^24 - 1] as (t + 2^52) - 2^52
+    // (copied here) where it called std::nearbyint: equal on integers, halves (ties to even),
+    // their neighbours and random values over the range, and on the clamped special values.
+    auto rounded = [](double t) { return (t + 0x1p52) - 0x1p52; };
+    const double top = double((1u << 24) - 1);
+    uint64_t state = 11;
+    auto check = [&](double t) {
+        const double c = std::clamp(t, 0.0, top);
+        ASSERT_EQ(rounded(c), std::clamp(std::nearbyint(t), 0.0, top)) << t;
+    };
+    for (uint32_t i = 0; i <= (1u << 24); i += (i < 4096 ? 1 : 997)) {
+        for (double t : {double(i), i + 0.5, i - 0.5})
+            for (double u : {t, std::nextafter(t, -1.0), std::nextafter(t, 1e300)}) check(u);
+    }
+    for (int i = 0; i < 1000000; ++i) check((test::random_unit(state) * 1.2 - 0.1) * double(1u << 24));
+    for (double t : {-0.0, -0.4, -1e300, 1e300, double(INFINITY), -double(INFINITY), 0x1p60}) check(t);
 }
 
 TEST(PointCodec, BaselineAndAvx2KernelsDecodeAlike) {
