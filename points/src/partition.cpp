@@ -47,9 +47,11 @@ struct Box {
             hi[a] = std::max(hi[a], p[a]);
         }
     }
-    void add(const Box& o) {
-        add(o.lo);
-        add(o.hi);
+    void add(const Box& o) {  // (o may be empty: its lo infinite, its hi minus infinity)
+        for (int a = 0; a < 3; ++a) {
+            lo[a] = std::min(lo[a], o.lo[a]);
+            hi[a] = std::max(hi[a], o.hi[a]);
+        }
     }
 };
 

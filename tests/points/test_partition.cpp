@@ -10,6 +10,7 @@
 #include <random>
 
 #include "../../points/src/partition.h"
+#include "mesh/generators.h"
 
 using namespace catpaq;
 using namespace catpaq::points_detail;
@@ -29,6 +30,18 @@ Items tied_items(size_t n, uint64_t seed) {
             const float pick = values[random() % 8];
             items[i].p[a] = a == 0 ? pick : a == 1 ? float(random() % 97) * 0.25f - 12.0f : float(random() % 100000) * 1e-3f;
         }
+        items[i].index = uint32_t(i);
+    }
+    return items;
+}
+
+// A sphere's vertices in the generator's order, which follows their position (as a scanner's
+// order does): blocks of a large split then often lie all on one side.
+Items ordered_items(size_t triangles) {
+    const Mesh mesh = make_sphere(triangles, 3);
+    Items items(mesh.positions.size());
+    for (size_t i = 0; i < items.size(); ++i) {
+        for (int a = 0; a < 3; ++a) items[i].p[a] = float(mesh.positions[i][a]);
         items[i].index = uint32_t(i);
     }
     return items;
@@ -137,11 +150,11 @@ std::vector<uint32_t> reference_left(std::vector<PartitionItem> node, const Part
 }
 
 // Every split of the tree is the rule's.
-void check_splits_follow_the_rule(PointSplitRule rule, size_t n, size_t node_points) {
+void check_splits_follow_the_rule(PointSplitRule rule, Items items, size_t node_points) {
     PartitionSettings settings;
     settings.split = rule;
     settings.node_points = node_points;
-    Items items = tied_items(n, 11);
+    const size_t n = items.size();
     const std::vector<HNode> nodes = partition_items(items, 0, uint32_t(n), 1, 0, settings, nullptr);
     for (const HNode& node : nodes) {
         if (node.left < 0) continue;
@@ -165,7 +178,8 @@ TEST(PointPartition, TreeDependsOnTheSetOnlyAndLeavesAreByInputIndex) {
 
 TEST(PointPartition, EverySplitIsTheRulesComputedPlainly) {
     for (PointSplitRule rule : {PointSplitRule::Balanced, PointSplitRule::Midpoint}) {
-        check_splits_follow_the_rule(rule, 5000, 64);       // sequential splits
-        check_splits_follow_the_rule(rule, 300000, 20000);  // the top splits in parallel
+        check_splits_follow_the_rule(rule, tied_items(5000, 11), 64);       // sequential splits
+        check_splits_follow_the_rule(rule, tied_items(300000, 11), 20000);  // the top splits in parallel
+        check_splits_follow_the_rule(rule, ordered_items(400000), 20000);   // blocks on one side
     }
 }
