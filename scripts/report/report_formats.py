@@ -106,6 +106,12 @@ def parse_points_bench(text):
                                        "same": r[9] == "yes"})
         need(out["out_of_core"], "points_bench: an out-of-core heading without rows")
     out["laz"] = parse_points_bench_laz(text)
+    out["normals"] = None
+    nq = re.search(r"^== estimated normals against the surface's \((\d+) points, (\d+) leaf points matched\)\n.*\n"
+                   r"\s*(%s)\s+(%s)\s+(%s)\s+(%s)\s+(%s)$" % ((NUM,) * 5), text, re.M)
+    if nq:
+        out["normals"] = {"points": int(nq.group(1)), "matched": int(nq.group(2)), "mean": float(nq.group(3)),
+                          "median": float(nq.group(4)), "p95": float(nq.group(5)), "flipped": float(nq.group(6))}
     return out
 
 
@@ -250,6 +256,14 @@ def points_section(raw, w):
       "at %.2f bytes: ours is %.2f times its speed at %.2f times its size." %
       (d["ours"], d["ours_b"], d["meshopt"], d["meshopt_b"], d["ours"] / d["meshopt"], d["ours_b"] / d["meshopt_b"]))
     w("")
+    if pb["normals"]:
+        n = pb["normals"]
+        w("Estimated normals against the surface's own (the first size's cloud converted again without its "
+          "normals; each of the %s leaf points matched to its input point): angle between the two lines mean "
+          "%.2f°, median %.2f°, 95th percentile %.2f°; %.3f%% point the other way (the orientation's failures: the "
+          "surface is closed and its normals point out)." % (f"{n['matched']:,}", n["mean"], n["median"], n["p95"],
+                                                             n["flipped"]))
+        w("")
     if pb["laz"]:
         laz_table(pb["laz"], w)
     if pb["splits"]:
