@@ -33,6 +33,15 @@ struct EstimateInput {
 // SelfAdjointEigenSolver::computeDirect (eigenvectors().col(0), eigenvalues()).
 void smallest_eigenvector(const double cov[6], double vector[3], double values[3]);
 
+// The same for a neighbourhood with a plane, faster: the smallest eigenvalue by Newton's method
+// on the characteristic polynomial from 0 (below it, the cubic rises and is concave: the steps
+// approach the root from below and never pass it), the other two from the polynomial's
+// coefficients, the vector as Eigen finds it from the eigenvalue. Returns false, computing
+// nothing, where the smallest eigenvalue is not well apart from the next (gap below a
+// thousandth of the largest) or Newton's method has not settled within a few steps: then
+// smallest_eigenvector's closed form is the one to use.
+bool plane_eigenvector(const double cov[6], double vector[3], double values[3]);
+
 // Estimates normals (when `normals` is not null) and radii (when `radii` is not null) of the
 // points [begin, end), which are one leaf of the hierarchy: orientation is made consistent
 // within the leaf. Writes normals[begin, end) and radii[begin, end). The neighbours are exact:
