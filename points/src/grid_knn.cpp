@@ -189,18 +189,40 @@ const bool g_avx2 = (__builtin_cpu_init(), __builtin_cpu_supports("avx2") && __b
 #endif
 
 // How many of d[0, padded) are below each of d[0, n): the ranks of the values, but for ties,
-// which share the lowest of their ranks. A loop without branches that vectorizes; compiled for
-// AVX2 too (eight lanes) and chosen at run time (GCC's target_clones).
-#if CATPAQ_KNN_AVX2
-__attribute__((target_clones("avx2", "default")))
-#endif
-void count_below(const int32_t* __restrict d, int n, int padded, int32_t* __restrict below) {
+// which share the lowest of their ranks. d is padded to a multiple of 8 with values above every
+// distance's bits. With AVX2, eight values to a register, each d[j] compared with all of them
+// and the counts kept in the register: where each value's count was a vectorized loop over d
+// ending in a horizontal sum, 5.7% of the 1M scan's conversion; now 4.1-4.6% (one register at a
+// time did better than all of a query's at once, 5.3%).
+void count_below_scalar(const int32_t* __restrict d, int n, int padded, int32_t* __restrict below) {
     for (int i = 0; i < n; ++i) {
         const int32_t v = d[i];
         int32_t count = 0;
         for (int j = 0; j < padded; ++j) count += int32_t(d[j] < v);
         below[i] = count;
     }
+}
+
+#if CATPAQ_KNN_AVX2
+__attribute__((target("avx2")))
+void count_below_avx2(const int32_t* __restrict d, int n, int padded, int32_t* __restrict below) {
+    for (int i = 0; i < n; i += 8) {
+        const __m256i values = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(d + i));
+        __m256i counts = _mm256_setzero_si256();
+        for (int j = 0; j < padded; ++j)  // (d[j] < v) is -1 where true: subtracted, it counts
+            counts = _mm256_sub_epi32(counts, _mm256_cmpgt_epi32(values, _mm256_set1_epi32(d[j])));
+        alignas(32) int32_t out[8];
+        _mm256_store_si256(reinterpret_cast<__m256i*>(out), counts);
+        for (int l = 0; l < 8 && i + l < n; ++l) below[i + l] = out[l];
+    }
+}
+#endif
+
+void count_below(const int32_t* __restrict d, int n, int padded, int32_t* __restrict below) {
+#if CATPAQ_KNN_AVX2
+    if (g_avx2) return count_below_avx2(d, n, padded, below);
+#endif
+    count_below_scalar(d, n, padded, below);
 }
 
 }  // namespace
