@@ -105,7 +105,7 @@ private:
     std::vector<float> xyz_;  // in core: the points as floats, 3 each, for the neighbour searches
     std::unique_ptr<Vec3f[]> estimated_normals_;  // in core, when estimated (else the cloud's)
     std::unique_ptr<float[]> estimated_radii_;
-    PointArrays arrays_;      // the points in partition order (in core: the cloud's and xyz_)
+    PointArrays arrays_;      // the points in partition order (in core: the cloud's, xyz_ and the estimated)
     float cloud_extent_ = 0;
     std::unique_ptr<ArchiveWriter> writer_;
     // Out of core: the store whose mapped pages are dropped once resident memory passes

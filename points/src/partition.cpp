@@ -170,6 +170,7 @@ private:
     uint32_t split_midpoint(uint32_t begin, uint32_t end, int at, const Box& box, Box children[2]) const;
     uint32_t split_balanced(uint32_t begin, uint32_t end, int at, const Box& box, Box children[2]) const;
     uint32_t split_by_rank(uint32_t begin, uint32_t end, int at, int axis, float median, Box children[2]) const;
+    uint32_t split_by_rank(uint32_t begin, uint32_t end, int at, const Box& box, int axis, Box children[2]) const;
     uint32_t split_by_plane(uint32_t begin, uint32_t end, int at, const Box& box, int axis, float plane,
                             Box children[2]) const;
     template <class Side>
@@ -275,16 +276,22 @@ uint32_t Partitioner::split_by_rank(uint32_t begin, uint32_t end, int at, int ax
     return stable_split(begin, end, at, half, side, children);
 }
 
+// The same, the median found first.
+uint32_t Partitioner::split_by_rank(uint32_t begin, uint32_t end, int at, const Box& box, int axis,
+                                    Box children[2]) const {
+    const bool wanted[3] = {axis == 0, axis == 1, axis == 2};
+    float median[3];
+    median_coordinates(arrays_[at], begin, end, box.lo, box.hi, wanted, median);
+    return split_by_rank(begin, end, at, axis, median[axis], children);
+}
+
 // The points below the plane to the left; by rank if that leaves a side empty.
 uint32_t Partitioner::split_by_plane(uint32_t begin, uint32_t end, int at, const Box& box, int axis, float plane,
                                      Box children[2]) const {
     auto side = [axis, plane](const PartitionItem& item) { return item.p[axis] < plane ? 0 : 2; };
     const uint32_t middle = stable_split(begin, end, at, 0, side, children);
     if (middle != begin && middle != end) return middle;
-    const bool wanted[3] = {axis == 0, axis == 1, axis == 2};
-    float median[3];
-    median_coordinates(arrays_[at], begin, end, box.lo, box.hi, wanted, median);
-    return split_by_rank(begin, end, at, axis, median[axis], children);
+    return split_by_rank(begin, end, at, box, axis, children);
 }
 
 // Seed 002: the middle of the longest side of the tight box. A tight box has points on both of
@@ -334,12 +341,7 @@ uint32_t Partitioner::split_balanced(uint32_t begin, uint32_t end, int at, const
 uint32_t Partitioner::choose_split(uint32_t begin, uint32_t end, int depth, int at, const Box& box,
                                    Box children[2]) const {
     // Deep trees come from points that coincide or nearly do: split them by rank.
-    if (depth >= kMidpointMaxDepth) {
-        const bool wanted[3] = {true, false, false};
-        float median[3];
-        median_coordinates(arrays_[at], begin, end, box.lo, box.hi, wanted, median);
-        return split_by_rank(begin, end, at, 0, median[0], children);
-    }
+    if (depth >= kMidpointMaxDepth) return split_by_rank(begin, end, at, box, 0, children);
     if (settings_.split == PointSplitRule::Balanced) return split_balanced(begin, end, at, box, children);
     return split_midpoint(begin, end, at, box, children);
 }

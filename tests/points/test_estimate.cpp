@@ -28,6 +28,27 @@ void expect_as_eigen(const double c[6]) {
     }
 }
 
+// The covariance (xx, xy, xz, yy, yz, zz) of 16 points spread uniformly by `scales` along the
+// columns of `axes`, around `centre` on every axis.
+void random_covariance(std::mt19937_64& random, const double scales[3], const Eigen::Matrix3d& axes, double centre,
+                       double c[6]) {
+    std::uniform_real_distribution<double> uniform(-1, 1);
+    double p[16][3], mean[3] = {0, 0, 0};
+    for (auto& q : p) {
+        const double u[3] = {uniform(random) * scales[0], uniform(random) * scales[1], uniform(random) * scales[2]};
+        for (int a = 0; a < 3; ++a) {
+            q[a] = centre + axes(a, 0) * u[0] + axes(a, 1) * u[1] + axes(a, 2) * u[2];
+            mean[a] += q[a] / 16;
+        }
+    }
+    for (int i = 0; i < 6; ++i) c[i] = 0;
+    for (auto& q : p) {
+        const double d[3] = {q[0] - mean[0], q[1] - mean[1], q[2] - mean[2]};
+        c[0] += d[0] * d[0], c[1] += d[0] * d[1], c[2] += d[0] * d[2];
+        c[3] += d[1] * d[1], c[4] += d[1] * d[2], c[5] += d[2] * d[2];
+    }
+}
+
 }  // namespace
 
 TEST(PointEstimate, SmallestEigenvectorHasEigensBits) {
@@ -38,21 +59,8 @@ TEST(PointEstimate, SmallestEigenvectorHasEigensBits) {
         const int kind = trial % 5;
         const double scales[5][3] = {{1, 1, 1e-3}, {1, 1e-3, 1e-4}, {1, 1, 1}, {1, 0.5, 0.1}, {1, 1, 0}};
         Eigen::Matrix3d axes = Eigen::Matrix3d::NullaryExpr([&] { return uniform(random); });
-        double p[16][3], mean[3] = {0, 0, 0};
-        for (auto& q : p) {
-            const double u[3] = {uniform(random) * scales[kind][0], uniform(random) * scales[kind][1],
-                                 uniform(random) * scales[kind][2]};
-            for (int a = 0; a < 3; ++a) {
-                q[a] = 100 + axes(a, 0) * u[0] + axes(a, 1) * u[1] + axes(a, 2) * u[2];
-                mean[a] += q[a] / 16;
-            }
-        }
-        double c[6] = {0, 0, 0, 0, 0, 0};
-        for (auto& q : p) {
-            const double d[3] = {q[0] - mean[0], q[1] - mean[1], q[2] - mean[2]};
-            c[0] += d[0] * d[0], c[1] += d[0] * d[1], c[2] += d[0] * d[2];
-            c[3] += d[1] * d[1], c[4] += d[1] * d[2], c[5] += d[2] * d[2];
-        }
+        double c[6];
+        random_covariance(random, scales[kind], axes, 100, c);
         expect_as_eigen(c);
         if (HasFailure()) return;
     }
@@ -76,21 +84,8 @@ TEST(PointEstimate, PlaneEigenvectorAgreesWithEigenAndDeclinesWithoutAPlane) {
         const int kind = trial % 6;
         // Orthonormal axes (a random rotation), so that the scales are the spread along them.
         Eigen::Matrix3d axes = Eigen::Matrix3d::NullaryExpr([&] { return uniform(random); }).householderQr().householderQ();
-        double p[16][3], mean[3] = {0, 0, 0};
-        for (auto& q : p) {
-            const double u[3] = {uniform(random) * scales[kind][0], uniform(random) * scales[kind][1],
-                                 uniform(random) * scales[kind][2]};
-            for (int a = 0; a < 3; ++a) {
-                q[a] = 10 + axes(a, 0) * u[0] + axes(a, 1) * u[1] + axes(a, 2) * u[2];
-                mean[a] += q[a] / 16;
-            }
-        }
-        double c[6] = {0, 0, 0, 0, 0, 0};
-        for (auto& q : p) {
-            const double d[3] = {q[0] - mean[0], q[1] - mean[1], q[2] - mean[2]};
-            c[0] += d[0] * d[0], c[1] += d[0] * d[1], c[2] += d[0] * d[2];
-            c[3] += d[1] * d[1], c[4] += d[1] * d[2], c[5] += d[2] * d[2];
-        }
+        double c[6];
+        random_covariance(random, scales[kind], axes, 10, c);
         double v[3], l[3], ve[3], le[3];
         smallest_eigenvector(c, ve, le);
         if (!plane_eigenvector(c, v, l)) continue;

@@ -58,10 +58,15 @@ std::map<uint64_t, std::vector<uint32_t>> node_sets(const std::vector<HNode>& no
     return sets;
 }
 
-void check_split_rule(PointSplitRule rule, size_t n, size_t node_points) {
+PartitionSettings settings_of(PointSplitRule rule, size_t node_points) {
     PartitionSettings settings;
     settings.split = rule;
     settings.node_points = node_points;
+    return settings;
+}
+
+void check_split_rule(PointSplitRule rule, size_t n, size_t node_points) {
+    const PartitionSettings settings = settings_of(rule, node_points);
     Items items = tied_items(n, 7);
     const std::vector<HNode> nodes = partition_items(items, 0, uint32_t(n), 1, 0, settings, nullptr);
     // Leaves list their points by input index.
@@ -151,9 +156,7 @@ std::vector<uint32_t> reference_left(std::vector<PartitionItem> node, const Part
 
 // Every split of the tree is the rule's.
 void check_splits_follow_the_rule(PointSplitRule rule, Items items, size_t node_points) {
-    PartitionSettings settings;
-    settings.split = rule;
-    settings.node_points = node_points;
+    const PartitionSettings settings = settings_of(rule, node_points);
     const size_t n = items.size();
     const std::vector<HNode> nodes = partition_items(items, 0, uint32_t(n), 1, 0, settings, nullptr);
     for (const HNode& node : nodes) {
