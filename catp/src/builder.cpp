@@ -23,7 +23,6 @@
 #include "base/error.h"
 #include "base/heap_warmup.h"
 #include "base/progress.h"
-#include "base/signal_cleanup.h"
 #include "base/paged_array.h"
 #include "base/sysinfo.h"
 #include "base/temp_file.h"
@@ -1096,15 +1095,7 @@ CatpBuildReport CatpBuild::run() {
     if (leaf_level > kMaxLevel - 3) fail("leaf level %d is deeper than the lattice allows (%d)", leaf_level, kMaxLevel - 3);
     levels_ = choose_block_octave(sample_, estimate, leaf_level, shares_->block_triangles);
     report_.block_level = 3 * levels_.block_octave;
-    // The archive writer spills nodes to a named file (OUTPUT.nodes.tmp.PID, see
-    // common_codec/src/archive.cpp): registered for removal on signals before it exists and
-    // unlinked as soon as it does (the writer keeps it open and finds nothing to remove later),
-    // so that no way of ending the run leaves it behind.
-    const std::string spill = archive_spill_name(output_);
-    remove_on_signal(spill);
     archive_ = std::make_unique<ArchiveWriter>(output_, ArchiveKind::Catp);
-    ::unlink(spill.c_str());
-    forget_on_signal(spill);
 
     to_lattice();
     lap(report_.seconds_read);

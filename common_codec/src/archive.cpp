@@ -15,6 +15,7 @@
 #include "base/bytes.h"
 #include "base/checksum.h"
 #include "base/error.h"
+#include "base/signal_cleanup.h"
 #include "common_codec/deflate.h"
 
 namespace catpaq {
@@ -212,15 +213,19 @@ ArchiveWriter::ArchiveWriter(std::string path, ArchiveKind kind) : impl_(new Imp
     impl_->path = std::move(path);
     impl_->kind = kind;
     impl_->spill_path = impl_->path + ".nodes.tmp." + std::to_string(getpid());
+    // The spill is only ever used through the open stream: registered for removal on signals
+    // before it exists and unlinked as soon as it does, so that no way of ending the run (a
+    // signal, an error, a crash) leaves it next to the output. Its name stays for messages.
+    remove_on_signal(impl_->spill_path);
     impl_->spill = std::fopen(impl_->spill_path.c_str(), "w+b");
-    if (!impl_->spill) fail("cannot create '%s': %s", impl_->spill_path.c_str(), std::strerror(errno));
+    const int error = errno;
+    ::unlink(impl_->spill_path.c_str());
+    forget_on_signal(impl_->spill_path);
+    if (!impl_->spill) fail("cannot create '%s': %s", impl_->spill_path.c_str(), std::strerror(error));
 }
 
 ArchiveWriter::~ArchiveWriter() {
-    if (impl_->spill) {
-        std::fclose(impl_->spill);
-        std::remove(impl_->spill_path.c_str());
-    }
+    if (impl_->spill) std::fclose(impl_->spill);
 }
 
 void ArchiveWriter::add_node(ArchiveEntry entry, const uint8_t* data, size_t size) {
@@ -281,7 +286,6 @@ uint64_t ArchiveWriter::finish(const std::vector<uint8_t>& meta) {
     out.commit();
     std::fclose(m.spill);
     m.spill = nullptr;
-    std::remove(m.spill_path.c_str());
     return h.file_size;
 }
 

@@ -15,6 +15,7 @@
 #include <cstring>
 #include <vector>
 
+#include "base/default_init.h"
 #include "points/format.h"
 
 namespace catpaq {
@@ -43,7 +44,7 @@ struct PartitionItem {
     float p[3];
     uint32_t index;
 };
-using Items = std::vector<PartitionItem>;
+using Items = UninitializedVector<PartitionItem>;  // filled by its maker, in parallel
 
 // Floats order as these keys do (negatives reversed below the positives; -0 just below +0).
 inline uint32_t float_order_key(float v) {

@@ -78,7 +78,8 @@ std::string parse_archive_index(const ArchiveHeader& header, const uint8_t* data
                                 std::vector<ArchiveEntry>& out);
 
 // Builds an archive: nodes are appended in any order (spilled to a temporary file next to the
-// output, so memory stays bounded), then finish() writes header, meta, index and the payload in
+// output, so memory stays bounded; unlinked as soon as it is open, so nothing is left behind
+// however the run ends), then finish() writes header, meta, index and the payload in
 // (level, key) order under a temporary name and renames it into place.
 class ArchiveWriter {
 public:
