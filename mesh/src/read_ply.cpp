@@ -2,11 +2,16 @@
 // Binary bodies are decoded with memcpy from a large buffer, with the byte order fixed per call
 // by a template parameter, so the inner loops have no per-value virtual calls or iostreams.
 #include <algorithm>
+#include <atomic>
 #include <bit>
+#include <cmath>
 #include <cassert>
 #include <cstring>
 #include <limits>
 #include <string_view>
+
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_for.h>
 
 #include "base/error.h"
 #include "input_file.h"
@@ -24,6 +29,7 @@ using ull = unsigned long long;
 
 constexpr size_t kNone = size_t(-1);
 constexpr size_t kBatchBytes = size_t(1) << 20;  // bytes decoded per ensure() on the binary path
+constexpr size_t kParallelVertices = 16384;       // batches of fixed-size vertices this large: on all cores
 
 enum class PlyType : uint8_t { Int8, UInt8, Int16, UInt16, Int32, UInt32, Float32, Float64 };
 enum class PlyFormat { Ascii, BinaryLittle, BinaryBig };
@@ -183,6 +189,11 @@ struct PlyStream::Impl {
     void emit_vertex(const double* values, uint64_t index, std::vector<Vec3d>& positions,
                      std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out,
                      std::vector<float>* radii_out) const;
+    bool vertex_valid(const double* values, bool normals_wanted, bool colors_wanted, bool radii_wanted) const;
+    template <bool Swap>
+    bool parse_vertices_parallel(const char* data, size_t stride, size_t k, int last_field, std::vector<Vec3d>& positions,
+                                 std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out,
+                                 std::vector<float>* radii_out) const;
     uint8_t color_byte(double value, PlyType type, uint64_t index) const;
     void check_index(int64_t index, uint64_t face) const;
 
@@ -460,6 +471,56 @@ void PlyStream::Impl::check_index(int64_t index, uint64_t face) const {
 // ---------------------------------------------------------------------------------------------
 // Body: binary
 
+// Whether emit_vertex would take these values without an error (the same tests, no message).
+bool PlyStream::Impl::vertex_valid(const double* values, bool normals_wanted, bool colors_wanted, bool radii_wanted) const {
+    bool ok = mesh_io::finite3(values[kX], values[kY], values[kZ]);
+    if (normals_wanted) ok &= mesh_io::finite3(values[kNx], values[kNy], values[kNz]);
+    if (colors_wanted)
+        for (int f = kRed; f <= kBlue; ++f)
+            if (field_type[f] == PlyType::Float32 || field_type[f] == PlyType::Float64) ok &= std::isfinite(values[f]);
+    if (radii_wanted) ok &= std::isfinite(values[kRadius]) && values[kRadius] >= 0.0 && values[kRadius] <= 3.0e38;
+    return ok;
+}
+
+// Decodes k fixed-size vertices at `data` on all cores, appending them as emit_vertex would.
+// Returns false, appending nothing, if any is invalid: the caller's serial loop then names the
+// first. (One core decoded 100M points' 1.5 GB in 5 s while the other waited.)
+template <bool Swap>
+bool PlyStream::Impl::parse_vertices_parallel(const char* data, size_t stride, size_t k, int last_field,
+                                              std::vector<Vec3d>& positions, std::vector<Vec3f>* normals_out,
+                                              std::vector<Rgb8>* colors_out, std::vector<float>* radii_out) const {
+    const size_t base = positions.size();
+    positions.resize(base + k);
+    if (normals_out) normals_out->resize(base + k);
+    if (colors_out) colors_out->resize(base + k);
+    if (radii_out) radii_out->resize(base + k);
+    std::atomic<bool> valid{true};
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, k, 8192), [&](const tbb::blocked_range<size_t>& r) {
+        double values[kFieldCount] = {};
+        bool ok = true;
+        for (size_t i = r.begin(); i < r.end(); ++i) {
+            const char* p = data + i * stride;
+            for (int f = 0; f <= last_field; ++f)
+                if (field[f] != kNone) values[f] = load_double<Swap>(p + offset[f], field_type[f]);
+            ok &= vertex_valid(values, normals_out, colors_out, radii_out);
+            positions[base + i] = {values[kX], values[kY], values[kZ]};
+            if (normals_out) (*normals_out)[base + i] = mesh_io::unit_normal(values[kNx], values[kNy], values[kNz]);
+            if (colors_out && ok)
+                (*colors_out)[base + i] = {color_byte(values[kRed], field_type[kRed], 0),
+                                           color_byte(values[kGreen], field_type[kGreen], 0),
+                                           color_byte(values[kBlue], field_type[kBlue], 0)};
+            if (radii_out) (*radii_out)[base + i] = float(values[kRadius]);
+        }
+        if (!ok) valid.store(false, std::memory_order_relaxed);
+    });
+    if (valid.load()) return true;
+    positions.resize(base);
+    if (normals_out) normals_out->resize(base);
+    if (colors_out) colors_out->resize(base);
+    if (radii_out) radii_out->resize(base);
+    return false;
+}
+
 template <bool Swap>
 void PlyStream::Impl::read_vertices_binary(size_t n, std::vector<Vec3d>& positions, std::vector<Vec3f>* normals_out,
                                            std::vector<Rgb8>* colors_out, std::vector<float>* radii_out) {
@@ -482,10 +543,13 @@ void PlyStream::Impl::read_vertices_binary(size_t n, std::vector<Vec3d>& positio
             truncated();
         }
         const char* p = file.data();
-        for (size_t i = 0; i < k; ++i, p += stride) {
-            for (int f = 0; f <= last_field; ++f)
-                if (field[f] != kNone) values[f] = load_double<Swap>(p + offset[f], field_type[f]);
-            emit_vertex(values, done + i, positions, normals_out, colors_out, radii_out);
+        if (k < kParallelVertices ||
+            !parse_vertices_parallel<Swap>(p, stride, k, last_field, positions, normals_out, colors_out, radii_out)) {
+            for (size_t i = 0; i < k; ++i, p += stride) {
+                for (int f = 0; f <= last_field; ++f)
+                    if (field[f] != kNone) values[f] = load_double<Swap>(p + offset[f], field_type[f]);
+                emit_vertex(values, done + i, positions, normals_out, colors_out, radii_out);
+            }
         }
         file.consume(k * stride);
         first += k;

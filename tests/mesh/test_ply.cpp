@@ -80,27 +80,40 @@ TEST(WritePly, InvalidMeshIsRefusedAndNothingIsWritten) {
     EXPECT_FALSE(std::filesystem::exists(path));
 }
 
+// Large files are decoded on all cores in batches (read_ply.cpp, parse_vertices_parallel), small
+// ones on one: both sizes, both byte orders read back every vertex as written, in order.
+TEST(WritePly, BinaryRoundTripIsExactOnAllCores) {
+    Mesh sphere = make_sphere(200000, 5);  // 100,002 vertices: several parallel batches
+    ASSERT_GT(sphere.vertex_count(), 3 * 16384u);
+    std::string path = scratch("round_trip_large.ply");
+    write_ply(path, sphere);
+    expect_same_mesh(read_mesh(path), sphere);
+}
+
 TEST(WritePly, ReadsBackWithBigEndianWrittenByHand) {
     // The same sphere written big-endian by hand (double positions, reordered properties,
-    // an extra per-face property) reads back identically.
-    Mesh sphere = make_sphere(500, 2);
-    std::string file = "ply\nformat binary_big_endian 1.0\nelement vertex " + std::to_string(sphere.vertex_count()) +
-                       "\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
-                       "property double x\nproperty double y\nproperty double z\n"
-                       "property float nx\nproperty float ny\nproperty float nz\n"
-                       "element face " + std::to_string(sphere.triangle_count()) +
-                       "\nproperty list uchar uint vertex_indices\nproperty ushort material\nend_header\n";
-    for (size_t v = 0; v < sphere.vertex_count(); ++v) {
-        for (uint8_t c : sphere.colors[v]) file += char(c);
-        for (double c : sphere.positions[v]) put_be(file, c);
-        for (float c : sphere.normals[v]) put_be(file, c);
+    // an extra per-face property) reads back identically, small and large.
+    for (size_t triangles : {500, 100000}) {
+        SCOPED_TRACE(triangles);
+        Mesh sphere = make_sphere(triangles, 2);
+        std::string file = "ply\nformat binary_big_endian 1.0\nelement vertex " + std::to_string(sphere.vertex_count()) +
+                           "\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n"
+                           "property double x\nproperty double y\nproperty double z\n"
+                           "property float nx\nproperty float ny\nproperty float nz\n"
+                           "element face " + std::to_string(sphere.triangle_count()) +
+                           "\nproperty list uchar uint vertex_indices\nproperty ushort material\nend_header\n";
+        for (size_t v = 0; v < sphere.vertex_count(); ++v) {
+            for (uint8_t c : sphere.colors[v]) file += char(c);
+            for (double c : sphere.positions[v]) put_be(file, c);
+            for (float c : sphere.normals[v]) put_be(file, c);
+        }
+        for (size_t t = 0; t < sphere.triangle_count(); ++t) {
+            file += char(3);
+            for (int k = 0; k < 3; ++k) put_be(file, sphere.indices[3 * t + k]);
+            put_be(file, uint16_t(t));
+        }
+        expect_same_mesh(read_mesh(test::write_file("sphere_be.ply", file)), sphere);
     }
-    for (size_t t = 0; t < sphere.triangle_count(); ++t) {
-        file += char(3);
-        for (int k = 0; k < 3; ++k) put_be(file, sphere.indices[3 * t + k]);
-        put_be(file, uint16_t(t));
-    }
-    expect_same_mesh(read_mesh(test::write_file("sphere_be.ply", file)), sphere);
 }
 
 TEST(PlyStream, ChunkedReadsMatchWholeReads) {

@@ -186,6 +186,36 @@ TEST(ReaderErrors, NanAndInfCoordinates) {
         {"line 5", "non-finite"}));
 }
 
+// In a file large enough to be decoded on all cores, the error still names the first bad
+// vertex (the batch is decoded again in order to find it).
+TEST(ReaderErrors, LargeBinaryFileNamesTheFirstBadVertex) {
+    constexpr int kVertices = 60000;
+    auto file_with = [](int bad_vertex, int bad_field) {
+        std::string file = "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(kVertices) +
+                           "\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\n"
+                           "property float ny\nproperty float nz\nproperty float red\nproperty float green\n"
+                           "property float blue\nelement face 0\nproperty list uchar int vertex_indices\nend_header\n";
+        for (int v = 0; v < kVertices; ++v)
+            for (int f = 0; f < 9; ++f) {
+                const float value = f < 3 ? float(v) * 1e-3f : f < 6 ? (f == 5 ? 1.0f : 0.0f) : 0.5f;
+                const bool bad = v == bad_vertex && f == bad_field;
+                put_le(file, bad ? std::numeric_limits<float>::quiet_NaN() : value);
+            }
+        return file;
+    };
+    EXPECT_TRUE(read_fails(write_file("late_nan.ply", file_with(41234, 1)), {"vertex 41234 has a non-finite coordinate"}));
+    EXPECT_TRUE(read_fails(write_file("late_nan_normal.ply", file_with(20001, 4)), {"vertex 20001 has a non-finite normal"}));
+    EXPECT_TRUE(read_fails(write_file("late_nan_colour.ply", file_with(59999, 7)), {"vertex 59999 has a non-finite colour"}));
+    // And a valid one reads whole (no faces: as a point cloud).
+    PlyStream stream(write_file("late_none.ply", file_with(kVertices, 0)));
+    Mesh points;
+    while (stream.read_vertices(size_t(kVertices), points.positions, &points.normals, &points.colors) > 0) {
+    }
+    ASSERT_EQ(points.positions.size(), size_t(kVertices));
+    EXPECT_EQ(points.positions[kVertices - 1][0], double(float(kVertices - 1) * 1e-3f));
+    EXPECT_EQ(points.colors[kVertices - 1], (Rgb8{128, 128, 128}));
+}
+
 // --- indices out of range ---------------------------------------------------------------------
 
 TEST(ReaderErrors, IndexOutOfRange) {
