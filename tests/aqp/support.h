@@ -13,13 +13,13 @@
 #include "aqp/verify.h"
 #include "catp/distance.h"
 #include "mesh/mesh.h"
+#include "scratch_directory.h"
 
 namespace catpaq::aqp::test {
 
 inline std::filesystem::path scratch_dir() {
-    std::filesystem::path dir = std::filesystem::temp_directory_path() / ("catpaq_aqp_" + std::to_string(getpid()));
-    std::filesystem::create_directories(dir);
-    return dir;
+    static const catpaq::test::ScratchDirectory dir("catpaq_aqp_");
+    return dir.path();
 }
 
 struct Built {

@@ -132,7 +132,7 @@ TEST(AqpClean, TinyComponentsAreDroppedAndCounted) {
 
 TEST(AqpClean, ANonOrientableSurfaceIsRefusedWithAMessage) {
     try {
-        clean_to_manifold(test::moebius_band(24), {});
+        clean_to_manifold(aqp::test::moebius_band(24), {});
         FAIL() << "a Moebius band was accepted";
     } catch (const Error& e) {
         EXPECT_NE(std::string(e.what()).find("orientable"), std::string::npos) << e.what();

@@ -16,8 +16,8 @@
 
 using namespace catpaq;
 using namespace catpaq::aqp;
-using test::build;
-using test::Built;
+using aqp::test::build;
+using aqp::test::Built;
 
 namespace {
 
@@ -140,8 +140,8 @@ TEST(AqpDataset, AClosedInputWeldsIntoAClosedMeshAtEveryLevel) {
 }
 
 TEST(AqpDataset, StoredBoundsHoldAgainstTheInputBothWays) {
-    test::expect_bounds_hold(make_sphere(20000, 7), sphere_dataset().path);
-    test::expect_bounds_hold(read_mesh(std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply"), bunny_dataset().path);
+    aqp::test::expect_bounds_hold(make_sphere(20000, 7), sphere_dataset().path);
+    aqp::test::expect_bounds_hold(read_mesh(std::string(CATPAQ_SOURCE_DIR) + "/data/bunny.ply"), bunny_dataset().path);
 }
 
 TEST(AqpDataset, StoredBoundsAreMonotoneAndShrinkTowardsTheFinestLevel) {
@@ -177,7 +177,7 @@ TEST(AqpDataset, TheReportAgreesWithTheDataset) {
 
 TEST(AqpDataset, VerifyCatchesAMovedSharedEdgeSample) {
     const Built& b = sphere_dataset();
-    const std::string broken = (test::scratch_dir() / "moved_edge.cpq").string();
+    const std::string broken = (aqp::test::scratch_dir() / "moved_edge.cpq").string();
     const int k = AqpDataset(b.path).finest_level();
     rewrite_with_edit(b.path, broken, 3, k, [](PatchGrid& g) { g.position[g.index(1, 0)][0] ^= 1; });
     AqpVerifyReport r = verify_aqp(AqpDataset(broken));
@@ -189,7 +189,7 @@ TEST(AqpDataset, VerifyCatchesAMovedSharedEdgeSample) {
 
 TEST(AqpDataset, VerifyCatchesACoarseSampleThatIsNotTheFineOne) {
     const Built& b = sphere_dataset();
-    const std::string broken = (test::scratch_dir() / "not_nested.cpq").string();
+    const std::string broken = (aqp::test::scratch_dir() / "not_nested.cpq").string();
     const int k = AqpDataset(b.path).finest_level();
     auto edit = [](PatchGrid& g) { g.normal[g.index(2, 2)] ^= 0x0101; };
     // Version 3 cannot hold it: a level stores only the samples its coarser level lacks, and the
@@ -206,7 +206,7 @@ TEST(AqpDataset, VerifyCatchesACoarseSampleThatIsNotTheFineOne) {
 // dataset rewritten in the old layout decodes to the same samples at every level.
 TEST(AqpDataset, AVersionTwoDatasetWithRgb16NodesDecodesTheSameSamples) {
     const std::string path = sphere_untiled_dataset().path;
-    const std::string old_path = (test::scratch_dir() / "version2.cpq").string();
+    const std::string old_path = (aqp::test::scratch_dir() / "version2.cpq").string();
     AqpDataset d(path);
     ASSERT_TRUE(d.meta().node_layout().byte_planes);
     rewrite_with_edit(path, old_path, 0, 0, [](PatchGrid&) {}, true);
@@ -239,7 +239,7 @@ TEST(AqpDataset, TilesHoldTheSameSamplesInFewerNodesAndBytesAndVersionThreeStill
     std::printf("sphere: %zu nodes, %llu bytes with tiles; %zu nodes, %llu bytes without\n", tiled.archive().entries().size(),
                 (unsigned long long)sphere_dataset().report.file_bytes, untiled.archive().entries().size(),
                 (unsigned long long)untiled.archive().header().file_size);
-    const std::string v3_path = (test::scratch_dir() / "version3.cpq").string();
+    const std::string v3_path = (aqp::test::scratch_dir() / "version3.cpq").string();
     {
         ArchiveWriter w(v3_path, ArchiveKind::Aqp);
         for (size_t e = 0; e < untiled.archive().entries().size(); ++e) {
@@ -269,7 +269,7 @@ TEST(AqpDataset, TilesHoldTheSameSamplesInFewerNodesAndBytesAndVersionThreeStill
 
 TEST(AqpDataset, ACorruptNodeIsReportedNotACrash) {
     const Built& b = sphere_dataset();
-    const std::string broken = (test::scratch_dir() / "corrupt.cpq").string();
+    const std::string broken = (aqp::test::scratch_dir() / "corrupt.cpq").string();
     std::filesystem::copy_file(b.path, broken, std::filesystem::copy_options::overwrite_existing);
     {
         AqpDataset d(broken);
@@ -288,7 +288,7 @@ TEST(AqpDataset, ACorruptNodeIsReportedNotACrash) {
 }
 
 TEST(AqpDataset, BadInputIsRefusedWithAMessageAndLeavesNoFile) {
-    const std::string path = (test::scratch_dir() / "bad.cpq").string();
+    const std::string path = (aqp::test::scratch_dir() / "bad.cpq").string();
     std::filesystem::remove(path);
     Mesh empty;
     try {
@@ -303,7 +303,7 @@ TEST(AqpDataset, BadInputIsRefusedWithAMessageAndLeavesNoFile) {
     Mesh infinite = make_sphere(500, 1);
     infinite.positions[5][2] = INFINITY;
     EXPECT_THROW(build(infinite, "bad"), Error);
-    EXPECT_THROW(build(test::moebius_band(40), "bad"), Error);
+    EXPECT_THROW(build(aqp::test::moebius_band(40), "bad"), Error);
     AqpBuildOptions too_deep;
     too_deep.patch_level = kMaxPatchLevel + 1;
     EXPECT_THROW(build(make_sphere(500, 1), "bad", too_deep), Error);

@@ -74,9 +74,9 @@ class AqpHardCase : public ::testing::TestWithParam<HardCase> {};
 TEST_P(AqpHardCase, ConvertsWithEveryPropertyOrIsRefusedWithAMessage) {
     const HardCase c = GetParam();
     const Mesh input = make_hard_case(c);
-    test::Built b;
+    aqp::test::Built b;
     try {
-        b = test::build(input, hard_case_name(c));
+        b = aqp::test::build(input, hard_case_name(c));
     } catch (const Error& e) {
         EXPECT_GT(std::string(e.what()).size(), 10u) << hard_case_name(c) << " refused without a message";
         GTEST_SKIP() << "refused: " << e.what();
@@ -111,7 +111,7 @@ TEST_P(AqpHardCase, ConvertsWithEveryPropertyOrIsRefusedWithAMessage) {
             ASSERT_LE(to_border.distance(mid), bound * (1 + 1e-6)) << "a border edge away from the input's border";
         }
     }
-    test::expect_bounds_hold(clean, b.path, /*not_vacuous=*/false);
+    aqp::test::expect_bounds_hold(clean, b.path, /*not_vacuous=*/false);
 }
 
 INSTANTIATE_TEST_SUITE_P(AllHardCases, AqpHardCase, ::testing::ValuesIn(kAllHardCases),
@@ -133,11 +133,11 @@ TEST(AqpHardCases, HighGenusConvertsWithItsPropertiesOrIsRefusedWithAMessage) {
         AqpBuildOptions options;
         options.domain_triangles = domain;
         try {
-            test::Built b = test::build(slab, "genus16_" + std::to_string(domain), options);
+            aqp::test::Built b = aqp::test::build(slab, "genus16_" + std::to_string(domain), options);
             AqpDataset d(b.path);
             EXPECT_TRUE(verify_aqp(d).ok());
             EXPECT_EQ(count_edges(aqp_level_mesh(d, d.finest_level()).indices).border, 0u);
-            test::expect_bounds_hold(clean_to_manifold(slab, {}).mesh, b.path, false);
+            aqp::test::expect_bounds_hold(clean_to_manifold(slab, {}).mesh, b.path, false);
         } catch (const Error& e) {
             // Too few base triangles for 16 handles, or folds: the message says so.
             const std::string what = e.what();

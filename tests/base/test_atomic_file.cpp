@@ -4,13 +4,13 @@
 
 #include "base/atomic_file.h"
 #include "base/error.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
 
 static fs::path scratch(const char* name) {
-    fs::path dir = fs::temp_directory_path() / ("catpaq_base_" + std::to_string(getpid()));
-    fs::create_directories(dir);
+    static const catpaq::test::ScratchDirectory dir("catpaq_base_");
     return dir / name;
 }
 

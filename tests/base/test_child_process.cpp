@@ -4,13 +4,17 @@
 
 #include "base/child_process.h"
 #include "base/error.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
 
 namespace {
 
-std::string log_path(const char* name) { return (fs::temp_directory_path() / (std::string("catpaq_child_") + name)).string(); }
+std::string log_path(const char* name) {
+    static const catpaq::test::ScratchDirectory dir("catpaq_child_");
+    return (dir / name).string();
+}
 
 }  // namespace
 

@@ -9,16 +9,16 @@
 #include "crack_check.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
 
 namespace {
 
-fs::path scratch_dir() {
-    fs::path dir = fs::temp_directory_path() / ("catpaq_cracks_" + std::to_string(getpid()));
-    fs::create_directories(dir);
-    return dir;
+const fs::path& scratch_dir() {
+    static const catpaq::test::ScratchDirectory dir("catpaq_cracks_");
+    return dir.path();
 }
 
 struct Built {

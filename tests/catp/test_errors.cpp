@@ -10,16 +10,21 @@
 #include "catp/verify.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
 
 namespace {
 
+const fs::path& scratch_dir() {
+    static const catpaq::test::ScratchDirectory dir("catpaq_errors_");
+    return dir.path();
+}
+
 std::string build_to_temp(const Mesh& mesh, const std::string& name, size_t leaf_triangles, int leaf_level = -1,
                           CatpBuildReport* report = nullptr) {
-    fs::path dir = fs::temp_directory_path() / ("catpaq_errors_" + std::to_string(getpid()));
-    fs::create_directories(dir);
+    const fs::path& dir = scratch_dir();
     std::string path = (dir / (name + ".cpq")).string();
     CatpBuildSettings settings;
     settings.leaf_triangles = leaf_triangles;
@@ -82,8 +87,7 @@ TEST(CatpErrors, StoredBoundsHoldWhereThinTrianglesVanish) {
         mesh.positions.insert(mesh.positions.end(), {a, b, c});
         mesh.indices.insert(mesh.indices.end(), {base, base + 1, base + 2});
     }
-    fs::path dir = fs::temp_directory_path() / ("catpaq_errors_" + std::to_string(getpid()));
-    fs::create_directories(dir);
+    const fs::path& dir = scratch_dir();
     std::string path = (dir / "thin.cpq").string();
     CatpBuildSettings settings;
     settings.leaf_triangles = 300;

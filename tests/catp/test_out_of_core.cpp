@@ -13,22 +13,19 @@
 #include "common_codec/archive.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
 
 namespace {
 
+// A directory per test, removed when the test ends.
 struct TempDir {
-    fs::path path;
-    TempDir() {
-        path = fs::temp_directory_path() / ("catpaq_ooc_" + std::to_string(getpid()) + "_" +
-                                            ::testing::UnitTest::GetInstance()->current_test_info()->name());
-        fs::remove_all(path);
-        fs::create_directories(path);
-    }
-    ~TempDir() { fs::remove_all(path); }
-    std::string file(const std::string& name) const { return (path / name).string(); }
+    catpaq::test::ScratchDirectory dir{
+        "catpaq_ooc_", std::string("_") + ::testing::UnitTest::GetInstance()->current_test_info()->name()};
+    const fs::path path = dir.path();
+    std::string file(const std::string& name) const { return (dir / name).string(); }
 };
 
 std::string bytes_of(const std::string& path) { return read_file(path); }

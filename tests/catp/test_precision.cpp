@@ -10,6 +10,7 @@
 #include "catp/dataset.h"
 #include "catp/verify.h"
 #include "mesh/generators.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
@@ -17,8 +18,7 @@ namespace fs = std::filesystem;
 namespace {
 
 std::string temp_path(const std::string& name) {
-    fs::path dir = fs::temp_directory_path() / ("catpaq_precision_" + std::to_string(getpid()));
-    fs::create_directories(dir);
+    static const catpaq::test::ScratchDirectory dir("catpaq_precision_");
     return (dir / (name + ".cpq")).string();
 }
 

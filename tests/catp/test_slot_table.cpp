@@ -9,6 +9,7 @@
 #include "catp/builder.h"
 #include "catp/dataset.h"
 #include "mesh/generators.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
@@ -16,8 +17,7 @@ namespace fs = std::filesystem;
 namespace {
 
 std::string build_torus(const std::string& name) {
-    fs::path dir = fs::temp_directory_path() / ("catpaq_slots_" + std::to_string(getpid()));
-    fs::create_directories(dir);
+    static const catpaq::test::ScratchDirectory dir("catpaq_slots_");
     std::string path = (dir / (name + ".cpq")).string();
     CatpBuildSettings settings;
     settings.leaf_triangles = 300;

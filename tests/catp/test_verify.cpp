@@ -11,16 +11,16 @@
 #include "catp/verify.h"
 #include "common_codec/barycentric.h"
 #include "mesh/generators.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
 
 namespace {
 
-fs::path scratch_dir() {
-    fs::path dir = fs::temp_directory_path() / ("catpaq_verify_" + std::to_string(getpid()));
-    fs::create_directories(dir);
-    return dir;
+const fs::path& scratch_dir() {
+    static const catpaq::test::ScratchDirectory dir("catpaq_verify_");
+    return dir.path();
 }
 
 std::string build(const Mesh& mesh, const std::string& name, size_t leaf_triangles) {

@@ -18,6 +18,7 @@
 #include "aqp_client/aqp_format.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
+#include "scratch_directory.h"
 
 namespace catpaq::test {
 
@@ -26,17 +27,8 @@ inline const char* aqp_model_name(AqpModel m) { return m == AqpModel::Sphere ? "
 
 // A scratch directory per process, removed at exit.
 inline std::string aqp_scratch_dir() {
-    struct Scratch {
-        std::filesystem::path dir =
-            std::filesystem::temp_directory_path() / ("catpaq_aqp_client_" + std::to_string(getpid()));
-        Scratch() { std::filesystem::create_directories(dir); }
-        ~Scratch() {
-            std::error_code ignored;
-            std::filesystem::remove_all(dir, ignored);
-        }
-    };
-    static Scratch scratch;
-    return scratch.dir.string();
+    static const ScratchDirectory dir("catpaq_aqp_client_");
+    return dir.string();
 }
 
 // The input of a model: the sphere and torus are closed; the bunny (data/bunny.ply) has holes in its

@@ -10,6 +10,7 @@
 #include "base/error.h"
 #include "client/image.h"
 #include "mesh/generators.h"
+#include "scratch_directory.h"
 
 namespace fs = std::filesystem;
 
@@ -32,23 +33,16 @@ HeadlessGlContext* gl_context(std::string* why) {
     return context.get();
 }
 
-namespace {
-struct Scratch {
-    fs::path dir;
-    Scratch() {
-        dir = fs::temp_directory_path() / ("catpaq_client_gl_" + std::to_string(getpid()));
-        fs::create_directories(dir);
-    }
-    ~Scratch() {
-        std::error_code ec;
-        if (!std::getenv("CATPAQ_TEST_IMAGES")) fs::remove_all(dir, ec);
-    }
-};
-}  // namespace
-
 std::string scratch_dir() {
-    static Scratch scratch;
-    return scratch.dir.string();
+    static ScratchDirectory dir("catpaq_client_gl_");
+    // The images save_image writes under CATPAQ_TEST_IMAGES are there to be looked at: kept.
+    static const bool images_kept = [] {
+        if (!std::getenv("CATPAQ_TEST_IMAGES")) return false;
+        dir.keep();
+        return true;
+    }();
+    (void)images_kept;
+    return dir.string();
 }
 
 const std::string& dataset_path(Model model, size_t triangles, int leaf_level, LayoutChoice layout) {

@@ -15,33 +15,16 @@
 #include "catp/builder.h"
 #include "common_codec/archive.h"
 #include "mesh/generators.h"
+#include "scratch_directory.h"
 
 namespace catpaq::test {
 
 namespace fs = std::filesystem;
 
-namespace {
-
-struct Scratch {
-    fs::path dir;
-    Scratch() {
-        dir = fs::temp_directory_path() / ("catpaq_client_core_" + std::to_string(getpid()));
-        fs::create_directories(dir);
-    }
-    ~Scratch() {
-        std::error_code ec;
-        fs::remove_all(dir, ec);
-    }
-};
-
-Scratch& scratch() {
-    static Scratch s;
-    return s;
+std::string scratch_dir() {
+    static const ScratchDirectory dir("catpaq_client_core_");
+    return dir.string();
 }
-
-}  // namespace
-
-std::string scratch_dir() { return scratch().dir.string(); }
 
 const std::string& sphere_dataset() {
     static std::string path = [] {

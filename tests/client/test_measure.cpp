@@ -25,6 +25,7 @@
 #include "mesh/generators.h"
 #include "points/builder.h"
 #include "points/sampling.h"
+#include "scratch_directory.h"
 
 namespace fs = std::filesystem;
 using namespace catpaq;
@@ -35,18 +36,9 @@ namespace {
 
 constexpr double kFar = 1e7;  // an offset from the origin where float keeps only metres
 
-struct Scratch {
-    fs::path dir = fs::temp_directory_path() / ("catpaq_measure_" + std::to_string(getpid()));
-    Scratch() { fs::create_directories(dir); }
-    ~Scratch() {
-        std::error_code ignored;
-        fs::remove_all(dir, ignored);
-    }
-};
-
-Scratch& scratch() {
-    static Scratch s;
-    return s;
+const fs::path& scratch_dir() {
+    static const test::ScratchDirectory dir("catpaq_measure_");
+    return dir.path();
 }
 
 // A CATP sphere (radius 1) moved by `offset` on every axis, built once per process.
@@ -56,7 +48,7 @@ const std::string& catp_sphere(double offset) {
     Mesh sphere = make_sphere(20000);
     for (Vec3d& p : sphere.positions)
         for (double& c : p) c += offset;
-    const std::string path = (scratch().dir / ("sphere_" + std::to_string(int64_t(offset)) + ".cpq")).string();
+    const std::string path = (scratch_dir() / ("sphere_" + std::to_string(int64_t(offset)) + ".cpq")).string();
     CatpBuildSettings settings;
     settings.leaf_triangles = 500;
     settings.progress = false;
@@ -69,7 +61,7 @@ std::string points_sphere(double offset) {
     PointCloud cloud = sample_surface(make_sphere(20000), 200000, 7, true, false);
     for (Vec3d& p : cloud.positions)
         for (double& c : p) c += offset;
-    const std::string path = (scratch().dir / ("points_" + std::to_string(int64_t(offset)) + ".cpq")).string();
+    const std::string path = (scratch_dir() / ("points_" + std::to_string(int64_t(offset)) + ".cpq")).string();
     PointsBuildSettings settings;
     settings.progress = false;
     build_points(std::move(cloud), path, settings);

@@ -12,6 +12,7 @@
 #include "client/gl_context.h"
 #include "client/session.h"
 #include "client/viewer.h"
+#include "scratch_directory.h"
 #include "server/server.h"
 
 namespace fs = std::filesystem;
@@ -19,27 +20,20 @@ using namespace catpaq;
 
 namespace {
 
-struct Scratch {
-    fs::path dir;
-    Scratch() {
-        dir = fs::temp_directory_path() / ("catpaq_seam_" + std::to_string(getpid()));
+// The served root, in the process's scratch directory.
+const fs::path& root_dir() {
+    static const test::ScratchDirectory dir("catpaq_seam_");
+    static const fs::path root = [] {
         fs::create_directories(dir / "root");
-    }
-    ~Scratch() {
-        std::error_code ec;
-        fs::remove_all(dir, ec);
-    }
-};
-
-Scratch& scratch() {
-    static Scratch s;
-    return s;
+        return dir / "root";
+    }();
+    return root;
 }
 
 // The box dataset, in a directory a server can serve.
 const std::string& box_dataset() {
     static std::string path = [] {
-        std::string p = (scratch().dir / "root" / "boxes.cpq").string();
+        std::string p = (root_dir() / "boxes.cpq").string();
         test::write_box_dataset(p, test::BoxDatasetSettings{});
         return p;
     }();
@@ -160,7 +154,7 @@ TEST(FormatSeam, AServerThatKnowsNoFormatServesItToTheSession) {
     if (!HeadlessGlContext::available(&why)) GTEST_SKIP() << why;
     box_dataset();
     ServerSettings server_settings;
-    server_settings.root = (scratch().dir / "root").string();
+    server_settings.root = root_dir().string();
     server_settings.port = 0;
     server_settings.threads = 1;
     server_settings.log_level = LogLevel::Error;

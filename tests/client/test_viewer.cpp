@@ -19,6 +19,7 @@
 #include "client/session.h"
 #include "client/viewer.h"
 #include "mesh/generators.h"
+#include "scratch_directory.h"
 
 namespace fs = std::filesystem;
 using namespace catpaq;
@@ -27,26 +28,14 @@ using namespace catpaq::client_test;
 
 namespace {
 
-struct Scratch {
-    fs::path dir;
-    Scratch() {
-        dir = fs::temp_directory_path() / ("catpaq_viewer_" + std::to_string(getpid()));
-        fs::create_directories(dir);
-    }
-    ~Scratch() {
-        std::error_code ec;
-        fs::remove_all(dir, ec);
-    }
-};
-
-Scratch& scratch() {
-    static Scratch s;
-    return s;
+const fs::path& scratch_dir() {
+    static const test::ScratchDirectory dir("catpaq_viewer_");
+    return dir.path();
 }
 
 const std::string& sphere_dataset() {
     static std::string path = [] {
-        std::string p = (scratch().dir / "sphere.cpq").string();
+        std::string p = (scratch_dir() / "sphere.cpq").string();
         CatpBuildSettings settings;
         settings.leaf_triangles = 500;
         settings.progress = false;
@@ -173,7 +162,7 @@ TEST(ViewCommand, RendersUnderXvfb) {
     if (access("/usr/bin/xvfb-run", X_OK) != 0) GTEST_SKIP() << "xvfb-run is not installed";
     ASSERT_TRUE(fs::exists(catpaq_binary())) << catpaq_binary();
     const std::string& dataset = sphere_dataset();
-    std::string png = (scratch().dir / "view.png").string();
+    std::string png = (scratch_dir() / "view.png").string();
     std::string output;
     int status = run("/usr/bin/xvfb-run -a -s \"-screen 0 1280x800x24\" " + catpaq_binary() + " view " + dataset +
                          " --frames 30 --screenshot " + png + " --size 320x240",
@@ -224,7 +213,7 @@ TEST(ViewCommand, RejectsBadOptions) {
 // Screenshots taken with P or F12 are numbered from the first free name: an earlier screenshot
 // (of this run or of another) is never replaced (each run used to start again at 0000).
 TEST(Screenshots, TakeTheFirstFreeNumber) {
-    fs::path dir = scratch().dir / "shots";
+    fs::path dir = scratch_dir() / "shots";
     fs::create_directories(dir);
     EXPECT_EQ(next_screenshot_path(dir.string()), (dir / "catpaq_view_0000.png").string());
     std::fclose(std::fopen((dir / "catpaq_view_0000.png").c_str(), "w"));
@@ -241,7 +230,7 @@ TEST(ViewCommand, DrawsOnDemandAndIdlesWithoutUsingACore) {
     const double seconds = 5;
     ChildRun r = run_measured({"/usr/bin/xvfb-run", "-a", "-s", "-screen 0 1280x800x24", catpaq_binary(), "view",
                                sphere_dataset(), "--size", "320x240", "--exit-after", std::to_string(seconds)},
-                              (scratch().dir / "idle.txt").string());
+                              (scratch_dir() / "idle.txt").string());
     ASSERT_EQ(r.status, 0) << r.output;
     EXPECT_GE(r.seconds, seconds);
     EXPECT_LT(r.cpu_seconds, 0.4 * seconds) << r.cpu_seconds << " s of CPU in " << r.seconds << " s\n" << r.output;
@@ -261,7 +250,7 @@ TEST(ViewCommand, ShowsAFailedNodeAndKeepsTheCoarserData) {
         std::fclose(f);
     }
     bytes[bytes.size() - 100] ^= 0x40;  // inside the last (finest) node
-    fs::path corrupt = scratch().dir / "corrupt.cpq", png = scratch().dir / "corrupt.png";
+    fs::path corrupt = scratch_dir() / "corrupt.cpq", png = scratch_dir() / "corrupt.png";
     {
         std::FILE* f = std::fopen(corrupt.c_str(), "wb");
         std::fwrite(bytes.data(), 1, bytes.size(), f);

@@ -17,27 +17,17 @@
 #include "base/checksum.h"
 #include "base/error.h"
 #include "common_codec/archive.h"
+#include "scratch_directory.h"
 
 using namespace catpaq;
 namespace fs = std::filesystem;
 
 namespace {
 
-fs::path scratch_dir() { return fs::temp_directory_path() / ("catpaq_archive_test_" + std::to_string(::getpid())); }
-
 fs::path scratch(const std::string& name) {
-    fs::create_directories(scratch_dir());
-    return scratch_dir() / name;
+    static const catpaq::test::ScratchDirectory dir("catpaq_archive_test_");
+    return dir / name;
 }
-
-// Removes the scratch files when the tests end.
-struct ScratchCleanup : ::testing::Environment {
-    void TearDown() override {
-        std::error_code ignored;
-        fs::remove_all(scratch_dir(), ignored);
-    }
-};
-const auto* const kCleanup = ::testing::AddGlobalTestEnvironment(new ScratchCleanup);
 
 std::vector<uint8_t> read_all(const fs::path& path) {
     std::ifstream in(path, std::ios::binary);

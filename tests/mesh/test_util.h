@@ -13,15 +13,12 @@
 
 #include "base/error.h"
 #include "mesh/io.h"
+#include "scratch_directory.h"
 
 namespace catpaq::test {
 
 inline std::string scratch(const std::string& name) {
-    static const std::filesystem::path dir = [] {
-        auto path = std::filesystem::temp_directory_path() / ("catpaq_mesh_" + std::to_string(getpid()));
-        std::filesystem::create_directories(path);
-        return path;
-    }();
+    static const ScratchDirectory dir("catpaq_mesh_");
     return (dir / name).string();
 }
 

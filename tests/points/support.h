@@ -13,15 +13,12 @@
 #include "base/atomic_file.h"
 #include "base/error.h"
 #include "points/point_cloud.h"
+#include "scratch_directory.h"
 
 namespace catpaq::test {
 
 inline std::string scratch(const std::string& name) {
-    static const std::filesystem::path dir = [] {
-        auto path = std::filesystem::temp_directory_path() / ("catpaq_points_" + std::to_string(getpid()));
-        std::filesystem::create_directories(path);
-        return path;
-    }();
+    static const ScratchDirectory dir("catpaq_points_");
     return (dir / name).string();
 }
 

@@ -12,6 +12,7 @@
 #include "mesh/generators.h"
 #include "points/builder.h"
 #include "points/sampling.h"
+#include "scratch_directory.h"
 #include "server_formats/describers.h"
 
 using namespace catpaq;
@@ -20,9 +21,8 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path scratch(const std::string& name) {
-    fs::path d = fs::temp_directory_path() / ("catpaq_describers_" + std::to_string(getpid()));
-    fs::create_directories(d);
-    return d / name;
+    static const catpaq::test::ScratchDirectory dir("catpaq_describers_");
+    return dir / name;
 }
 
 // Describes the dataset at `path` with this build's describer of its kind.

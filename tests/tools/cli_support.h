@@ -10,6 +10,8 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include "scratch_directory.h"
+
 namespace catpaq::cli_test {
 
 namespace fs = std::filesystem;
@@ -20,12 +22,8 @@ struct ToolRun {
 };
 
 inline fs::path scratch() {
-    static fs::path dir = [] {
-        fs::path d = fs::temp_directory_path() / ("catpaq_cli_" + std::to_string(getpid()));
-        fs::create_directories(d);
-        return d;
-    }();
-    return dir;
+    static const test::ScratchDirectory dir("catpaq_cli_");
+    return dir.path();
 }
 
 // Runs the tool with `args`; its stdout and stderr together, or with `stdout_only` its stdout

@@ -13,28 +13,15 @@
 #include "base/error.h"
 #include "mesh/generators.h"
 #include "points/sampling.h"
+#include "scratch_directory.h"
 
 namespace fs = std::filesystem;
 
 namespace catpaq::test {
 
-namespace {
-struct Scratch {
-    fs::path dir;
-    Scratch() {
-        dir = fs::temp_directory_path() / ("catpaq_points_client_" + std::to_string(getpid()));
-        fs::create_directories(dir);
-    }
-    ~Scratch() {
-        std::error_code ec;
-        fs::remove_all(dir, ec);
-    }
-};
-}  // namespace
-
 std::string points_scratch_dir() {
-    static Scratch scratch;
-    return scratch.dir.string();
+    static const ScratchDirectory dir("catpaq_points_client_");
+    return dir.string();
 }
 
 const std::string& points_dataset(const PointSet& set) {
