@@ -45,10 +45,16 @@ nlohmann::json clean_json(const aqp::CleanReport& c) {
             {"summary", c.summary()}};
 }
 
-// True for files read as point clouds: the point formats by extension, and a PLY without faces.
-bool is_point_input(const std::string& path, const Mesh* mesh) {
+// The file name's extension, from its last dot, in lower case ("" without one).
+std::string lower_extension(const std::string& path) {
     std::string ext = path.substr(path.find_last_of('.') == std::string::npos ? path.size() : path.find_last_of('.'));
     for (char& c : ext) c = char(std::tolower(static_cast<unsigned char>(c)));
+    return ext;
+}
+
+// True for files read as point clouds: the point formats by extension, and a PLY without faces.
+bool is_point_input(const std::string& path, const Mesh* mesh) {
+    const std::string ext = lower_extension(path);
     if (ext == ".xyz" || ext == ".txt" || ext == ".pts" || ext == ".las" || ext == ".laz") return true;
     return mesh && mesh->triangle_count() == 0;
 }
@@ -174,6 +180,14 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     options.finish();
 
     prepare_output(job);
+    // The budget is checked before the mesh is read where the file says its size (PLY): reading a
+    // mesh far above it would take the memory it is meant to spare, and the time, first. (Faces
+    // count as one triangle each: polygons only make the estimate low, and the converter checks
+    // again on the triangles.)
+    if (o.memory_budget && !is_point_input(job.input, nullptr) && lower_extension(job.input) == ".ply") {
+        const uint64_t faces = PlyStream(job.input).face_count();
+        if (faces) aqp::check_aqp_memory_budget(faces, o.memory_budget);
+    }
     // A mesh is converted as it is; a point cloud (with normals, or they are estimated) becomes a
     // closed surface by Poisson reconstruction first, as the paper does for scans.
     std::vector<std::string> dropped;

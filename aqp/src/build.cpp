@@ -53,11 +53,6 @@ int choose_patch_level(const AqpBuildOptions& o, size_t surface_vertices, size_t
     return std::clamp(k, 1, kMaxPatchLevel);
 }
 
-// Peak resident memory of a conversion, from measurements rounded up (aqp_bench: 42 MiB for the
-// bunny's 75k triangles, 322 MiB for a 1M-triangle scan, the input mesh included): 400 bytes per
-// input triangle and 32 MiB.
-uint64_t estimate_memory(size_t input_triangles) { return uint64_t(input_triangles) * 400 + (uint64_t(32) << 20); }
-
 // Every distinct sample of the finest level, evaluated once: the first (patch, i, j) showing a
 // sample number gives its domain point.
 std::vector<SurfaceSample> resample(const QuadLayout& layout, const SampleNumbering& numbering, const SurfaceMap& map,
@@ -241,6 +236,20 @@ std::vector<uint8_t> tile_shifts(int finest_level, size_t patches, size_t tile_s
     return shifts;
 }
 
+// Peak resident memory of a conversion, from measurements rounded up (aqp_bench: 42 MiB for the
+// bunny's 75k triangles, 322 MiB for a 1M-triangle scan, the input mesh included): 400 bytes per
+// input triangle and 32 MiB.
+uint64_t aqp_memory_estimate(uint64_t input_triangles) { return input_triangles * 400 + (uint64_t(32) << 20); }
+
+void check_aqp_memory_budget(uint64_t input_triangles, uint64_t budget) {
+    const uint64_t estimate = aqp_memory_estimate(input_triangles);
+    if (!budget || estimate <= budget) return;
+    fail("converting %llu triangles to AQP needs about %llu MiB (AQP converts in core), above the budget of %llu MiB: "
+         "give --memory %lluM or more, or convert to CATP or points, which stay within the budget",
+         (unsigned long long)input_triangles, (unsigned long long)(estimate >> 20), (unsigned long long)(budget >> 20),
+         (unsigned long long)((estimate + (uint64_t(1) << 20) - 1) >> 20));
+}
+
 void build_aqp_dataset(const Mesh& input, const std::string& out_path, const AqpBuildOptions& o, AqpBuildReport* report_out) {
     const auto start = Clock::now();
     if (o.patch_level < -1 || o.patch_level == 0 || o.patch_level > kMaxPatchLevel)
@@ -257,10 +266,8 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
 
     // 1. Clean.
     auto t = Clock::now();
-    r.memory_estimate = estimate_memory(input.triangle_count());
-    if (o.memory_budget && r.memory_estimate > o.memory_budget)
-        fail("converting %zu triangles to AQP needs about %llu MiB (in core for now), above the budget of %llu MiB",
-             input.triangle_count(), (unsigned long long)(r.memory_estimate >> 20), (unsigned long long)(o.memory_budget >> 20));
+    r.memory_estimate = aqp_memory_estimate(input.triangle_count());
+    check_aqp_memory_budget(input.triangle_count(), o.memory_budget);
     CleanOptions clean_options;
     clean_options.min_component_area_fraction = o.min_component_area_fraction;
     CleanMesh clean = clean_to_manifold(input, clean_options, &r.clean);

@@ -3,6 +3,8 @@
 // failing on a moved one), and the options of one format refused by name for another.
 #include <gtest/gtest.h>
 
+#include <limits>
+
 #include <nlohmann/json.hpp>
 
 #include "base/atomic_file.h"
@@ -172,6 +174,25 @@ TEST(CliFormats, AqpRefusesWhatItCannotConvertAndWritesNothing) {
     ToolRun budget = run("convert " + in.string() + " -o " + out.string() + " --format aqp --memory 1M --quiet");
     EXPECT_EQ(budget.status, 1) << budget.output;
     EXPECT_NE(budget.output.find("above the budget of 1 MiB"), std::string::npos) << budget.output;
+    expect_nothing_written(out);
+    // A PLY's face count is enough to refuse, before the mesh is read: this one's first vertex is
+    // NaN, which reading it would report (a large mesh would take the memory and the time first).
+    fs::path early_in = scratch() / "aqp_early.ply";
+    std::string file = "ply\nformat binary_little_endian 1.0\nelement vertex 30000\nproperty float x\nproperty float y\n"
+                       "property float z\nelement face 30000\nproperty list uchar int vertex_indices\nend_header\n";
+    auto put = [&file](auto value) { file.append(reinterpret_cast<const char*>(&value), sizeof value); };  // little-endian host
+    for (int v = 0; v < 30000; ++v)
+        for (int k = 0; k < 3; ++k) put(v == 0 && k == 0 ? std::numeric_limits<float>::quiet_NaN() : float(v % 7 + k));
+    for (int f = 0; f < 30000; ++f) {
+        file += char(3);
+        for (int32_t i : {0, 1, 2}) put(i);
+    }
+    write_text(early_in, file);
+    ToolRun early = run("convert " + early_in.string() + " -o " + out.string() + " --format aqp --memory 40M --quiet");
+    EXPECT_EQ(early.status, 1) << early.output;
+    EXPECT_NE(early.output.find("30000 triangles"), std::string::npos) << early.output;
+    EXPECT_NE(early.output.find("above the budget of 40 MiB"), std::string::npos) << early.output;
+    EXPECT_EQ(early.output.find("non-finite"), std::string::npos) << early.output;
     expect_nothing_written(out);
 }
 

@@ -97,6 +97,14 @@ struct AqpBuildReport {
            seconds_encode = 0;
 };
 
+// Peak resident memory of converting a mesh of this many triangles (the mesh read included): AQP
+// converts in core.
+uint64_t aqp_memory_estimate(uint64_t input_triangles);
+
+// Throws Error, naming the estimate and what to do instead, when that estimate exceeds a non-zero
+// `budget`. For `convert` to call before it reads the mesh, from the count in the file's header.
+void check_aqp_memory_budget(uint64_t input_triangles, uint64_t budget);
+
 // Converts `input` into an AQP dataset at `out_path`. Throws Error with a clear message for what
 // it refuses: an invalid or empty mesh, nothing left after cleaning, a non-orientable surface, a
 // domain that cannot be reached, a parameterization that is not bijective, a memory estimate
