@@ -189,6 +189,8 @@ struct PlyStream::Impl {
     void emit_vertex(const double* values, uint64_t index, std::vector<Vec3d>& positions,
                      std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out,
                      std::vector<float>* radii_out) const;
+    void store_vertex(const double* values, uint64_t index, size_t at, std::vector<Vec3d>& positions,
+                      std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out, std::vector<float>* radii_out) const;
     bool vertex_valid(const double* values, bool normals_wanted, bool colors_wanted, bool radii_wanted) const;
     template <bool Swap>
     bool parse_vertices_parallel(const char* data, size_t stride, size_t k, int last_field, std::vector<Vec3d>& positions,
@@ -436,29 +438,36 @@ uint8_t PlyStream::Impl::color_byte(double value, PlyType type, uint64_t index) 
     }
 }
 
+// Writes vertex `index`'s values to element `at` of the outputs (the colour's conversion throws,
+// naming `index`, on a non-finite float colour).
+void PlyStream::Impl::store_vertex(const double* values, uint64_t index, size_t at, std::vector<Vec3d>& positions,
+                                   std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out,
+                                   std::vector<float>* radii_out) const {
+    positions[at] = {values[kX], values[kY], values[kZ]};
+    if (normals_out) (*normals_out)[at] = mesh_io::unit_normal(values[kNx], values[kNy], values[kNz]);
+    if (colors_out)
+        (*colors_out)[at] = {color_byte(values[kRed], field_type[kRed], index),
+                             color_byte(values[kGreen], field_type[kGreen], index),
+                             color_byte(values[kBlue], field_type[kBlue], index)};
+    if (radii_out) (*radii_out)[at] = float(values[kRadius]);
+}
+
 void PlyStream::Impl::emit_vertex(const double* values, uint64_t index, std::vector<Vec3d>& positions,
                                   std::vector<Vec3f>* normals_out, std::vector<Rgb8>* colors_out,
                                   std::vector<float>* radii_out) const {
     if (!mesh_io::finite3(values[kX], values[kY], values[kZ]))
         data_error(strprintf("vertex %llu has a non-finite coordinate (%g, %g, %g)", ull(index), values[kX],
                              values[kY], values[kZ]));
-    positions.push_back({values[kX], values[kY], values[kZ]});
-    if (normals_out) {
-        if (!mesh_io::finite3(values[kNx], values[kNy], values[kNz]))
-            data_error(strprintf("vertex %llu has a non-finite normal", ull(index)));
-        normals_out->push_back(mesh_io::unit_normal(values[kNx], values[kNy], values[kNz]));
-    }
-    if (colors_out) {
-        colors_out->push_back({color_byte(values[kRed], field_type[kRed], index),
-                               color_byte(values[kGreen], field_type[kGreen], index),
-                               color_byte(values[kBlue], field_type[kBlue], index)});
-    }
-    if (radii_out) {
-        double radius = values[kRadius];
-        if (!std::isfinite(radius) || radius < 0.0 || radius > 3.0e38)
-            data_error(strprintf("vertex %llu has an invalid radius (%g)", ull(index), radius));
-        radii_out->push_back(float(radius));
-    }
+    if (normals_out && !mesh_io::finite3(values[kNx], values[kNy], values[kNz]))
+        data_error(strprintf("vertex %llu has a non-finite normal", ull(index)));
+    const size_t at = positions.size();
+    positions.emplace_back();
+    if (normals_out) normals_out->emplace_back();
+    if (colors_out) colors_out->emplace_back();
+    if (radii_out) radii_out->emplace_back();
+    store_vertex(values, index, at, positions, normals_out, colors_out, radii_out);  // checks the colour
+    if (radii_out && (!std::isfinite(values[kRadius]) || values[kRadius] < 0.0 || values[kRadius] > 3.0e38))
+        data_error(strprintf("vertex %llu has an invalid radius (%g)", ull(index), values[kRadius]));
 }
 
 void PlyStream::Impl::check_index(int64_t index, uint64_t face) const {
@@ -471,7 +480,8 @@ void PlyStream::Impl::check_index(int64_t index, uint64_t face) const {
 // ---------------------------------------------------------------------------------------------
 // Body: binary
 
-// Whether emit_vertex would take these values without an error (the same tests, no message).
+// Whether emit_vertex would take these values without an error (its tests and the colour's, no
+// message).
 bool PlyStream::Impl::vertex_valid(const double* values, bool normals_wanted, bool colors_wanted, bool radii_wanted) const {
     bool ok = mesh_io::finite3(values[kX], values[kY], values[kZ]);
     if (normals_wanted) ok &= mesh_io::finite3(values[kNx], values[kNy], values[kNz]);
@@ -502,14 +512,12 @@ bool PlyStream::Impl::parse_vertices_parallel(const char* data, size_t stride, s
             const char* p = data + i * stride;
             for (int f = 0; f <= last_field; ++f)
                 if (field[f] != kNone) values[f] = load_double<Swap>(p + offset[f], field_type[f]);
-            ok &= vertex_valid(values, normals_out, colors_out, radii_out);
-            positions[base + i] = {values[kX], values[kY], values[kZ]};
-            if (normals_out) (*normals_out)[base + i] = mesh_io::unit_normal(values[kNx], values[kNy], values[kNz]);
-            if (colors_out && ok)
-                (*colors_out)[base + i] = {color_byte(values[kRed], field_type[kRed], 0),
-                                           color_byte(values[kGreen], field_type[kGreen], 0),
-                                           color_byte(values[kBlue], field_type[kBlue], 0)};
-            if (radii_out) (*radii_out)[base + i] = float(values[kRadius]);
+            // An invalid vertex is not stored (its colour's conversion would throw): the batch is
+            // decoded again in order anyway.
+            if (vertex_valid(values, normals_out, colors_out, radii_out))
+                store_vertex(values, 0, base + i, positions, normals_out, colors_out, radii_out);
+            else
+                ok = false;
         }
         if (!ok) valid.store(false, std::memory_order_relaxed);
     });

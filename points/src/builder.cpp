@@ -544,29 +544,8 @@ PointsBuildReport Builder::run_in_core(PointCloud& cloud, const std::string& out
     const double start = now_seconds();
     PointInputSummary input;
     input.count = cloud.size();
-    // In parallel: one pass over 2.4 GB of positions at 100M points.
-    struct Extent {
-        Bounds bounds;
-        float largest_radius = 0;
-    };
-    const Extent extent = tbb::parallel_reduce(
-        tbb::blocked_range<size_t>(0, cloud.size(), 1 << 16), Extent(),
-        [&](const tbb::blocked_range<size_t>& r, Extent e) {
-            for (size_t i = r.begin(); i < r.end(); ++i) e.bounds.add(cloud.positions[i]);
-            if (!cloud.radii.empty())
-                for (size_t i = r.begin(); i < r.end(); ++i) e.largest_radius = std::max(e.largest_radius, cloud.radii[i]);
-            return e;
-        },
-        [](Extent x, const Extent& y) {
-            if (!y.bounds.empty()) {
-                x.bounds.add(y.bounds.min);
-                x.bounds.add(y.bounds.max);
-            }
-            x.largest_radius = std::max(x.largest_radius, y.largest_radius);
-            return x;
-        });
-    input.bounds = extent.bounds;
-    input.largest_radius = extent.largest_radius;
+    input.bounds = cloud.bounds();
+    for (float r : cloud.radii) input.largest_radius = std::max(input.largest_radius, r);
     input.normals = cloud.has_normals();
     input.colors = cloud.has_colors();
     input.radii = cloud.has_radii();

@@ -5,6 +5,9 @@
 #include <cmath>
 #include <filesystem>
 
+#include <tbb/blocked_range.h>
+#include <tbb/parallel_reduce.h>
+
 #include "base/error.h"
 #include "mesh/io.h"
 #include "point_source.h"
@@ -14,10 +17,21 @@ namespace catpaq {
 
 using ull = unsigned long long;
 
+// In parallel: one pass over 2.4 GB of positions at 100M points.
 Bounds PointCloud::bounds() const {
-    Bounds b;
-    for (const Vec3d& p : positions) b.add(p);
-    return b;
+    return tbb::parallel_reduce(
+        tbb::blocked_range<size_t>(0, positions.size(), 1 << 16), Bounds(),
+        [&](const tbb::blocked_range<size_t>& r, Bounds b) {
+            for (size_t i = r.begin(); i < r.end(); ++i) b.add(positions[i]);
+            return b;
+        },
+        [](Bounds x, const Bounds& y) {
+            if (!y.empty()) {
+                x.add(y.min);
+                x.add(y.max);
+            }
+            return x;
+        });
 }
 
 namespace {
