@@ -368,8 +368,23 @@ private:
     void choose_layout_and_leaves();
     void finish_archive();
 
-    double write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
-                      double unquantized_error, double children_stored, bool leaf);
+    // A node whose fragments are final, with what its bound needs; written at once, or (one that
+    // draws nothing) once its level is done (finish_empty_nodes).
+    struct PreparedNode {
+        ArchiveEntry entry;
+        std::vector<uint8_t> bytes;
+        std::vector<uint32_t> slot_bytes;
+        QuantizationLoss loss;
+        LostGeometryReach reach;
+        double step = 0, unquantized = 0, children_stored = 0;
+        size_t triangles = 0, vertices = 0;
+        bool leaf = false;
+        double* stored = nullptr;  // where the caller keeps the node's stored bound
+    };
+    void write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
+                    double unquantized_error, double children_stored, bool leaf, double* stored);
+    void commit_node(PreparedNode& node, double lost);
+    void finish_empty_nodes();
     double quantization_step(const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots) const;
 
 
@@ -411,6 +426,10 @@ private:
     };
     std::unique_ptr<FragmentSpill> fragments_;
     std::unordered_map<uint64_t, DiamondError> diamond_error_;
+    // The nodes of the level being written that draw nothing, and the largest stored bound of
+    // those that draw something (lattice units; -1: none yet).
+    std::vector<PreparedNode> empty_nodes_;
+    double drawn_max_stored_ = -1;
     uint64_t bytes_spilled_ = 0;
     const Rgb8 default_color_{180, 180, 180};
 };
@@ -767,12 +786,13 @@ double CatpBuild::quantization_step(const DiamondInfo& info, const std::array<co
     return longest / layout_.grid;
 }
 
-// Writes the node of a diamond whose fragments are final; returns its stored error bound
-// (lattice units): see DiamondError.
-double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
-                             double unquantized_error, double children_stored, bool leaf) {
+// Writes the node of a diamond whose fragments are final and sets *stored to its stored error
+// bound (lattice units): see DiamondError. A node that draws nothing waits for its level's other
+// nodes (finish_empty_nodes), and *stored is set then.
+void CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::array<const WorkFragment*, 8>& slots,
+                           double unquantized_error, double children_stored, bool leaf, double* stored) {
     DiamondFragments node;
-    size_t triangles = 0, vertices = 0;
+    PreparedNode prepared;
     std::vector<QuantizedSlot> quantized;
     quantized.reserve(8);
     for (int s = 0; s < 8; ++s) {
@@ -785,50 +805,85 @@ double CatpBuild::write_node(DiamondId id, const DiamondInfo& info, const std::a
         quantize_fragment(*slots[s], t, layout_, node.slots[s], &q.trace);
         if (node.slots[s].indices.empty()) continue;
         node.slot_mask |= uint8_t(1 << s);
-        triangles += node.slots[s].triangle_count();
-        vertices += node.slots[s].vertices.size();
+        prepared.triangles += node.slots[s].triangle_count();
+        prepared.vertices += node.slots[s].vertices.size();
     }
     // Thin geometry the grid cannot hold is drawn nowhere: the bound must cover its distance to
-    // what is drawn. When the node draws nothing, nothing local bounds that: the model's
-    // diagonal does (the nearest drawn surface is somewhere in the model).
-    const double step = quantization_step(info, slots);
+    // what is drawn.
+    prepared.step = quantization_step(info, slots);
+    const double step = prepared.step;
     // At the leaves, pieces along a face up to four mean input edges long, and a quarter of the
     // tetrahedron, are clipping slivers whose triangle goes on, drawn, in the neighbour: not
     // needles (which span the tetrahedron, and may be the input's typical triangle: the Slivers
     // hard case). Coarser levels excuse nothing: there every neighbour may lose the same thin
     // geometry (Slivers' coarse levels draw nothing at all).
     const double excuse = leaf ? std::min(4 * mean_edge_, step * layout_.grid / 4) : 0.0;
-    QuantizationLoss loss = quantization_loss(quantized, step / 4, step, excuse, leaf);
-    const double lost = loss.nothing_drawn ? bounds_.diagonal() / place_.cell : loss.error;
-    const double stored = std::max(unquantized_error + std::max(step, lost), children_stored);
-    std::vector<uint32_t> slot_bytes;
-    std::vector<uint8_t> bytes = encode_diamond_node(node, &slot_bytes);
-    ArchiveEntry entry;
-    entry.key = id.bits;
-    entry.level = uint16_t(info.level);
-    entry.flags = uint16_t(node.slot_mask) | (leaf ? kCatpLeafFlag : 0);
-    entry.count = uint32_t(triangles);
-    entry.error = float(stored * place_.cell);
-    archive_->add_node(entry, bytes.data(), bytes.size());
-    std::lock_guard lock(stats_mutex_);
-    entry.size = uint32_t(bytes.size());
-    slot_bytes_[{entry.level, entry.key}] = {entry, std::move(slot_bytes)};
-    if (leaf) {
-        const double area = place_.cell * place_.cell;
-        report_.lost_triangles += loss.triangles;
-        report_.lost_area += loss.area * area;
-        report_.lost_error = std::max(report_.lost_error, lost * place_.cell);
-        report_.lost_beyond_step |= lost > 2 * step;
+    prepared.loss = quantization_loss(quantized, step / 4, step, excuse, leaf);
+    prepared.bytes = encode_diamond_node(node, &prepared.slot_bytes);
+    prepared.entry.key = id.bits;
+    prepared.entry.level = uint16_t(info.level);
+    prepared.entry.flags = uint16_t(node.slot_mask) | (leaf ? kCatpLeafFlag : 0);
+    prepared.entry.count = uint32_t(prepared.triangles);
+    prepared.unquantized = unquantized_error;
+    prepared.children_stored = children_stored;
+    prepared.leaf = leaf;
+    prepared.stored = stored;
+    if (prepared.loss.nothing_drawn) {
+        prepared.reach = lost_geometry_reach(info, slots);
+        std::lock_guard lock(stats_mutex_);
+        empty_nodes_.push_back(std::move(prepared));
+        return;
     }
-    CatpLevelStats& s = stats_[info.level];
+    commit_node(prepared, prepared.loss.error);
+}
+
+// Writes a prepared node whose lost geometry lies within `lost` (lattice units) of what is drawn.
+void CatpBuild::commit_node(PreparedNode& node, double lost) {
+    const double stored = std::max(node.unquantized + std::max(node.step, lost), node.children_stored);
+    ArchiveEntry& entry = node.entry;
+    entry.error = float(stored * place_.cell);
+    archive_->add_node(entry, node.bytes.data(), node.bytes.size());
+    *node.stored = stored;
+    std::lock_guard lock(stats_mutex_);
+    entry.size = uint32_t(node.bytes.size());
+    slot_bytes_[{entry.level, entry.key}] = {entry, std::move(node.slot_bytes)};
+    if (!node.loss.nothing_drawn) drawn_max_stored_ = std::max(drawn_max_stored_, stored);
+    if (node.leaf) {
+        const double area = place_.cell * place_.cell;
+        report_.lost_triangles += node.loss.triangles;
+        report_.lost_area += node.loss.area * area;
+        report_.lost_error = std::max(report_.lost_error, lost * place_.cell);
+        report_.lost_beyond_step |= lost > 2 * node.step;
+    }
+    CatpLevelStats& s = stats_[entry.level];
     s.diamonds++;
-    s.fragments += size_t(__builtin_popcount(node.slot_mask));
-    s.triangles += triangles;
-    s.vertices += vertices;
-    s.bytes += bytes.size();
+    s.fragments += size_t(__builtin_popcount(entry.flags & 0xff));
+    s.triangles += node.triangles;
+    s.vertices += node.vertices;
+    s.bytes += node.bytes.size();
     s.max_error = std::max(s.max_error, double(entry.error));
-    s.empty_diamonds += loss.nothing_drawn;
-    return stored;
+    s.empty_diamonds += node.loss.nothing_drawn;
+}
+
+// Writes the nodes of the level just made that draw nothing. Where all their geometry reaches
+// their diamonds' outer faces (lost_geometry_reach), the surface goes on into neighbours of the
+// same level, which draw it within their bounds: a point of it is within the diameters of the
+// empty nodes it may cross (all of them, at most) plus the level's largest bound of a node that
+// draws something. Else (a piece alone inside, or a level that draws nothing at all, as the
+// Slivers hard case's coarse levels) nothing local bounds it, and the model's diagonal does.
+// (The diagonal for every empty node made the whole chain of its ancestors carry it, by
+// monotonicity: a 1M uneven-density mesh had 101 such diamonds down to level 15, and a client
+// drew 289 nodes for a 64 x 48 view of it.)
+void CatpBuild::finish_empty_nodes() {
+    const double diagonal = bounds_.diagonal() / place_.cell;
+    double chain = 0;
+    for (const PreparedNode& node : empty_nodes_) chain += node.reach.diameter;
+    for (PreparedNode& node : empty_nodes_) {
+        const bool local = node.reach.anchored && drawn_max_stored_ >= 0;
+        commit_node(node, local ? std::min(diagonal, chain + drawn_max_stored_) : diagonal);
+    }
+    empty_nodes_.clear();
+    drawn_max_stored_ = -1;
 }
 
 // Ranges [begin, end) of 0..count over which group_of(index) is constant (sorted input).
@@ -857,10 +912,11 @@ void CatpBuild::write_leaf_nodes() {
         std::array<const WorkFragment*, 8> slots{};
         for (size_t k = runs[i].first; k < runs[i].second; ++k)
             slots[refs[k].key.slot] = &fragments_->get(refs[k], loaded[refs[k].key.slot]);
-        // Each diamond's own entry, written by this thread only.
-        diamond_error_.find(id.bits)->second.stored = write_node(id, info, slots, 0.0, 0.0, true);
+        // Each diamond's own entry, written by this thread only (or by finish_empty_nodes).
+        write_node(id, info, slots, 0.0, 0.0, true, &diamond_error_.find(id.bits)->second.stored);
         progress_->add(1);
     });
+    finish_empty_nodes();
 }
 
 // One coarsening step: every diamond of `level` is made from the fragments of the finer level
@@ -942,7 +998,7 @@ void CatpBuild::coarsen_level() {
         // Monotone: a diamond's error bounds its children's plus its own simplification.
         DiamondError& error = produced_error[i];
         error.unquantized = children.unquantized + simplify_error;
-        error.stored = write_node(id, info, slots, error.unquantized, children.stored, false);
+        write_node(id, info, slots, error.unquantized, children.stored, false, &error.stored);
         for (int s = 0; s < 8; ++s)
             if (!produced[s].indices.empty()) next->put(SlotKey{id.bits, s}, std::move(produced[s]));
         progress_->add(gathered_triangles);
@@ -975,6 +1031,7 @@ void CatpBuild::coarsen_level() {
         return_free_memory(warm_heap_.get());
         coarsen_run(i);
     }
+    finish_empty_nodes();
     bytes_spilled_ += fragments_->bytes_spilled();
     fragments_ = std::move(next);
     // No return_free_memory() here: the next level reuses what this one freed, and trimming

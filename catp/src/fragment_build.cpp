@@ -6,6 +6,7 @@
 #include <cstring>
 #include <limits>
 #include <memory>
+#include <unordered_map>
 #if defined(__SSE__)
 #include <xmmintrin.h>
 #endif
@@ -1143,12 +1144,13 @@ void clip_into_slots(const DiamondInfo& d, const WorkFragment& gathered, const s
     }
 }
 
-double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
-    for (auto& f : out) f = WorkFragment{};
-    uint8_t slots = existing_slots(d);
-    int n = d.ring_size;
-    // Outer faces: those not containing the spine; plus interior faces on the root boundary of a
-    // partial diamond (their neighbour slot does not exist).
+namespace {
+
+// The planes of a diamond's outer faces: those not containing the spine; plus interior faces on
+// the root boundary of a partial diamond (their neighbour slot does not exist).
+std::vector<LatticePlane> outer_planes(const DiamondInfo& d) {
+    const uint8_t slots = existing_slots(d);
+    const int n = d.ring_size;
     std::vector<LatticePlane> outer;
     for (int s = 0; s < n; ++s) {
         if (!(slots & (1 << s))) continue;
@@ -1158,6 +1160,84 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
         if (!(slots & (1 << ((s + n - 1) % n)))) outer.push_back(make_plane(d.spine_a, d.spine_b, r0));
         if (!(slots & (1 << ((s + 1) % n)))) outer.push_back(make_plane(d.spine_a, d.spine_b, r1));
     }
+    return outer;
+}
+
+bool on_outer_face(const std::vector<LatticePlane>& outer, const Vec3d& p) {
+    for (const LatticePlane& plane : outer) {
+        const double value = plane.n[0] * p[0] + plane.n[1] * p[1] + plane.n[2] * p[2] - double(plane.d);
+        if (std::fabs(value) < 1e-3 && plane_side(plane, p) == 0) return true;
+    }
+    return false;
+}
+
+}  // namespace
+
+LostGeometryReach lost_geometry_reach(const DiamondInfo& d, const std::array<const WorkFragment*, 8>& slots) {
+    const std::vector<LatticePlane> outer = outer_planes(d);
+    // Vertices of all slots, one per position (a piece crossing an interior face has a copy of
+    // its vertices there in each slot), joined by the triangles (union-find).
+    struct PositionHash {
+        size_t operator()(const Vec3d& p) const {
+            uint64_t h = 0;
+            for (double v : p) {
+                uint64_t bits;
+                std::memcpy(&bits, &v, 8);
+                h = (h ^ bits) * 0x9E3779B97F4A7C15ull;
+            }
+            return size_t(h ^ (h >> 29));
+        }
+    };
+    std::unordered_map<Vec3d, uint32_t, PositionHash> number;
+    std::vector<uint32_t> parent;
+    std::vector<Vec3d> position;
+    auto find = [&](uint32_t v) {
+        while (parent[v] != v) v = parent[v] = parent[parent[v]];
+        return v;
+    };
+    LostGeometryReach reach;
+    double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+    for (const WorkFragment* f : slots) {
+        if (!f) continue;
+        std::vector<uint32_t> id(f->positions.size());
+        for (size_t v = 0; v < f->positions.size(); ++v) {
+            auto [it, fresh] = number.emplace(f->positions[v], uint32_t(parent.size()));
+            if (fresh) {
+                parent.push_back(uint32_t(parent.size()));
+                position.push_back(f->positions[v]);
+            }
+            id[v] = it->second;
+        }
+        for (size_t t = 0; t + 2 < f->indices.size(); t += 3) {
+            for (int k = 0; k < 3; ++k) {
+                const Vec3d& p = f->positions[f->indices[t + size_t(k)]];
+                for (int a = 0; a < 3; ++a) {
+                    lo[a] = std::min(lo[a], p[a]);
+                    hi[a] = std::max(hi[a], p[a]);
+                }
+            }
+            const uint32_t a = find(id[f->indices[t]]);
+            for (int k = 1; k < 3; ++k) {
+                const uint32_t b = find(id[f->indices[t + size_t(k)]]);
+                if (a != b) parent[b] = a;
+            }
+        }
+    }
+    if (parent.empty()) return reach;
+    std::vector<uint8_t> anchored(parent.size(), 0);
+    for (uint32_t v = 0; v < parent.size(); ++v)
+        if (on_outer_face(outer, position[v])) anchored[find(v)] = 1;
+    for (uint32_t v = 0; v < parent.size(); ++v)
+        if (!anchored[find(v)]) return reach;  // a piece inside, alone: nothing near bounds it
+    reach.anchored = true;
+    reach.diameter = std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
+                               (hi[2] - lo[2]) * (hi[2] - lo[2]));
+    return reach;
+}
+
+double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::array<WorkFragment, 8>& out) {
+    for (auto& f : out) f = WorkFragment{};
+    const std::vector<LatticePlane> outer = outer_planes(d);
     size_t vertex_count = gathered.positions.size();
     std::vector<uint8_t> locked(vertex_count, 0);
     // The planes as arrays, so that the first test below, the smallest |n.p - d| over every

@@ -157,6 +157,18 @@ struct QuantizationLoss {
     double error = 0;
     bool nothing_drawn = false;
 };
+// Where the geometry of a node that draws nothing (all of it thinner than the grid step) can be
+// found from: when every connected piece of it (joined across the node's slots by position)
+// reaches an outer face of the diamond, the surface it belongs to goes on into a neighbour, so
+// every point of it is within `diameter` (of its bounding box, lattice units) of surface that
+// the neighbours draw, to within their own bounds. `anchored` is false when a piece lies inside
+// alone: then nothing near bounds it.
+struct LostGeometryReach {
+    bool anchored = false;
+    double diameter = 0;
+};
+LostGeometryReach lost_geometry_reach(const DiamondInfo& d, const std::array<const WorkFragment*, 8>& slots);
+
 // excuse_length: pieces up to this long (lattice units) that lie along a face of their
 // tetrahedron count as covered by the neighbour across it (see the definition). measure_area:
 // fill `area` (else 0).

@@ -212,3 +212,42 @@ TEST(MeasuredError, NothingRemovedIsZero) {
     WorkFragment g = height_field(8, 1.0, 7, 1000.0);
     EXPECT_EQ(measured_simplification_error(g, g.indices), 0.0);
 }
+
+// lost_geometry_reach: the converter's bound for a node that draws nothing rests on every piece
+// of its geometry reaching an outer face of the diamond (the surface then goes on into a
+// neighbour); a piece alone inside must be reported, and the diameter must cover the geometry.
+TEST(LostGeometryReach, APieceAloneInsideIsNotAnchoredAndOneOnAnOuterFaceIs) {
+    const DiamondInfo d = diamond_info(root_diamond());
+    const Tetrahedron t = diamond_tetrahedron(d, 0);
+    auto point = [](const LatticePoint& p, const LatticePoint& q, double wp) {
+        return Vec3d{wp * p[0] + (1 - wp) * q[0], wp * p[1] + (1 - wp) * q[1], wp * p[2] + (1 - wp) * q[2]};
+    };
+    Vec3d centre{0, 0, 0};
+    for (const LatticePoint& c : t)
+        for (int a = 0; a < 3; ++a) centre[a] += 0.25 * c[a];
+    const Vec3d near_centre = point(t[0], LatticePoint{int32_t(centre[0]), int32_t(centre[1]), int32_t(centre[2])}, 0.25);
+    const Vec3d on_face = point(t[0], t[2], 0.5);  // the middle of edge (A, ring 0): on outer face (A, r0, r1)
+
+    WorkFragment alone;
+    alone.positions = {centre, near_centre, point(t[1], LatticePoint{int32_t(centre[0]), int32_t(centre[1]), int32_t(centre[2])}, 0.25)};
+    alone.indices = {0, 1, 2};
+    std::array<const WorkFragment*, 8> slots{};
+    slots[0] = &alone;
+    EXPECT_FALSE(lost_geometry_reach(d, slots).anchored);
+
+    WorkFragment reaching = alone;
+    reaching.positions[2] = on_face;
+    slots[0] = &reaching;
+    LostGeometryReach reach = lost_geometry_reach(d, slots);
+    EXPECT_TRUE(reach.anchored);
+    double d2 = 0;
+    for (int a = 0; a < 3; ++a) d2 += (on_face[a] - centre[a]) * (on_face[a] - centre[a]);
+    EXPECT_GE(reach.diameter, std::sqrt(d2));
+
+    // Both in one node: a lone piece (apart from the other) still has nothing near it.
+    WorkFragment apart = alone;
+    for (Vec3d& v : apart.positions)
+        for (double& c : v) c *= 0.5;  // towards B, the origin: no position shared
+    slots[1] = &apart;
+    EXPECT_FALSE(lost_geometry_reach(d, slots).anchored);
+}
