@@ -876,6 +876,9 @@ void CatpBuild::commit_node(PreparedNode& node, double lost) {
 // drew 289 nodes for a 64 x 48 view of it.)
 void CatpBuild::finish_empty_nodes() {
     const double diagonal = bounds_.diagonal() / place_.cell;
+    // In key order: threads queued them in any order, and the sum must not depend on it.
+    std::sort(empty_nodes_.begin(), empty_nodes_.end(),
+              [](const PreparedNode& a, const PreparedNode& b) { return a.entry.key < b.entry.key; });
     double chain = 0;
     for (const PreparedNode& node : empty_nodes_) chain += node.reach.diameter;
     for (PreparedNode& node : empty_nodes_) {
