@@ -113,6 +113,11 @@ static void print_catp_json(const CatpBuildReport& r, const ConvertJob& job, uin
                        {"input", {{"path", job.input}, {"vertices", r.input_vertices}, {"triangles", r.input_triangles}}},
                        {"output", {{"path", job.output}, {"bytes", r.file_bytes}, {"diamonds", r.nodes}}},
                        {"leaf_level", r.leaf_level},
+                       {"coarsest_leaf_level", r.coarsest_leaf_level},
+                       {"density_leaf_level", r.density_leaf_level},
+                       {"blocks", r.blocks},
+                       {"block_level", r.block_level},
+                       {"leaves_across_blocks", r.leaves_across_blocks},
                        {"precision", r.precision},
                        {"mean_edge", r.mean_edge},
                        {"vertex_layout", r.layout.name()},
@@ -233,19 +238,21 @@ int convert_catp(Options& options, const ConvertJob& job) {
         triangles += l.triangles;
     }
     std::printf("input:      %s: %zu vertices, %zu triangles\n", input.c_str(), r.input_vertices, r.input_triangles);
-    std::printf("output:     %s: %llu bytes, %zu diamonds, leaf level %d\n", output.c_str(),
+    std::printf("output:     %s: %llu bytes, %zu diamonds, deepest leaves at level %d\n", output.c_str(),
                 (unsigned long long)r.file_bytes, r.nodes, r.leaf_level);
-    std::printf("precision:  %.4g model units (%.3g mean edges of %.4g): vertex layout %s, grid %d, leaf step %.4g, "
-                "leaf level %d (%d from the density alone)\n",
-                r.precision, r.precision / r.mean_edge, r.mean_edge, r.layout.name(), r.layout.grid, r.leaf_step,
+    std::printf("precision:  %.4g model units (%.3g mean edges of %.4g): vertex layout %s, grid %d, leaf step %.4g\n",
+                r.precision, r.precision / r.mean_edge, r.mean_edge, r.layout.name(), r.layout.grid, r.leaf_step);
+    std::printf("leaves:     levels %d to %d, following the density (even at level %d)\n", r.coarsest_leaf_level,
                 r.leaf_level, r.density_leaf_level);
     uint64_t process_budget = r.memory_budget + own;
     std::printf("build:      %.2f s (reading included), %.0f input triangles/s, peak memory %.1f MiB of a %.0f MiB budget\n",
                 r.seconds, double(r.input_triangles) / r.seconds, double(r.peak_rss) / (1 << 20),
                 double(process_budget) / (1 << 20));
-    std::printf("out of core: %zu blocks at level %d, triangles binned %s, %.1f MiB of scratch data written to disk\n",
+    std::printf("out of core: %zu blocks at level %d, triangles binned %s, %.1f MiB of scratch data written to disk",
                 r.blocks, r.block_level, r.compact_bins ? "by vertex index" : "with their vertices",
                 double(r.bytes_spilled) / (1 << 20));
+    if (r.leaves_across_blocks) std::printf(", %zu leaves across blocks", r.leaves_across_blocks);
+    std::printf("\n");
     std::printf("phases:     read %.2f s, bin %.2f s, clip %.2f s, leaf nodes %.2f s, coarsen %.2f s, write %.2f s\n",
                 r.seconds_read, r.seconds_bin, r.seconds_clip, r.seconds_leaf_nodes, r.seconds_coarsen,
                 r.seconds_write);

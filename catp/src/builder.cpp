@@ -7,6 +7,7 @@
 #include <cstring>
 #include <malloc.h>
 #include <map>
+#include <unordered_set>
 #include <mutex>
 #include <type_traits>
 #include <unordered_map>
@@ -122,27 +123,17 @@ size_t longest_run(const std::vector<uint64_t>& keys) {
     return longest;
 }
 
-// The leaf level: sample vertices are tracked down the hierarchy one bisection at a time (a point
-// in a tetrahedron is in the child on its side of the splitting plane), counting the tetrahedra
-// hit; the leaf level is the first with about `leaf_target` triangles per occupied tetrahedron
-// on average, and with no tetrahedron estimated to hold more than kLargestLeafRatio times the
-// target. Vertices sample the surface as well as triangle centroids do (a mesh has about two
-// triangles per vertex), and they are known before the triangles are read.
-//
-// The second condition matters where density varies: the coarsening's working memory grows
-// with the largest diamond (its gathered fragments), not with the mean one, and the budget
-// reserves a fixed amount per thread for it (kMemoryPerThread). A 300k-triangle scan with a
-// 2M-triangle sphere inside chose its leaves by the mean alone: the sphere's leaf tetrahedra
-// held 46k triangles each, and at a 102 MiB budget the build peaked at 235 MiB. Scan-like
-// meshes of uniform density have a largest tetrahedron of 4.4-6.3 times the target at the level
-// the mean chooses, so their leaves are unchanged. Deeper levels stop once the mean tetrahedron
-// holds under a sixteenth of the target: extreme density contrasts would otherwise make
-// millions of tiny fragments elsewhere.
-constexpr double kLargestLeafRatio = 8.0;
+// Sample vertices tracked down the hierarchy one bisection at a time (a point in a tetrahedron
+// is in the child on its side of the splitting plane). Vertices sample the surface as well as
+// triangle centroids do (a mesh has about two triangles per vertex), and they are known before
+// the triangles are read.
+struct TrackedSample {
+    Vec3d p;
+    Tetrahedron t;
+};
 
-int choose_leaf_level(const std::vector<Vec3d>& sample, uint64_t triangles, size_t leaf_target) {
-    struct Tracked { Vec3d p; Tetrahedron t; };
-    std::vector<Tracked> points;
+std::vector<TrackedSample> track_from_root(const std::vector<Vec3d>& sample) {
+    std::vector<TrackedSample> points;
     DiamondInfo root = diamond_info(root_diamond());
     for (const Vec3d& p : sample)
         for (int s = 0; s < 6; ++s) {
@@ -152,17 +143,33 @@ int choose_leaf_level(const std::vector<Vec3d>& sample, uint64_t triangles, size
                 break;
             }
         }
+    return points;
+}
+
+// Parallel over the points: the read phase is otherwise single-threaded, and tracking 50k
+// points down 15 levels took 0.13 s of it.
+template <class Fn>
+void over_points(size_t n, Fn&& fn) {
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 1024), [&](const tbb::blocked_range<size_t>& r) {
+        for (size_t i = r.begin(); i != r.end(); ++i) fn(i);
+    });
+}
+
+void descend_sample(TrackedSample& s) {
+    Tetrahedron a, b;
+    bisect(s.t, a, b);
+    s.t = separated(a, &s.p, 1) ? b : a;
+}
+
+// The density's level: the first where the occupied tetrahedra hold about `leaf_target`
+// triangles on average (at most 1.41 times it). Where density is even, the leaves are there
+// (choose_refined_diamonds).
+int choose_mean_level(const std::vector<Vec3d>& sample, uint64_t triangles, size_t leaf_target) {
+    std::vector<TrackedSample> points = track_from_root(sample);
     double per_point = double(triangles) / double(std::max<size_t>(1, points.size()));
     std::vector<uint64_t> keys(points.size());
-    // Parallel over the points: the read phase is otherwise single-threaded, and tracking 50k
-    // points down 15 levels took 0.13 s of it.
-    auto over_points = [&](auto&& fn) {
-        tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 1024), [&](const tbb::blocked_range<size_t>& r) {
-            for (size_t i = r.begin(); i != r.end(); ++i) fn(i);
-        });
-    };
     for (int level = 0; level < kMaxLevel - 3; ++level) {
-        over_points([&](size_t i) {
+        over_points(points.size(), [&](size_t i) {
             Tetrahedron k = canonical_tetrahedron(points[i].t);
             uint64_t h = 1469598103934665603ull;
             for (auto& p : k)
@@ -170,19 +177,103 @@ int choose_leaf_level(const std::vector<Vec3d>& sample, uint64_t triangles, size
             keys[i] = h;
         });
         tbb::parallel_sort(keys.begin(), keys.end());
-        const size_t largest = longest_run(keys);
         size_t distinct = size_t(std::unique(keys.begin(), keys.end()) - keys.begin());
         const double mean = per_point * double(points.size()) / double(std::max<size_t>(1, distinct));
-        const double target = double(leaf_target);
-        if (mean <= target * 1.4142 && (per_point * double(largest) <= target * kLargestLeafRatio || mean < target / 16))
-            return level;
-        over_points([&](size_t i) {
-            Tetrahedron a, b;
-            bisect(points[i].t, a, b);
-            points[i].t = separated(a, &points[i].p, 1) ? b : a;
-        });
+        if (mean <= double(leaf_target) * 1.4142) return level;
+        over_points(points.size(), [&](size_t i) { descend_sample(points[i]); });
     }
     return kMaxLevel - 3;
+}
+
+// The leaves follow the local density (adaptive leaves): the refined diamonds, closed under
+// parents, are those coarser than `floor` (the precision's level: every leaf's grid step reaches
+// the precision) and those the sample says hold too much (`ids`). Leaf tetrahedra are then the
+// slots whose creating parent is refined and whose own diamond is not: a cut of the diamond DAG,
+// so the leaves tile the model conformingly as the client's cuts do, and every cut of the
+// dataset stays crack-free by the same argument.
+struct RefinedDiamonds {
+    int floor = 0;
+    std::unordered_set<uint64_t> ids;
+    int deepest = 0;  // the deepest level `ids` refines to (its deepest diamond's level + 1)
+    bool refined(uint64_t diamond, int level) const { return level < floor || ids.count(diamond) != 0; }
+};
+
+// Where the density asks for leaves coarser or finer than the mean level: above it, a diamond
+// none of whose tetrahedra holds half the target stays a leaf (a sparse region, or a corner of
+// the surface: a hundredfold density contrast made the sparse part of a mesh three times larger
+// and slower to build when every leaf sat at the level of the dense part); at and below it, a
+// diamond with a tetrahedron estimated at more than kLargestLeafRatio times the target is
+// refined. The coarsening's working memory grows with the largest diamonds, and the budget
+// reserves a fixed amount per thread for them: a 300k-triangle scan with a 2M-triangle sphere
+// inside, its leaves chosen by the mean alone, held 46k triangles in a leaf and peaked at
+// 235 MiB at a 102 MiB budget. At 8 times (the bound when one leaf level served the whole model,
+// then reached only by its largest leaf) the dense sphere of a 1M uneven mesh filled most of its
+// leaves up to it and, with 2 threads at 122 MiB, peaked at 123.6 MiB; at 6 times, 110.2 MiB
+// (memory_budget_bench; at 4 times 80.5, but the 10M scan's file grew 2.2%). Scan-like meshes of
+// even density have a few tetrahedra of 4.4-6.3 times the target at the mean level: the 1M
+// scan's file is the same, the 10M scan's has 11 more diamonds (3073) and 0.05% more bytes. A
+// diamond without a sample stays a leaf. The estimate is the sample's count times the triangles
+// per sample.
+constexpr double kLargestLeafRatio = 6.0;
+constexpr double kSparseLeafRatio = 0.5;
+
+RefinedDiamonds choose_refined_diamonds(const std::vector<Vec3d>& sample, uint64_t triangles, size_t leaf_target,
+                                        int mean_level) {
+    RefinedDiamonds refined;
+    std::vector<TrackedSample> points = track_from_root(sample);
+    const double per_point = double(triangles) / double(std::max<size_t>(1, points.size()));
+    const double target = double(leaf_target);
+    struct Where {
+        uint64_t diamond;
+        int slot;
+        bool operator<(const Where& o) const { return diamond != o.diamond ? diamond < o.diamond : slot < o.slot; }
+        bool operator==(const Where& o) const { return diamond == o.diamond && slot == o.slot; }
+    };
+    std::vector<Where> where;
+    for (int level = 0; level < kMaxLevel - 3 && !points.empty(); ++level) {
+        where.resize(points.size());
+        over_points(points.size(), [&](size_t i) {
+            DiamondId id;
+            int slot = 0;
+            tetrahedron_diamond(points[i].t, id, slot);
+            where[i] = {id.bits, slot};
+        });
+        std::vector<Where> sorted = where;
+        tbb::parallel_sort(sorted.begin(), sorted.end());
+        // Per diamond, its fullest tetrahedron's count: refine or not.
+        std::vector<uint64_t> refine;  // sorted
+        for (size_t i = 0; i < sorted.size();) {
+            size_t fullest = 0, j = i;
+            while (j < sorted.size() && sorted[j].diamond == sorted[i].diamond) {
+                size_t k = j;
+                while (k < sorted.size() && sorted[k] == sorted[j]) ++k;
+                fullest = std::max(fullest, k - j);
+                j = k;
+            }
+            const double estimate = per_point * double(fullest);
+            if (level < mean_level ? estimate >= target * kSparseLeafRatio : estimate > target * kLargestLeafRatio)
+                refine.push_back(sorted[i].diamond);
+            i = j;
+        }
+        if (refine.empty()) break;
+        refined.ids.insert(refine.begin(), refine.end());
+        refined.deepest = level + 1;
+        size_t kept = 0;
+        for (size_t i = 0; i < points.size(); ++i)
+            if (std::binary_search(refine.begin(), refine.end(), where[i].diamond)) points[kept++] = points[i];
+        points.resize(kept);
+        over_points(points.size(), [&](size_t i) { descend_sample(points[i]); });
+    }
+    // Closed under parents: a diamond is refined only where all of its parents are.
+    std::vector<uint64_t> work(refined.ids.begin(), refined.ids.end());
+    while (!work.empty()) {
+        const DiamondId id{work.back()};
+        work.pop_back();
+        if (id == root_diamond()) continue;
+        for (DiamondId p : diamond_parents(id))
+            if (refined.ids.insert(p.bits).second) work.push_back(p.bits);
+    }
+    return refined;
 }
 
 // The block octave: the coarsest (at most the leaf level's) whose fullest cube is estimated to
@@ -364,7 +455,7 @@ private:
     template <typename Record>
     void build_leaves(TriangleBins<Record>& bins);
     void write_leaf_nodes();
-    void coarsen_level();
+    void coarsen_level(int level);
     void choose_layout_and_leaves();
     void finish_archive();
 
@@ -401,7 +492,9 @@ private:
     Placement place_{};
     std::unique_ptr<PagedArray<VertexRecord>> vertices_;
     std::vector<Vec3d> sample_;  // model units
-    LevelChoice levels_;
+    LevelChoice levels_;  // leaf_level: the deepest leaf level (the density's, then the precision's)
+    int mean_level_ = 0;  // the density's level where it is even (choose_mean_level)
+    RefinedDiamonds refined_;
     VertexLayout layout_;
     double mean_edge_ = 0;   // lattice units
     double precision_ = 0;   // lattice units, as asked for
@@ -424,8 +517,11 @@ private:
     struct DiamondError {
         double unquantized = 0, stored = 0;
     };
-    std::unique_ptr<FragmentSpill> fragments_;
-    std::unordered_map<uint64_t, DiamondError> diamond_error_;
+    std::unique_ptr<FragmentSpill> fragments_;  // the leaves', then each coarser level's
+    std::unique_ptr<FragmentSpill> leaves_;     // while coarsening: the leaves (not gathered
+    size_t leaf_next_ = 0;                      // from leaf_next_ on)
+    std::unordered_map<uint64_t, DiamondError> diamond_error_;  // the level just made
+    std::unordered_map<uint64_t, DiamondError> leaf_error_;     // every leaf's
     // The nodes of the level being written that draw nothing, and the largest stored bound of
     // those that draw something (lattice units; -1: none yet).
     std::vector<PreparedNode> empty_nodes_;
@@ -549,6 +645,7 @@ bool CatpBuild::choose_bins(uint64_t triangle_estimate) const {
     uint64_t vertex_bytes = vertices_->size() * sizeof(VertexRecord);
     // Triangles crossing block borders are binned once per block: 25% margin.
     uint64_t bin_bytes = triangle_estimate * sizeof(TriangleCorners) * 5 / 4;
+    if (triangle_estimate * 5 / 4 >= UINT32_MAX) return false;  // TriangleCorners::sequence
     return vertex_bytes + bin_bytes <= budget_ * 2 / 5;
 }
 
@@ -629,8 +726,12 @@ void CatpBuild::bin_triangles(TriangleBins<Record>& bins) {
         for (size_t t = 0; t < batch->triangles; ++t) {
             const uint32_t* f = &batch->indices[3 * t];
             if (f[0] == f[1] || f[1] == f[2] || f[0] == f[2]) continue;  // no area, nothing to clip
-            make_record(f, *vertices_, batch->records.emplace_back());
+            Record& r = batch->records.emplace_back();
+            make_record(f, *vertices_, r);
+            r.sequence = decltype(r.sequence)(records_read + batch->records.size() - 1);
         }
+        if (std::is_same_v<Record, TriangleCorners> && records_read + batch->records.size() > UINT32_MAX)
+            fail("internal error: compact bins hold fewer than 2^32 triangles");
         batch->first_record = records_read;
         records_read += batch->records.size();
         return batch;
@@ -683,18 +784,22 @@ size_t CatpBuild::load_block(TriangleBins<TriangleCorners>& bins, size_t b, std:
     if (records.size() < corners.size()) records.resize(corners.size());
     const PagedArray<VertexRecord>& vertices = *vertices_;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, corners.size(), 4096), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i != r.end(); ++i)
+        for (size_t i = r.begin(); i != r.end(); ++i) {
             for (int k = 0; k < 3; ++k) {
                 const VertexRecord& v = vertices.resident_at(corners[i].vertices[k]);
                 records[i].positions[k] = v.position;
                 records[i].normals[k] = v.normal;
                 records[i].colors[k] = v.color;
             }
+            records[i].sequence = corners[i].sequence;
+        }
     });
     return corners.size();
 }
 
-// Clips each block's triangles by its leaf tetrahedra; the leaf fragments go to the spill.
+// Clips each block's triangles by its leaf tetrahedra; the leaf fragments go to the spill. A
+// leaf coarser than the blocks (a sparse region's, where memory asked for small blocks) gathers
+// its triangles from every block they were binned in, and is clipped after the blocks.
 template <typename Record>
 void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     fragments_ = std::make_unique<FragmentSpill>(output_, shares_->fragments_in_memory);
@@ -718,26 +823,73 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     std::vector<std::vector<LeafHit>> chunk_hits;
     LeafGroups groups;
     tbb::enumerable_thread_specific<SourceVertexMap> source_maps;  // reused: see SourceVertexMap::clear
+    // Leaves coarser than the blocks: their triangles, by leaf number, until every block is done.
+    TriangleBins<TriangleRecord> spanning(output_, shares_->fragments_in_memory / 2);
+    std::vector<SlotKey> spanning_keys;
+    std::map<std::pair<uint64_t, int>, uint32_t> spanning_number;
+    std::vector<std::vector<std::pair<SlotKey, uint32_t>>> chunk_spanning;
+    const RefinedDiamonds& refined = refined_;
     for (size_t b : order) {
         const size_t count = load_block(bins, b, records);
         BlockCube block = BlockCube::from_key(levels_.block_octave, bins.block_key(b));
-        int leaf_level = levels_.leaf_level;
+        const int block_level = 3 * block.octave;
+        const int deepest = levels_.leaf_level;
+        // The cube a level's tetrahedra are looked for in: the block, or for a level coarser
+        // than the blocks, the block's ancestor of that level's octave (its leaves may reach
+        // into other blocks: they are gathered across blocks, below).
+        auto cube_of = [&](int level) {
+            if (level >= block_level) return block;
+            BlockCube cube = block;
+            cube.octave = level / 3;
+            for (int a = 0; a < 3; ++a) cube.index[a] = block.index[a] >> (block.octave - cube.octave);
+            return cube;
+        };
         const size_t chunks = (count + kRouteChunk - 1) / kRouteChunk;
         if (chunk_hits.size() < chunks) chunk_hits.resize(chunks);
+        if (chunk_spanning.size() < chunks) chunk_spanning.resize(chunks);
         for (std::vector<LeafHit>& h : chunk_hits) h.clear();
+        for (auto& h : chunk_spanning) h.clear();
         tbb::parallel_for(size_t(0), chunks, [&](size_t c) {
             std::vector<LeafHit>& out = chunk_hits[c];
             const size_t end = std::min(count, (c + 1) * kRouteChunk);
             for (size_t i = c * kRouteChunk; i != end; ++i) {
                 const Vec3d* corners = records[i].positions.data();
+                auto emit = [&](SlotKey k, int level, bool whole) {
+                    if (level < block_level) chunk_spanning[c].push_back({k, uint32_t(i)});
+                    else out.push_back({k, uint32_t(i), whole});
+                };
+                // A tetrahedron of level L is a leaf when its creating parent is refined and its
+                // own diamond is not (refined_ is closed under parents, and every diamond above
+                // the floor is refined). Down the levels from the floor: while the triangle lies
+                // strictly inside one tetrahedron, that one (the fast path's tables); once it
+                // crosses a face, every candidate of each level.
+                int level = refined.floor;
                 SlotKey key;
-                if (single_leaf(corners, leaf_level, block, key)) {
-                    out.push_back({key, uint32_t(i), true});
-                    continue;
+                bool placed = false;
+                for (; level <= deepest && single_leaf(corners, level, cube_of(level), key); ++level)
+                    if (!refined.refined(key.diamond, level)) {
+                        emit(key, level, true);
+                        placed = true;
+                        break;
+                    }
+                for (bool deeper = !placed; deeper && level <= deepest; ++level) {
+                    deeper = false;
+                    search_leaf_slots(corners, level, cube_of(level), [&](SlotKey k) {
+                        if (level > refined.floor &&
+                            !refined.refined(slot_parent(diamond_info(DiamondId{k.diamond}), k.slot).bits, level - 1))
+                            return;  // not a tetrahedron of the leaves' tiling
+                        if (refined.refined(k.diamond, level)) deeper = true;
+                        else emit(k, level, false);
+                    });
                 }
-                search_leaf_slots(corners, leaf_level, block, [&](SlotKey k) { out.push_back({k, uint32_t(i), false}); });
             }
         });
+        for (size_t c = 0; c < chunks; ++c)
+            for (auto [key, i] : chunk_spanning[c]) {
+                auto [it, fresh] = spanning_number.emplace(std::pair{key.diamond, key.slot}, uint32_t(spanning_keys.size()));
+                if (fresh) spanning_keys.push_back(key);
+                spanning.add(it->second, records[i]);
+            }
         groups.build(chunk_hits);
         tbb::parallel_for(size_t(0), groups.size(), [&](size_t g) {
             const SlotKey key = groups.key(g);
@@ -774,6 +926,38 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
         });
         progress_->add(count);
     }
+    // The leaves coarser than the blocks: their triangles in input order, each once (a triangle
+    // crossing blocks was binned, and reached its leaf, in each).
+    std::vector<uint32_t> numbers(spanning.block_count());
+    for (size_t n = 0; n < numbers.size(); ++n) numbers[n] = uint32_t(n);
+    tbb::parallel_for(size_t(0), numbers.size(), [&](size_t n) {
+        std::vector<TriangleRecord> gathered;
+        {
+            static std::mutex load_mutex;  // TriangleBins::load is not thread-safe
+            std::lock_guard lock(load_mutex);
+            spanning.load(n, gathered);
+        }
+        std::sort(gathered.begin(), gathered.end(),
+                  [](const TriangleRecord& a, const TriangleRecord& b) { return a.sequence < b.sequence; });
+        gathered.erase(std::unique(gathered.begin(), gathered.end(),
+                                   [](const TriangleRecord& a, const TriangleRecord& b) { return a.sequence == b.sequence; }),
+                       gathered.end());
+        const SlotKey key = spanning_keys[spanning.block_key(n)];
+        const Tetrahedron t = slot_tetrahedron(key);
+        std::vector<ClipPlane> planes = tetrahedron_clip_planes(t, 0xf);
+        WorkFragment fragment;
+        FragmentWelder welder(fragment);
+        welder.reserve(gathered.size() * 5 / 8 + 64, gathered.size() * 9 / 8 + 16);
+        for (const TriangleRecord& r : gathered) {
+            if (strictly_inside(t, r.positions.data(), 3))
+                welder.add_whole(r.positions, r.normals, r.colors);
+            else
+                welder.add_clipped(r.positions, r.normals, r.colors, planes);
+        }
+        if (!fragment.indices.empty()) fragments_->put(key, std::move(fragment));
+    });
+    report_.leaves_across_blocks = spanning.block_count();
+    bytes_spilled_ += spanning.bytes_spilled();
     bytes_spilled_ += bins.bytes_spilled();
     return_free_memory(warm_heap_.get());
 }
@@ -902,50 +1086,86 @@ std::vector<std::pair<size_t, size_t>> group_runs(size_t count, GroupOf group_of
     return runs;
 }
 
+// Leaves sit at several levels: they are written deepest level first, so that a leaf's bound
+// covers its leaf children's (a leaf may have a child present, one its other parent made), and
+// a level's empty nodes are settled with that level.
 void CatpBuild::write_leaf_nodes() {
     std::vector<SpilledFragment>& refs = fragments_->fragments();
-    std::sort(refs.begin(), refs.end(), [](const SpilledFragment& a, const SpilledFragment& b) { return a.key < b.key; });
-    auto runs = group_runs(refs.size(), [&](size_t i) { return refs[i].key.diamond; });
-    for (auto& run : runs) diamond_error_.emplace(refs[run.first].key.diamond, DiamondError{});
-    progress_->set_total(runs.size());
-    tbb::parallel_for(size_t(0), runs.size(), [&](size_t i) {
-        DiamondId id{refs[runs[i].first].key.diamond};
-        DiamondInfo info = diamond_info(id);
-        std::array<WorkFragment, 8> loaded;
-        std::array<const WorkFragment*, 8> slots{};
-        for (size_t k = runs[i].first; k < runs[i].second; ++k)
-            slots[refs[k].key.slot] = &fragments_->get(refs[k], loaded[refs[k].key.slot]);
-        // Each diamond's own entry, written by this thread only (or by finish_empty_nodes).
-        write_node(id, info, slots, 0.0, 0.0, true, &diamond_error_.find(id.bits)->second.stored);
-        progress_->add(1);
+    auto level_of = [](const SpilledFragment& f) { return diamond_level(DiamondId{f.key.diamond}); };
+    std::sort(refs.begin(), refs.end(), [&](const SpilledFragment& a, const SpilledFragment& b) {
+        const int la = level_of(a), lb = level_of(b);
+        return la != lb ? la > lb : a.key < b.key;
     });
-    finish_empty_nodes();
+    auto runs = group_runs(refs.size(), [&](size_t i) { return refs[i].key.diamond; });
+    for (auto& run : runs) leaf_error_.emplace(refs[run.first].key.diamond, DiamondError{});
+    progress_->set_total(runs.size());
+    for (size_t first = 0; first < runs.size();) {
+        const int level = level_of(refs[runs[first].first]);
+        size_t last = first;
+        while (last < runs.size() && level_of(refs[runs[last].first]) == level) ++last;
+        tbb::parallel_for(first, last, [&](size_t i) {
+            DiamondId id{refs[runs[i].first].key.diamond};
+            DiamondInfo info = diamond_info(id);
+            std::array<WorkFragment, 8> loaded;
+            std::array<const WorkFragment*, 8> slots{};
+            for (size_t k = runs[i].first; k < runs[i].second; ++k)
+                slots[refs[k].key.slot] = &fragments_->get(refs[k], loaded[refs[k].key.slot]);
+            double children = 0;  // leaves of deeper levels, written already
+            for (DiamondId child : diamond_children(id)) {
+                auto it = leaf_error_.find(child.bits);
+                if (it != leaf_error_.end()) children = std::max(children, it->second.stored);
+            }
+            // Each diamond's own entry, written by this thread only (or by finish_empty_nodes).
+            write_node(id, info, slots, 0.0, children, true, &leaf_error_.find(id.bits)->second.stored);
+            progress_->add(1);
+        });
+        finish_empty_nodes();
+        first = last;
+    }
+    // The deepest leaves there are (those the density allowed may hold no geometry).
+    if (!refs.empty()) {
+        levels_.leaf_level = report_.leaf_level = level_of(refs.front());
+        report_.coarsest_leaf_level = level_of(refs.back());
+    }
+    // Kept while coarsening: each level gathers the leaves one level finer than itself.
+    leaves_ = std::move(fragments_);
 }
 
 // One coarsening step: every diamond of `level` is made from the fragments of the finer level
 // whose tetrahedra its refinement created (welded, simplified to about half, clipped into its
 // own tetrahedra); its node is written and its fragments replace the finer level's.
-void CatpBuild::coarsen_level() {
-    std::vector<SpilledFragment>& refs = fragments_->fragments();
-    std::vector<uint64_t> parent_of(refs.size());
+void CatpBuild::coarsen_level(int level) {
+    // The fragments one level finer: those the level below made, and the leaves there (sorted
+    // deepest first by write_leaf_nodes: the next ones to gather are at leaf_next_).
+    struct Input {
+        SpilledFragment ref;
+        FragmentSpill* spill;
+    };
+    std::vector<Input> inputs;
+    if (fragments_)
+        for (const SpilledFragment& f : fragments_->fragments()) inputs.push_back({f, fragments_.get()});
+    std::vector<SpilledFragment>& leaves = leaves_->fragments();
+    while (leaf_next_ < leaves.size() && diamond_level(DiamondId{leaves[leaf_next_].key.diamond}) == level + 1)
+        inputs.push_back({leaves[leaf_next_++], leaves_.get()});
+    std::vector<uint64_t> parent_of(inputs.size());
     {
-        std::vector<std::pair<uint64_t, size_t>> order(refs.size());
-        tbb::parallel_for(size_t(0), refs.size(), [&](size_t i) {
-            DiamondInfo child = diamond_info(DiamondId{refs[i].key.diamond});
-            order[i] = {slot_parent(child, refs[i].key.slot).bits, i};
+        std::vector<std::pair<uint64_t, size_t>> order(inputs.size());
+        tbb::parallel_for(size_t(0), inputs.size(), [&](size_t i) {
+            DiamondInfo child = diamond_info(DiamondId{inputs[i].ref.key.diamond});
+            order[i] = {slot_parent(child, inputs[i].ref.key.slot).bits, i};
         });
         // Children in key order within a parent: welding order, hence the output, is fixed.
         std::sort(order.begin(), order.end(), [&](const auto& a, const auto& b) {
-            return a.first != b.first ? a.first < b.first : refs[a.second].key < refs[b.second].key;
+            return a.first != b.first ? a.first < b.first : inputs[a.second].ref.key < inputs[b.second].ref.key;
         });
-        std::vector<SpilledFragment> sorted(refs.size());
+        std::vector<Input> sorted(inputs.size());
         for (size_t i = 0; i < order.size(); ++i) {
-            sorted[i] = refs[order[i].second];
+            sorted[i] = inputs[order[i].second];
             parent_of[i] = order[i].first;
         }
-        refs = std::move(sorted);
+        inputs = std::move(sorted);
     }
-    auto runs = group_runs(refs.size(), [&](size_t i) { return parent_of[i]; });
+    auto runs = group_runs(inputs.size(), [&](size_t i) { return parent_of[i]; });
     auto next = std::make_unique<FragmentSpill>(output_, shares_->coarse_fragments_in_memory);
     std::vector<DiamondError> produced_error(runs.size());
     // Each thread's gathered and child fragments, cleared from diamond to diamond but kept for
@@ -966,7 +1186,10 @@ void CatpBuild::coarsen_level() {
         DiamondError children;
         for (DiamondId child : diamond_children(id)) {
             auto it = diamond_error_.find(child.bits);
-            if (it == diamond_error_.end()) continue;
+            if (it == diamond_error_.end()) {
+                it = leaf_error_.find(child.bits);
+                if (it == leaf_error_.end()) continue;
+            }
             children.unquantized = std::max(children.unquantized, it->second.unquantized);
             children.stored = std::max(children.stored, it->second.stored);
         }
@@ -984,13 +1207,13 @@ void CatpBuild::coarsen_level() {
             FragmentWelder welder(gathered);
             size_t vertices = 0, triangles = 0;
             for (size_t k = runs[i].first; k < runs[i].second; ++k) {
-                vertices += refs[k].vertices;
-                triangles += refs[k].triangles;
+                vertices += inputs[k].ref.vertices;
+                triangles += inputs[k].ref.triangles;
             }
             welder.reserve(vertices, triangles);
             for (size_t k = runs[i].first; k < runs[i].second; ++k) {
-                welder.append(fragments_->get(refs[k], child));
-                fragments_->release(refs[k]);
+                welder.append(inputs[k].spill->get(inputs[k].ref, child));
+                inputs[k].spill->release(inputs[k].ref);
             }
         }
         size_t gathered_triangles = gathered.indices.size() / 3;
@@ -1017,7 +1240,7 @@ void CatpBuild::coarsen_level() {
     std::vector<size_t> small, large;
     for (size_t i = 0; i < runs.size(); ++i) {
         uint64_t triangles = 0;
-        for (size_t k = runs[i].first; k < runs[i].second; ++k) triangles += refs[k].triangles;
+        for (size_t k = runs[i].first; k < runs[i].second; ++k) triangles += inputs[k].ref.triangles;
         (triangles * kCoarsenBytesPerTriangle > kMemoryPerThread * 3 / 4 ? large : small).push_back(i);
     }
     // Isolated: a thread that waits inside coarsen_diamond's parallel steps runs only that
@@ -1035,7 +1258,7 @@ void CatpBuild::coarsen_level() {
         coarsen_run(i);
     }
     finish_empty_nodes();
-    bytes_spilled_ += fragments_->bytes_spilled();
+    if (fragments_) bytes_spilled_ += fragments_->bytes_spilled();
     fragments_ = std::move(next);
     // No return_free_memory() here: the next level reuses what this one freed, and trimming
     // every level made it fault all of it in again (250k page faults instead of 97k on the 10M
@@ -1065,14 +1288,22 @@ void CatpBuild::choose_layout_and_leaves() {
                                      : std::vector{VertexLayoutKind::Position48};
             break;
     }
-    PrecisionChoice choice = choose_precision(precision_, levels_.leaf_level, settings_.leaf_level >= 0, kinds);
+    const bool forced = settings_.leaf_level >= 0;
+    PrecisionChoice choice = choose_precision(precision_, mean_level_, forced, kinds);
     layout_ = choice.layout;
-    report_.density_leaf_level = levels_.leaf_level;
-    levels_.leaf_level = choice.leaf_level;
-    report_.leaf_level = choice.leaf_level;
+    report_.density_leaf_level = mean_level_;
+    // The precision's floor: no leaf is coarser than the coarsest level whose step, on the grid
+    // chosen, reaches the precision (the choice's own level, or coarser when the grid has room).
+    int floor = choice.leaf_level;
+    if (!forced)
+        while (floor > 0 && level_longest_edge(floor - 1) / layout_.grid <= precision_) --floor;
+    refined_.floor = floor;
+    levels_.leaf_level = std::max(floor, refined_.deepest);  // the deepest a leaf can be
+    report_.leaf_level = levels_.leaf_level;
     report_.layout = layout_;
     report_.mean_edge = mean_edge_ * place_.cell;
-    report_.leaf_step = level_longest_edge(choice.leaf_level) / layout_.grid * place_.cell;
+    // The coarsest leaves' step: the largest.
+    report_.leaf_step = level_longest_edge(floor) / layout_.grid * place_.cell;
     // What is guaranteed: the precision asked for, or (a forced leaf level that cannot reach
     // it) the leaves' step.
     report_.precision = std::max(precision_ * place_.cell, choice.reached ? 0.0 : report_.leaf_step);
@@ -1150,10 +1381,19 @@ CatpBuildReport CatpBuild::run() {
     }
     for (Vec3d& p : sample_)
         for (int i = 0; i < 3; ++i) p[i] = (p[i] - place_.origin[i]) / place_.cell;
-    int leaf_level = settings_.leaf_level >= 0 ? settings_.leaf_level
-                                               : choose_leaf_level(sample_, estimate, settings_.leaf_triangles);
-    if (leaf_level > kMaxLevel - 3) fail("leaf level %d is deeper than the lattice allows (%d)", leaf_level, kMaxLevel - 3);
-    levels_ = choose_block_octave(sample_, estimate, leaf_level, shares_->block_triangles);
+    const bool forced = settings_.leaf_level >= 0;
+    if (settings_.leaf_level > kMaxLevel - 3)
+        fail("leaf level %d is deeper than the lattice allows (%d)", settings_.leaf_level, kMaxLevel - 3);
+    mean_level_ = forced ? settings_.leaf_level : choose_mean_level(sample_, estimate, settings_.leaf_triangles);
+    if (forced) {
+        refined_.floor = settings_.leaf_level;  // every leaf there, as asked
+        refined_.deepest = settings_.leaf_level;
+    } else {
+        refined_ = choose_refined_diamonds(sample_, estimate, settings_.leaf_triangles, mean_level_);
+    }
+    // Blocks no finer than the deepest leaves the density asks for (coarser leaves gather their
+    // triangles across blocks: build_leaves).
+    levels_ = choose_block_octave(sample_, estimate, std::max(refined_.deepest, mean_level_), shares_->block_triangles);
     report_.block_level = 3 * levels_.block_octave;
     archive_ = std::make_unique<ArchiveWriter>(output_, ArchiveKind::Catp);
 
@@ -1198,18 +1438,25 @@ CatpBuildReport CatpBuild::run() {
     // ---- Coarser levels, bottom-up.
     for (int level = levels_.leaf_level - 1; level >= 0; --level) {
         uint64_t triangles = 0;  // every fragment of the finer level is gathered by one diamond
-        for (const SpilledFragment& f : fragments_->fragments()) triangles += f.triangles;
+        if (fragments_)
+            for (const SpilledFragment& f : fragments_->fragments()) triangles += f.triangles;
+        const std::vector<SpilledFragment>& leaves = leaves_->fragments();
+        for (size_t i = leaf_next_; i < leaves.size() && diamond_level(DiamondId{leaves[i].key.diamond}) == level + 1; ++i)
+            triangles += leaves[i].triangles;
         progress_->phase(strprintf("coarsening level %d of %d", level, levels_.leaf_level), triangles, "tri");
-        coarsen_level();
+        coarsen_level(level);
     }
-    bytes_spilled_ += fragments_->bytes_spilled();
+    if (fragments_) bytes_spilled_ += fragments_->bytes_spilled();
     fragments_.reset();
+    bytes_spilled_ += leaves_->bytes_spilled();
+    leaves_.reset();
     lap(report_.seconds_coarsen);
 
     progress_->phase("writing " + output_, 0, "bytes");
     finish_archive();
     progress_->finish();
     lap(report_.seconds_write);
+    stats_.resize(size_t(levels_.leaf_level) + 1);
     for (auto& s : stats_) {
         if (s.diamonds) report_.nodes += s.diamonds;
         report_.levels.push_back(s);

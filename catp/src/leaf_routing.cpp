@@ -306,6 +306,28 @@ bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
     return false;
 }
 
+bool strictly_inside(const Tetrahedron& t, const Vec3d* pts, int count) {
+    for (int f = 0; f < 4; ++f) {
+        const LatticePoint &a = t[(f + 1) % 4], &b = t[(f + 2) % 4], &c = t[(f + 3) % 4], &o = t[f];
+        double u[3], v[3], n[3];
+        for (int i = 0; i < 3; ++i) {
+            u[i] = double(b[i] - a[i]);
+            v[i] = double(c[i] - a[i]);
+        }
+        n[0] = u[1] * v[2] - u[2] * v[1];
+        n[1] = u[2] * v[0] - u[0] * v[2];
+        n[2] = u[0] * v[1] - u[1] * v[0];
+        double so = n[0] * (o[0] - a[0]) + n[1] * (o[1] - a[1]) + n[2] * (o[2] - a[2]);
+        double sign = so > 0 ? 1.0 : -1.0;
+        double scale = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
+        for (int k = 0; k < count; ++k) {
+            double s = sign * (n[0] * (pts[k][0] - a[0]) + n[1] * (pts[k][1] - a[1]) + n[2] * (pts[k][2] - a[2]));
+            if (!(s > 1e-6 * scale)) return false;
+        }
+    }
+    return true;
+}
+
 void cube_range(const Vec3d* pts, int count, int32_t side, int32_t lo[3], int32_t hi[3]) {
     for (int i = 0; i < 3; ++i) {
         double mn = pts[0][i], mx = pts[0][i];

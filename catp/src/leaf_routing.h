@@ -47,6 +47,10 @@ void bisect(const Tetrahedron& t, Tetrahedron& c0, Tetrahedron& c1);
 // floating-point error can only make it keep a tetrahedron that the exact clipper then rejects).
 bool separated(const Tetrahedron& t, const Vec3d* pts, int count);
 
+// Conservative acceptance: true if all points are strictly inside every face (with the same
+// margin, so floating-point error can only make it answer false).
+bool strictly_inside(const Tetrahedron& t, const Vec3d* pts, int count);
+
 // Index range of the cubes of side `side` that the points' bounding box may touch. ceil - 1, not
 // floor: geometry exactly on a cube boundary plane belongs to both cubes (a triangle lying in that
 // plane is kept by exactly one of them, by the coplanar rule).

@@ -31,18 +31,23 @@ struct SlotKey {
     bool operator<(const SlotKey& o) const { return diamond != o.diamond ? diamond < o.diamond : slot < o.slot; }
 };
 
-// One input triangle, self-contained (when the vertices do not fit in memory): 120 bytes.
+// One input triangle, self-contained (when the vertices do not fit in memory): 128 bytes.
 struct TriangleRecord {
     std::array<Vec3d, 3> positions;   // lattice units, on the snapping grid
     std::array<Vec3f, 3> normals;     // unit
     std::array<Rgb8, 3> colors;
+    // Its place among the binned triangles: a leaf larger than a block gathers its triangles
+    // from several blocks, and puts them back in this order (the order a leaf inside one block
+    // gets them in), so the output does not depend on the blocks.
+    uint64_t sequence;
 };
 
-// One input triangle by its corners' vertex indices (when the vertices stay in memory): 12
-// bytes, a tenth of a TriangleRecord. Binning 10M triangles as TriangleRecords moved 1.3 GB
+// One input triangle by its corners' vertex indices (when the vertices stay in memory): 16
+// bytes, an eighth of a TriangleRecord. Binning 10M triangles as TriangleRecords moved 1.3 GB
 // through the buffers and the scratch file, most of the binning phase's 5.9 s.
 struct TriangleCorners {
     std::array<uint32_t, 3> vertices;
+    uint32_t sequence;  // as TriangleRecord's (compact bins hold fewer than 2^32 triangles)
 };
 
 // Input triangles sorted into spatial blocks. Record is TriangleRecord or TriangleCorners.

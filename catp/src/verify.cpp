@@ -322,11 +322,23 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
             report.bad_flags++;
             checker.problem(strprintf("diamond %llu claims slots that do not exist", (unsigned long long)e.key));
         }
+        // Leaves may sit at any level (they follow the density), but the deepest level holds
+        // only leaves, and no slot is created by a leaf (a leaf is never refined).
         bool leaf = e.flags & kCatpLeafFlag;
-        if (leaf != (uint32_t(e.level) == meta.leaf_level)) {
+        if (!leaf && uint32_t(e.level) >= meta.leaf_level) {
             report.bad_flags++;
-            checker.problem(strprintf("diamond %llu: leaf flag does not match its level", (unsigned long long)e.key));
+            checker.problem(strprintf("diamond %llu: not a leaf, at the leaf level", (unsigned long long)e.key));
         }
+        if (e.key != root_diamond().bits)
+            for (int s = 0; s < info.ring_size; ++s) {
+                if (!(e.flags & (1u << s))) continue;
+                const ArchiveEntry* parent = index.find(slot_parent(info, s));
+                if (parent && (parent->flags & kCatpLeafFlag)) {
+                    report.bad_flags++;
+                    checker.problem(strprintf("diamond %llu: slot %d is created by a leaf", (unsigned long long)e.key, s));
+                    break;
+                }
+            }
         for (DiamondId p : diamond_parents(id)) {
             const ArchiveEntry* pe = index.find(p);
             if (pe && pe->error < e.error) {
@@ -373,9 +385,26 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
         original_samples = sample_surface(p, original->indices, settings.samples_per_level);
         original_border.reset(new SegmentDistance(mesh_border(*original)));
     }
+    // Leaves follow the density, so a level's uniform cut also draws the leaves of coarser
+    // levels: its bound and step are the largest of the diamonds it draws.
+    std::vector<std::array<double, 3>> leaves;  // level, stored error, quantization step
+    for (const ArchiveEntry& e : index.entries()) {
+        if (!(e.flags & kCatpLeafFlag)) continue;
+        const DiamondInfo info = diamond_info(DiamondId{e.key});
+        double step = 0;
+        for (int s = 0; s < info.ring_size; ++s)
+            if (e.flags & (1u << s))
+                step = std::max(step, longest_edge(diamond_tetrahedron(info, s)) * meta.cell / meta.layout.grid);
+        leaves.push_back({double(e.level), double(e.error), step});
+    }
     double largest_stored = 0;
     for (int level = 0; level <= max_level; ++level) {
         VerifyLevel& lv = report.levels[level];
+        for (const auto& [leaf_level, error, step] : leaves)
+            if (leaf_level < level) {
+                lv.stored_error = std::max(lv.stored_error, error);
+                lv.quantization_step = std::max(lv.quantization_step, step);
+            }
         largest_stored = std::max(largest_stored, lv.stored_error);
         progress.phase(strprintf("level %d of %d", level, max_level), original ? 2 * settings.samples_per_level : 0,
                        "samples");

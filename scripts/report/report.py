@@ -1331,12 +1331,12 @@ def write_report(raw, work, docs):
       "for point by laz-perf, not by LASzip or laspy with lazrs (no PyPI here); LAZ has no hierarchy, so "
       "that is a comparison of bytes at the finest level only. The point datasets are not compared with "
       "Potree-style octrees.")
-    w("- Leaves sit at one level of the hierarchy for the whole model, chosen so that no leaf holds more "
-      "than 8 times the target: where density varies a hundredfold the sparse parts are cut into small "
-      "fragments many levels below their own density (a 10M-triangle `make_uneven_density` mesh at 1 GiB: "
-      "leaf level 22 against 15 for the uniform 10M scan, 125.7 MB against 41.9 MB, 384k triangles/s; "
-      "measured once with `catpaq convert`). Leaves at a depth that follows the local density would "
-      "avoid it; not built yet.")
+    w("- CATP leaves follow the density (a tetrahedron splits while it holds more than 6 times the "
+      "target), but the out-of-core blocks are all of one size, set by the densest part: where a small "
+      "budget or a dense part asks for blocks finer than a sparse part's leaves, those leaves gather "
+      "their triangles across blocks through a scratch file (the 10M `make_uneven_density` mesh at "
+      "1 GiB: 8,433 such leaves, 390 MiB of scratch data; measured with `catpaq convert`). Blocks that "
+      "follow the density too would avoid it.")
     w("- The hard-case suite runs each case at one leaf level (7) and one seed; the crack tests "
       "(`tests/catp/test_cracks.cpp`) and error tests cover the same cases in ctest.")
     if mode == "short":

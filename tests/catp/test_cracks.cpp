@@ -3,6 +3,7 @@
 #include <gtest/gtest.h>
 
 #include <filesystem>
+#include <set>
 
 #include "base/error.h"
 #include "catp/builder.h"
@@ -138,4 +139,22 @@ TEST(CatpCracks, HardCasesAreCrackFreeOrRefused) {
             EXPECT_EQ(test::border_edges_off_original_border(file, cut, mesh, tolerance, cache), 0u) << "random cut " << t;
         }
     }
+}
+
+// Leaves follow the density: on a mesh whose density varies a hundredfold they sit at several
+// levels (a cut of the hierarchy, so every cut of the dataset is still closed), and the dataset
+// is smaller than with every leaf at the dense part's level.
+TEST(CatpCracks, AdaptiveLeavesSitAtSeveralLevelsAndEveryCutIsClosed) {
+    Mesh mesh = make_uneven_density(200000, 2);
+    Built adaptive = build(mesh, "uneven_adaptive", 200);
+    CatpFile file(adaptive.path);
+    std::set<int> leaf_levels;
+    for (const ArchiveEntry& e : file.index().entries())
+        if (e.flags & kCatpLeafFlag) leaf_levels.insert(e.level);
+    ASSERT_GE(leaf_levels.size(), 2u) << "the leaves are at one level: the test proves nothing";
+    EXPECT_EQ(*leaf_levels.rbegin(), adaptive.report.leaf_level);
+    EXPECT_GT(expect_every_cut_closed(adaptive.path, 30), 10);
+    Built uniform = build(mesh, "uneven_uniform", 200, adaptive.report.leaf_level);
+    EXPECT_LT(adaptive.report.file_bytes * 3, uniform.report.file_bytes * 2)
+        << "adaptive " << adaptive.report.file_bytes << " bytes, uniform " << uniform.report.file_bytes;
 }

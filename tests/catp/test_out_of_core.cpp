@@ -107,6 +107,26 @@ TEST(CatpOutOfCore, TheDatasetDoesNotDependOnTheMemoryBudget) {
     EXPECT_EQ(files, 3u);
 }
 
+// Leaves follow the density, and a small budget asks for blocks finer than the sparse part's
+// leaves: those gather their triangles from every block they were binned in, in input order,
+// so the dataset is still the one a roomy budget makes.
+TEST(CatpOutOfCore, AdaptiveLeavesAcrossBlocksGiveTheSameDataset) {
+    TempDir dir;
+    Mesh mesh = make_uneven_density(200000, 2);
+    std::string input = dir.file("uneven.ply");
+    write_ply(input, mesh, true);
+    CatpBuildSettings settings = quiet_settings();
+    settings.leaf_triangles = 200;
+    CatpBuildReport roomy = build_catp_file(input, dir.file("roomy.cpq"), settings);
+    settings.memory_budget = minimum_memory_budget();
+    CatpBuildReport tight = build_catp_file(input, dir.file("tight.cpq"), settings);
+    EXPECT_LT(roomy.coarsest_leaf_level, roomy.leaf_level) << "the leaves are at one level: the test proves nothing";
+    EXPECT_EQ(roomy.leaves_across_blocks, 0u);
+    EXPECT_GT(tight.leaves_across_blocks, 0u) << "no leaf crossed blocks: the test proves nothing";
+    EXPECT_GT(tight.bytes_spilled, 0u);
+    EXPECT_EQ(bytes_of(dir.file("roomy.cpq")), bytes_of(dir.file("tight.cpq")));
+}
+
 TEST(CatpOutOfCore, StreamedPlyGivesTheDatasetOfTheMeshInMemory) {
     TempDir dir;
     Mesh mesh = make_sphere(30000, 2);

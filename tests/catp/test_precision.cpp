@@ -135,8 +135,26 @@ TEST(CatpPrecision, LayoutFollowsTheInputsColoursAndThePrecision) {
     Converted b = convert(coloured, "loose", Precision{0, 1.0});
     EXPECT_EQ(b.report.layout.kind, VertexLayoutKind::Rgb24);
     EXPECT_EQ(b.report.layout.grid, kBaryGrid);
-    // With colours and a precision beyond the 24-bit grid at the density's leaves: 6-bit colour.
-    Converted c = convert(coloured, "tight", Precision{0, 0.5 * b.report.leaf_step / b.report.mean_edge});
+    // With colours and a precision beyond the 24-bit grid at the density's leaves (the finest
+    // ones: where the precision is loose the coarsest leaves may sit above them): 6-bit colour.
+    CatpFile loose(b.path);
+    const CatpMeta& meta = loose.index().meta();
+    double finest_step = 0;
+    for (const ArchiveEntry& e : loose.index().entries())
+        if (e.level == meta.leaf_level) {
+            const DiamondInfo info = diamond_info(DiamondId{e.key});
+            for (int s = 0; s < info.ring_size; ++s)
+                for (int i = 0; i < 4; ++i)
+                    for (int j = i + 1; j < 4; ++j) {
+                        const Tetrahedron t = diamond_tetrahedron(info, s);
+                        double d2 = 0;
+                        for (int a = 0; a < 3; ++a) d2 += double(t[i][a] - t[j][a]) * double(t[i][a] - t[j][a]);
+                        finest_step = std::max(finest_step, std::sqrt(d2) * meta.cell / meta.layout.grid);
+                    }
+            break;
+        }
+    ASSERT_GT(finest_step, 0.0);
+    Converted c = convert(coloured, "tight", Precision{0, 0.5 * finest_step / b.report.mean_edge});
     EXPECT_EQ(c.report.layout.kind, VertexLayoutKind::Rgb18);
     EXPECT_EQ(c.report.leaf_level, c.report.density_leaf_level);
     // The dataset records all of it.

@@ -2,10 +2,12 @@
 // The CATP converter: a mesh in, a CATP dataset (catp/format.h) out.
 //
 // 1. The model is placed in a power-of-two cube and mapped to the integer lattice.
-// 2. The leaf level is chosen from the triangle density (about `leaf_triangles` per tetrahedron)
-//    and the precision asked for: the vertex layout and its barycentric grid are chosen so that
-//    the leaves' quantization step, which bounds the finest level's distance to the input, is
-//    at most the precision; where the layout's finest grid is not enough, the leaves go deeper.
+// 2. Leaves follow the density (about `leaf_triangles` per tetrahedron, estimated from a sample
+//    of the vertices): a sparse part stops at a coarser level than a dense one (the refined
+//    diamonds are closed under parents, so the leaves tile the model as a cut of the hierarchy
+//    does). The precision asked for sets the vertex layout, its barycentric grid, and a floor:
+//    no leaf is coarser than the level whose quantization step, which bounds the finest
+//    level's distance to the input, reaches the precision.
 // 3. Leaves: the mesh is clipped by the leaf tetrahedra (catp/src/clip.h: canonical, exactly
 //    snapped constructions decided by exact predicates).
 // 4. Coarser diamonds, bottom-up: the fragments of a diamond's children are gathered and welded,
@@ -86,12 +88,14 @@ struct CatpLevelStats {
 
 struct CatpBuildReport {
     size_t input_vertices = 0, input_triangles = 0;
-    int leaf_level = 0;
-    int density_leaf_level = 0;    // the leaf level the density alone chose
+    int leaf_level = 0;            // the deepest leaves'
+    int coarsest_leaf_level = 0;   // the coarsest leaves' (leaves follow the density)
+    int density_leaf_level = 0;    // where the density is even: the mean tetrahedron there holds
+                                   // about leaf_triangles
     VertexLayout layout;
     double mean_edge = 0;          // world units
     double precision = 0;          // asked for, world units
-    double leaf_step = 0;          // the leaves' quantization step (<= precision), world units
+    double leaf_step = 0;          // the coarsest leaves' quantization step (<= precision), world units
     std::vector<std::string> warnings;  // for the user: what was not as asked
     size_t nodes = 0;
     uint64_t file_bytes = 0;
@@ -107,6 +111,9 @@ struct CatpBuildReport {
     uint64_t bytes_spilled = 0;  // scratch bytes written to disk (0 when everything fitted)
     int block_level = 0;         // level of the spatial blocks the leaves were built in
     size_t blocks = 0;
+    // Leaves coarser than the blocks (a sparse part's, when the budget asked for small
+    // blocks): each gathered its triangles from the blocks they were binned in.
+    size_t leaves_across_blocks = 0;
     double diagonal = 0;                 // world units
     std::vector<CatpLevelStats> levels;  // coarse to fine
     // Thin geometry lost at the finest level: pieces of input triangles that have no area once

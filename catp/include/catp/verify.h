@@ -16,8 +16,10 @@ struct VerifyLevel {
     size_t vertices = 0;      // stored in the level's fragments (shared ones once per fragment)
     size_t cut_vertices = 0;  // of the uniform cut at this level, welded by exact position
     uint64_t bytes = 0;
-    double stored_error = 0;     // largest stored error bound of the level's diamonds (world)
-    double quantization_step = 0;  // largest tetrahedron edge / grid of the level (world)
+    // Of the diamonds the level's uniform cut draws: the level's own and the leaves of coarser
+    // levels (leaves follow the density), world units:
+    double stored_error = 0;       // the largest stored error bound
+    double quantization_step = 0;  // the largest tetrahedron edge / grid
     // Measured on the uniform cut at this level (every coarser diamond refined), world units:
     double distance_to_original_max = -1, distance_to_original_rms = -1;    // level -> original
     double distance_from_original_max = -1, distance_from_original_rms = -1;  // original -> level
