@@ -928,12 +928,10 @@ void CatpBuild::build_leaves(TriangleBins<Record>& bins) {
     }
     // The leaves coarser than the blocks: their triangles in input order, each once (a triangle
     // crossing blocks was binned, and reached its leaf, in each).
-    std::vector<uint32_t> numbers(spanning.block_count());
-    for (size_t n = 0; n < numbers.size(); ++n) numbers[n] = uint32_t(n);
-    tbb::parallel_for(size_t(0), numbers.size(), [&](size_t n) {
+    std::mutex load_mutex;  // TriangleBins::load is not thread-safe
+    tbb::parallel_for(size_t(0), spanning.block_count(), [&](size_t n) {
         std::vector<TriangleRecord> gathered;
         {
-            static std::mutex load_mutex;  // TriangleBins::load is not thread-safe
             std::lock_guard lock(load_mutex);
             spanning.load(n, gathered);
         }
