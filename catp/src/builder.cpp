@@ -1145,6 +1145,9 @@ void CatpBuild::coarsen_level(int level) {
     std::vector<SpilledFragment>& leaves = leaves_->fragments();
     while (leaf_next_ < leaves.size() && diamond_level(DiamondId{leaves[leaf_next_].key.diamond}) == level + 1)
         inputs.push_back({leaves[leaf_next_++], leaves_.get()});
+    uint64_t finer_triangles = 0;  // every fragment of the finer level is gathered by one diamond
+    for (const Input& in : inputs) finer_triangles += in.ref.triangles;
+    progress_->phase(strprintf("coarsening level %d of %d", level, levels_.leaf_level), finer_triangles, "tri");
     std::vector<uint64_t> parent_of(inputs.size());
     {
         std::vector<std::pair<uint64_t, size_t>> order(inputs.size());
@@ -1434,16 +1437,7 @@ CatpBuildReport CatpBuild::run() {
     lap(report_.seconds_leaf_nodes);
 
     // ---- Coarser levels, bottom-up.
-    for (int level = levels_.leaf_level - 1; level >= 0; --level) {
-        uint64_t triangles = 0;  // every fragment of the finer level is gathered by one diamond
-        if (fragments_)
-            for (const SpilledFragment& f : fragments_->fragments()) triangles += f.triangles;
-        const std::vector<SpilledFragment>& leaves = leaves_->fragments();
-        for (size_t i = leaf_next_; i < leaves.size() && diamond_level(DiamondId{leaves[i].key.diamond}) == level + 1; ++i)
-            triangles += leaves[i].triangles;
-        progress_->phase(strprintf("coarsening level %d of %d", level, levels_.leaf_level), triangles, "tri");
-        coarsen_level(level);
-    }
+    for (int level = levels_.leaf_level - 1; level >= 0; --level) coarsen_level(level);
     if (fragments_) bytes_spilled_ += fragments_->bytes_spilled();
     fragments_.reset();
     bytes_spilled_ += leaves_->bytes_spilled();

@@ -1256,14 +1256,7 @@ double coarsen_diamond(const DiamondInfo& d, const WorkFragment& gathered, std::
         double nearest = 1e300;
         for (size_t k = 0; k < planes; ++k)
             nearest = std::min(nearest, std::fabs(nx[k] * p[0] + ny[k] * p[1] + nz[k] * p[2] - nd[k]));
-        if (!(nearest < 1e-3)) continue;
-        for (const LatticePlane& plane : outer) {
-            double value = plane.n[0] * p[0] + plane.n[1] * p[1] + plane.n[2] * p[2] - double(plane.d);
-            if (std::fabs(value) < 1e-3 && plane_side(plane, p) == 0) {
-                locked[v] = 1;
-                break;
-            }
-        }
+        if (nearest < 1e-3 && on_outer_face(outer, p)) locked[v] = 1;
     }
     SimplifySettings settings;
     settings.target_triangles = gathered.indices.size() / 3 / 2;

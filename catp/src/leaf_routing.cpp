@@ -269,6 +269,36 @@ void bisect(const Tetrahedron& t, Tetrahedron& c0, Tetrahedron& c1) {
     c1[a] = m;
 }
 
+namespace {
+
+// The plane of face f of a tetrahedron (the face opposite corner f), oriented so that the
+// opposite corner is on its positive side, with the margin of the conservative tests: about
+// 1e-6 lattice units, relative to the normal's L1 norm.
+struct FacePlane {
+    double n[3];
+    LatticePoint a;
+    double margin;
+    FacePlane(const Tetrahedron& t, int f) : a(t[(f + 1) % 4]) {
+        const LatticePoint &b = t[(f + 2) % 4], &c = t[(f + 3) % 4], &o = t[f];
+        double u[3], v[3];
+        for (int i = 0; i < 3; ++i) {
+            u[i] = double(b[i] - a[i]);
+            v[i] = double(c[i] - a[i]);
+        }
+        n[0] = u[1] * v[2] - u[2] * v[1];
+        n[1] = u[2] * v[0] - u[0] * v[2];
+        n[2] = u[0] * v[1] - u[1] * v[0];
+        const double so = n[0] * (o[0] - a[0]) + n[1] * (o[1] - a[1]) + n[2] * (o[2] - a[2]);
+        if (!(so > 0))
+            for (double& x : n) x = -x;
+        margin = 1e-6 * (std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]));
+    }
+    // Positive inside (the opposite corner's side).
+    double inside(const Vec3d& p) const { return n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2]); }
+};
+
+}  // namespace
+
 bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
     double min[3], max[3];
     for (int i = 0; i < 3; ++i) {
@@ -284,23 +314,9 @@ bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
         if (max[i] < tmin - 1e-6 || min[i] > tmax + 1e-6) return true;
     }
     for (int f = 0; f < 4; ++f) {
-        const LatticePoint &a = t[(f + 1) % 4], &b = t[(f + 2) % 4], &c = t[(f + 3) % 4], &o = t[f];
-        double u[3], v[3], n[3];
-        for (int i = 0; i < 3; ++i) {
-            u[i] = double(b[i] - a[i]);
-            v[i] = double(c[i] - a[i]);
-        }
-        n[0] = u[1] * v[2] - u[2] * v[1];
-        n[1] = u[2] * v[0] - u[0] * v[2];
-        n[2] = u[0] * v[1] - u[1] * v[0];
-        double so = n[0] * (o[0] - a[0]) + n[1] * (o[1] - a[1]) + n[2] * (o[2] - a[2]);
-        double sign = so > 0 ? 1.0 : -1.0;
-        double scale = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
+        const FacePlane plane(t, f);
         bool all_out = true;
-        for (int k = 0; k < count && all_out; ++k) {
-            double s = sign * (n[0] * (pts[k][0] - a[0]) + n[1] * (pts[k][1] - a[1]) + n[2] * (pts[k][2] - a[2]));
-            all_out = s < -1e-6 * scale;
-        }
+        for (int k = 0; k < count && all_out; ++k) all_out = plane.inside(pts[k]) < -plane.margin;
         if (all_out) return true;
     }
     return false;
@@ -308,22 +324,9 @@ bool separated(const Tetrahedron& t, const Vec3d* pts, int count) {
 
 bool strictly_inside(const Tetrahedron& t, const Vec3d* pts, int count) {
     for (int f = 0; f < 4; ++f) {
-        const LatticePoint &a = t[(f + 1) % 4], &b = t[(f + 2) % 4], &c = t[(f + 3) % 4], &o = t[f];
-        double u[3], v[3], n[3];
-        for (int i = 0; i < 3; ++i) {
-            u[i] = double(b[i] - a[i]);
-            v[i] = double(c[i] - a[i]);
-        }
-        n[0] = u[1] * v[2] - u[2] * v[1];
-        n[1] = u[2] * v[0] - u[0] * v[2];
-        n[2] = u[0] * v[1] - u[1] * v[0];
-        double so = n[0] * (o[0] - a[0]) + n[1] * (o[1] - a[1]) + n[2] * (o[2] - a[2]);
-        double sign = so > 0 ? 1.0 : -1.0;
-        double scale = std::fabs(n[0]) + std::fabs(n[1]) + std::fabs(n[2]);
-        for (int k = 0; k < count; ++k) {
-            double s = sign * (n[0] * (pts[k][0] - a[0]) + n[1] * (pts[k][1] - a[1]) + n[2] * (pts[k][2] - a[2]));
-            if (!(s > 1e-6 * scale)) return false;
-        }
+        const FacePlane plane(t, f);
+        for (int k = 0; k < count; ++k)
+            if (!(plane.inside(pts[k]) > plane.margin)) return false;
     }
     return true;
 }
