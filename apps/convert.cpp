@@ -39,7 +39,7 @@ static const char* kConvertUsage =
     "                           to anonymous files next to the output; aqp: works in core and\n"
     "                           refuses at once when its estimate exceeds the budget; points:\n"
     "                           default half the physical memory; a cloud whose in-core estimate,\n"
-    "                           about 72 bytes a point, exceeds it is read into scratch files next\n"
+    "                           about 62 bytes a point, exceeds it is read into scratch files next\n"
     "                           to the output and built one part at a time, the same dataset)\n"
     "catp:\n"
     "  --vertex-layout L        auto (default: position48 without colours; with colours rgb24 when\n"

@@ -26,7 +26,7 @@
 // over the leaf and the points around it (found through the hierarchy's node boxes, widened
 // per point until the neighbours are exact), a node's over its children's splats.
 //
-// Memory: in core, about 72 bytes per input point at the peak (10M points: 684 MiB, reading
+// Memory: in core, about 60 bytes per input point at the peak (10M points: 590 MiB, reading
 // included: the points in double precision with normals, colours and radii, the partition's
 // items, a float copy for the neighbour searches), plus node_points splats per level of the tree
 // per thread. A cloud whose estimate exceeds the memory budget is converted out of core
@@ -86,9 +86,10 @@ constexpr uint64_t kOutOfCorePointBytes = 160;
 // exceeds a smaller budget are refused).
 constexpr uint64_t kPointsMinimumBudget = uint64_t(48) << 20;
 
-// Peak memory of build_points on `points` input points, reading included: 72 bytes a point and
-// 8 MiB (measured peaks: 73 MiB at 1M points, 684 MiB at 10M, 6790 MiB at 100M; RESULTS section 7).
-inline uint64_t points_memory_estimate(size_t points) { return uint64_t(points) * 72 + (uint64_t(8) << 20); }
+// Peak memory of build_points on `points` input points, reading included: 62 bytes a point and
+// 24 MiB (measured peaks, points_bench: 79 MiB at 1M points, 590 MiB at 10M, 5719 MiB at 100M;
+// RESULTS section 7).
+inline uint64_t points_memory_estimate(size_t points) { return uint64_t(points) * 62 + (uint64_t(24) << 20); }
 
 struct PointsLevelStats {
     int depth = 0;
