@@ -213,9 +213,22 @@ ArchiveWriter::ArchiveWriter(std::string path, ArchiveKind kind) : impl_(new Imp
     impl_->path = std::move(path);
     impl_->kind = kind;
     impl_->spill_path = impl_->path + ".nodes.tmp." + std::to_string(getpid());
-    // The spill is only ever used through the open stream: registered for removal on signals
-    // before it exists and unlinked as soon as it does, so that no way of ending the run (a
-    // signal, an error, a crash) leaves it next to the output. Its name stays for messages.
+    // The spill is only ever used through the open stream, so it needs no name: an anonymous
+    // file in the output's directory (O_TMPFILE) where the file system has them. A named file
+    // unlinked at once still showed in the directory for that moment, which a test listing the
+    // directory while a conversion ran caught under load. Its name stays for messages.
+    const size_t slash = impl_->path.find_last_of('/');
+    const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : impl_->path.substr(0, slash);
+    if (const int fd = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600); fd >= 0) {
+        impl_->spill = ::fdopen(fd, "w+b");
+        if (impl_->spill) return;
+        const int error = errno;
+        ::close(fd);
+        fail("cannot create '%s': %s", impl_->spill_path.c_str(), std::strerror(error));
+    }
+    // Elsewhere a named file, registered for removal on signals before it exists and unlinked as
+    // soon as it does, so that no way of ending the run (a signal, an error, a crash) leaves it
+    // next to the output.
     remove_on_signal(impl_->spill_path);
     impl_->spill = std::fopen(impl_->spill_path.c_str(), "w+b");
     const int error = errno;
