@@ -7,18 +7,10 @@
 #include <unistd.h>
 
 #include "base/error.h"
+#include "base/output_path.h"
 #include "base/signal_cleanup.h"
 
 namespace catpaq {
-
-namespace {
-
-std::string directory_of(const std::string& path) {
-    size_t slash = path.find_last_of('/');
-    return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
-}
-
-}  // namespace
 
 AtomicFile::AtomicFile(std::string path) : path_(std::move(path)) {
     struct stat st{};

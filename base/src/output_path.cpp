@@ -12,12 +12,12 @@
 
 namespace catpaq {
 
-namespace {
-
 std::string directory_of(const std::string& path) {
     size_t slash = path.find_last_of('/');
     return slash == std::string::npos ? "." : slash == 0 ? "/" : path.substr(0, slash);
 }
+
+namespace {
 
 void check_writable_directory(const std::string& dir, const std::string& path, const std::string& what) {
     struct stat st{};

@@ -7,12 +7,11 @@
 #include <unistd.h>
 
 #include "base/error.h"
+#include "base/output_path.h"
 
 namespace catpaq {
 
-TempFile::TempFile(const std::string& near_path) {
-    size_t slash = near_path.find_last_of('/');
-    dir_ = slash == std::string::npos ? "." : slash == 0 ? "/" : near_path.substr(0, slash);
+TempFile::TempFile(const std::string& near_path) : dir_(directory_of(near_path)) {
     // O_TMPFILE gives a file that never had a name; mkstemp + unlink is the fallback for file
     // systems without it.
     fd_ = ::open(dir_.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600);

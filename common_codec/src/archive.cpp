@@ -15,6 +15,7 @@
 #include "base/bytes.h"
 #include "base/checksum.h"
 #include "base/error.h"
+#include "base/output_path.h"
 #include "base/signal_cleanup.h"
 #include "common_codec/deflate.h"
 
@@ -217,9 +218,7 @@ ArchiveWriter::ArchiveWriter(std::string path, ArchiveKind kind) : impl_(new Imp
     // file in the output's directory (O_TMPFILE) where the file system has them. A named file
     // unlinked at once still showed in the directory for that moment, which a test listing the
     // directory while a conversion ran caught under load. Its name stays for messages.
-    const size_t slash = impl_->path.find_last_of('/');
-    const std::string dir = slash == std::string::npos ? "." : slash == 0 ? "/" : impl_->path.substr(0, slash);
-    if (const int fd = ::open(dir.c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600); fd >= 0) {
+    if (const int fd = ::open(directory_of(impl_->path).c_str(), O_TMPFILE | O_RDWR | O_CLOEXEC, 0600); fd >= 0) {
         impl_->spill = ::fdopen(fd, "w+b");
         if (impl_->spill) return;
         const int error = errno;

@@ -7,6 +7,9 @@
 
 namespace catpaq {
 
+// The directory part of `path`: "." when it has none, "/" for a file at the root.
+std::string directory_of(const std::string& path);
+
 // Checks that `path` can be written as a file: it is not a directory, and its directory exists
 // and is writable. Throws Error naming `what` (the option, e.g. "-o") and the path.
 void check_output_file(const std::string& path, const std::string& what);
