@@ -1328,15 +1328,8 @@ double longest_edge(const Vec3d* const c[3]) {
 double face_distance(const Vec3d& p, const Tetrahedron& t) {
     double best = 1e300;
     for (int f = 0; f < 4; ++f) {
-        const LatticePoint &a = t[size_t((f + 1) % 4)], &b = t[size_t((f + 2) % 4)], &c = t[size_t((f + 3) % 4)];
-        double u[3], v[3], n[3];
-        for (int k = 0; k < 3; ++k) {
-            u[k] = double(b[k] - a[k]);
-            v[k] = double(c[k] - a[k]);
-        }
-        n[0] = u[1] * v[2] - u[2] * v[1];
-        n[1] = u[2] * v[0] - u[0] * v[2];
-        n[2] = u[0] * v[1] - u[1] * v[0];
+        const LatticePoint& a = t[size_t((f + 1) % 4)];
+        const std::array<double, 3> n = face_normal(t, f);
         const double len = std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
         if (!(len > 0)) continue;
         const double d = n[0] * (p[0] - a[0]) + n[1] * (p[1] - a[1]) + n[2] * (p[2] - a[2]);

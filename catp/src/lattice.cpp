@@ -112,6 +112,16 @@ Tetrahedron diamond_tetrahedron(const DiamondInfo& d, int slot) {
     return {d.spine_a, d.spine_b, d.ring[slot], d.ring[(slot + 1) % n]};
 }
 
+std::array<double, 3> face_normal(const Tetrahedron& t, int f) {
+    const LatticePoint &a = t[size_t((f + 1) % 4)], &b = t[size_t((f + 2) % 4)], &c = t[size_t((f + 3) % 4)];
+    double u[3], v[3];
+    for (int k = 0; k < 3; ++k) {
+        u[k] = double(b[k] - a[k]);
+        v[k] = double(c[k] - a[k]);
+    }
+    return {u[1] * v[2] - u[2] * v[1], u[2] * v[0] - u[0] * v[2], u[0] * v[1] - u[1] * v[0]};
+}
+
 bool tetrahedron_exists(const Tetrahedron& t) {
     for (const LatticePoint& p : t)
         if (!inside_root_cube(p)) return false;

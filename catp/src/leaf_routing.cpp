@@ -279,15 +279,9 @@ struct FacePlane {
     LatticePoint a;
     double margin;
     FacePlane(const Tetrahedron& t, int f) : a(t[(f + 1) % 4]) {
-        const LatticePoint &b = t[(f + 2) % 4], &c = t[(f + 3) % 4], &o = t[f];
-        double u[3], v[3];
-        for (int i = 0; i < 3; ++i) {
-            u[i] = double(b[i] - a[i]);
-            v[i] = double(c[i] - a[i]);
-        }
-        n[0] = u[1] * v[2] - u[2] * v[1];
-        n[1] = u[2] * v[0] - u[0] * v[2];
-        n[2] = u[0] * v[1] - u[1] * v[0];
+        const LatticePoint& o = t[size_t(f)];
+        const std::array<double, 3> normal = face_normal(t, f);
+        std::copy(normal.begin(), normal.end(), n);
         const double so = n[0] * (o[0] - a[0]) + n[1] * (o[1] - a[1]) + n[2] * (o[2] - a[2]);
         if (!(so > 0))
             for (double& x : n) x = -x;

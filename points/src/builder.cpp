@@ -316,9 +316,9 @@ void Builder::prepare(const PointInputSummary& input, PointsBuildReport& report)
 // the partition's scratch array is gone, and the leaves' floats (xyz_) are made from the permuted
 // positions after the input's are released, rather than from the items beside both. On the 100M
 // cloud that lowered the peak from 6451 to 5719 MiB (68 to 60 bytes a point, reading included;
-// the dataset is the same); at that size, touching fresh memory
-// is a large part of the partition phase (perf: the kernel's page clearing was a third of the CPU
-// time of the first 30 s), and the peak is what must be fresh.
+// the dataset is the same). At that size, touching fresh memory is a large part of the partition
+// phase (perf: the kernel's page clearing was a third of the CPU time of the first 30 s), and the
+// peak is what must be fresh.
 void Builder::partition_in_core(PointCloud& cloud) {
     const size_t n = cloud.size();
     UninitializedVector<uint32_t> perm;

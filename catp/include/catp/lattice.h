@@ -82,6 +82,10 @@ int diamond_level(DiamondId id);
 // all four corners lie inside the root cube. Slots are numbered 0 .. ring size - 1 (< 8).
 Tetrahedron diamond_tetrahedron(const DiamondInfo& d, int slot);
 bool tetrahedron_exists(const Tetrahedron& t);
+// The normal of face f of t (the face opposite corner f: corners f+1, f+2, f+3 mod 4), not
+// normalized: (t[f+2] - t[f+1]) x (t[f+3] - t[f+1]) in double. Its sign follows the corners'
+// order, not the side the tetrahedron is on.
+std::array<double, 3> face_normal(const Tetrahedron& t, int f);
 // Bit mask of the slots that exist.
 uint8_t existing_slots(const DiamondInfo& d);
 
