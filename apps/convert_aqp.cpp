@@ -9,8 +9,10 @@
 #include "apps/convert_formats.h"
 #include "aqp/build.h"
 #include "aqp/format.h"
+#include "aqp/reduce.h"
 #include "aqp_reconstruct/poisson.h"
 #include "base/error.h"
+#include "base/temp_file.h"
 #include "mesh/io.h"
 #include "mesh/up_axis.h"
 #include "mesh/precision.h"
@@ -67,8 +69,18 @@ nlohmann::json poisson_json(const aqp::PoissonReport* p) {
             {"seconds", p->seconds}};
 }
 
+nlohmann::json reduction_json(const aqp::ReduceReport* p) {
+    if (!p) return nullptr;
+    return {{"input_vertices", p->input_vertices},     {"input_triangles", p->input_triangles},
+            {"round1_triangles", p->round1_triangles}, {"vertices", p->vertices},
+            {"triangles", p->triangles},               {"blocks", p->blocks},
+            {"largest_block", p->largest_block},       {"vertex_distance", p->vertex_distance},
+            {"memory_estimate", p->memory_estimate},   {"scratch_bytes", p->scratch_bytes},
+            {"seconds", p->seconds}};
+}
+
 void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::vector<std::string>& dropped,
-                const aqp::PoissonReport* poisson) {
+                const aqp::PoissonReport* poisson, const aqp::ReduceReport* reduction) {
     const aqp::ParamCheck& pc = r.domain.check;
     nlohmann::json levels = nlohmann::json::array();
     for (const aqp::AqpLevelStats& l : r.levels)
@@ -76,9 +88,13 @@ void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::
                           {"max_error", l.max_error}, {"mean_error", l.mean_error}});
     nlohmann::json out{
         {"format", "aqp"},
-        {"input", {{"path", job.input}, {"vertices", r.clean.input_vertices}, {"triangles", r.clean.input_triangles}}},
+        {"input",
+         {{"path", job.input},
+          {"vertices", reduction ? reduction->input_vertices : r.clean.input_vertices},
+          {"triangles", reduction ? reduction->input_triangles : r.clean.input_triangles}}},
         {"output", {{"path", job.output}, {"bytes", r.file_bytes}, {"payload_bytes", r.payload_bytes}}},
         {"poisson", poisson_json(poisson)},
+        {"reduction", reduction_json(reduction)},
         {"clean", clean_json(r.clean)},
         {"domain",
          {{"base_vertices", r.domain.base_vertices},
@@ -118,7 +134,8 @@ void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::
     std::printf("%s\n", out.dump().c_str());
 }
 
-void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job, const aqp::PoissonReport* poisson) {
+void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job, const aqp::PoissonReport* poisson,
+                 const aqp::ReduceReport* reduction) {
     const aqp::ParamCheck& pc = r.domain.check;
     if (poisson) {
         std::printf("points:     %s: %zu points; Poisson surface (CGAL) of %zu vertices, %zu triangles in %.2f s "
@@ -129,8 +146,17 @@ void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job, const aqp:
             std::printf("; normals estimated, %zu points left out unoriented", poisson->unoriented_dropped);
         std::printf(")\n");
     }
-    std::printf("input:      %s: %zu vertices, %zu triangles\n", job.input.c_str(), r.clean.input_vertices,
-                r.clean.input_triangles);
+    if (reduction) {
+        std::printf("input:      %s: %llu vertices, %llu triangles, above the memory budget in core\n", job.input.c_str(),
+                    (unsigned long long)reduction->input_vertices, (unsigned long long)reduction->input_triangles);
+        std::printf("reduced:    out of core to %llu vertices, %llu triangles in %.2f s (%u blocks simplified in two "
+                    "rounds; removed vertices at most %.4g from the result, added to the errors below)\n",
+                    (unsigned long long)reduction->vertices, (unsigned long long)reduction->triangles, reduction->seconds,
+                    reduction->blocks, reduction->vertex_distance);
+    } else {
+        std::printf("input:      %s: %zu vertices, %zu triangles\n", job.input.c_str(), r.clean.input_vertices,
+                    r.clean.input_triangles);
+    }
     std::printf("cleaned:    %zu vertices, %zu triangles, %zu component%s, genus %d, %zu border loops\n",
                 r.clean.vertices, r.clean.triangles, r.clean.components, r.clean.components == 1 ? "" : "s",
                 r.clean.genus, r.clean.border_loops);
@@ -159,6 +185,30 @@ void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job, const aqp:
     std::printf("error is in model units; the bounding-box diagonal is %.6g\n", r.diagonal);
 }
 
+// The triangles a reduction aims at under `budget`: as many as both the in-core converter's
+// estimate (with room for a result up to 10% above its target) and the reduction's own allow.
+uint64_t aqp_triangles_within(uint64_t budget, uint64_t input_vertices, uint64_t input_faces) {
+    auto fits = [&](uint64_t t) {
+        return aqp::aqp_memory_estimate(t + t / 10) <= budget &&
+               aqp::reduce_memory_estimate(input_vertices, t, budget) <= budget;
+    };
+    uint64_t lo = 0, hi = input_faces;
+    while (lo < hi) {
+        const uint64_t mid = hi - (hi - lo) / 2;
+        if (fits(mid)) lo = mid;
+        else hi = mid - 1;
+    }
+    return lo;
+}
+// Fewer triangles than this are not worth a reduction (the domain alone wants a few hundred).
+constexpr uint64_t kMinReducedTriangles = 20000;
+// The smallest budget under which a file of this size reduces to kMinReducedTriangles.
+uint64_t aqp_budget_for_reduction(uint64_t input_vertices, uint64_t input_faces) {
+    uint64_t budget = aqp::aqp_memory_estimate(0);
+    while (aqp_triangles_within(budget, input_vertices, input_faces) < kMinReducedTriangles) budget += uint64_t(1) << 20;
+    return budget;
+}
+
 }  // namespace
 
 int convert_aqp(Options& options, const ConvertJob& job) {
@@ -175,26 +225,49 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     UpAxis axis;
     if (!parse_up_axis(up, axis)) usage_error("--up: '%s' is not one of x, y, z, -x, -y, -z", up.c_str());
     o.up_axis = uint32_t(axis);
-    o.memory_budget = options.bytes("memory", 0);
+    // As for catp and points: half the physical memory unless told.
+    o.memory_budget = options.bytes("memory", physical_memory_bytes() / 2);
     o.progress = !job.quiet;
     options.finish();
 
     prepare_output(job);
-    // The budget is checked before the mesh is read where the file says its size (PLY): reading a
-    // mesh far above it would take the memory it is meant to spare, and the time, first. (Faces
-    // count as one triangle each: polygons only make the estimate low, and the converter checks
-    // again on the triangles.)
+    // The budget is checked before the mesh is read where the file says its size (PLY): a mesh
+    // whose in-core estimate exceeds it is reduced out of core to what fits (aqp/reduce.h), and
+    // converted from that. (Faces count as one triangle each: polygons only make the estimate
+    // low, and the converter checks again on the triangles.) Other mesh formats are read whole.
+    std::vector<std::string> dropped;
+    Mesh input;
+    std::unique_ptr<aqp::ReduceReport> reduction;
     if (o.memory_budget && !is_point_input(job.input, nullptr) && lower_extension(job.input) == ".ply") {
-        const uint64_t faces = PlyStream(job.input).face_count();
-        if (faces) aqp::check_aqp_memory_budget(faces, o.memory_budget);
+        const PlyStream ply(job.input);
+        const uint64_t faces = ply.face_count();
+        if (faces && aqp::aqp_memory_estimate(faces) > o.memory_budget) {
+            aqp::ReduceOptions ro;
+            ro.target_triangles = aqp_triangles_within(o.memory_budget, ply.vertex_count(), faces);
+            ro.memory_budget = o.memory_budget;
+            ro.scratch_near = job.output;
+            ro.threads = o.threads;
+            ro.progress = o.progress;
+            if (ro.target_triangles < kMinReducedTriangles) {
+                const uint64_t needed = aqp_budget_for_reduction(ply.vertex_count(), faces);
+                fail("converting %llu triangles to AQP needs about %llu MiB in core, above the budget of %llu MiB, and "
+                     "reducing them out of core first to a mesh that fits needs at least %llu MiB: give --memory "
+                     "%lluM or more",
+                     (unsigned long long)faces, (unsigned long long)(aqp::aqp_memory_estimate(faces) >> 20),
+                     (unsigned long long)(o.memory_budget >> 20), (unsigned long long)(needed >> 20),
+                     (unsigned long long)((needed + (uint64_t(1) << 20) - 1) >> 20));
+            }
+            dropped = ply.dropped();
+            reduction = std::make_unique<aqp::ReduceReport>();
+            input = aqp::reduce_ply_out_of_core(job.input, ro, reduction.get());
+            o.input_error = reduction->vertex_distance;
+        }
     }
     // A mesh is converted as it is; a point cloud (with normals, or they are estimated) becomes a
     // closed surface by Poisson reconstruction first, as the paper does for scans.
-    std::vector<std::string> dropped;
-    Mesh input;
     std::unique_ptr<aqp::PoissonReport> poisson;
-    if (!is_point_input(job.input, nullptr)) input = read_mesh(job.input, &dropped);
-    if (is_point_input(job.input, &input)) {
+    if (!reduction && !is_point_input(job.input, nullptr)) input = read_mesh(job.input, &dropped);
+    if (!reduction && is_point_input(job.input, &input)) {
         PointReadInfo info;
         const PointCloud cloud = read_point_cloud(job.input, &info);
         dropped = info.dropped;
@@ -210,9 +283,9 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     aqp::build_aqp_dataset(input, job.output, o, &r);
     for (const std::string& w : r.warnings) std::fprintf(stderr, "catpaq convert: warning: %s\n", w.c_str());
     if (job.json)
-        print_json(r, job, dropped, poisson.get());
+        print_json(r, job, dropped, poisson.get(), reduction.get());
     else if (!job.quiet)
-        print_table(r, job, poisson.get());
+        print_table(r, job, poisson.get(), reduction.get());
     return 0;
 }
 

@@ -236,16 +236,17 @@ std::vector<uint8_t> tile_shifts(int finest_level, size_t patches, size_t tile_s
     return shifts;
 }
 
-// Peak resident memory of a conversion, from measurements rounded up (aqp_bench: 42 MiB for the
-// bunny's 75k triangles, 322 MiB for a 1M-triangle scan, the input mesh included): 400 bytes per
-// input triangle and 32 MiB.
-uint64_t aqp_memory_estimate(uint64_t input_triangles) { return input_triangles * 400 + (uint64_t(32) << 20); }
+// Peak resident memory of a conversion, from measurements rounded up (`catpaq convert --format
+// aqp` of gen_mesh's scans, the input mesh included, maximum resident size by /usr/bin/time: 112
+// MiB at 200k triangles, 189 MiB at 400k, 401 MiB at 1M): 400 bytes per input triangle and 48 MiB.
+uint64_t aqp_memory_estimate(uint64_t input_triangles) { return input_triangles * 400 + (uint64_t(48) << 20); }
 
 void check_aqp_memory_budget(uint64_t input_triangles, uint64_t budget) {
     const uint64_t estimate = aqp_memory_estimate(input_triangles);
     if (!budget || estimate <= budget) return;
     fail("converting %llu triangles to AQP needs about %llu MiB (AQP converts in core), above the budget of %llu MiB: "
-         "give --memory %lluM or more, or convert to CATP or points, which stay within the budget",
+         "give --memory %lluM or more, give the mesh as PLY (reduced out of core to what fits first), or convert to "
+         "CATP or points, which stay within the budget",
          (unsigned long long)input_triangles, (unsigned long long)(estimate >> 20), (unsigned long long)(budget >> 20),
          (unsigned long long)((estimate + (uint64_t(1) << 20) - 1) >> 20));
 }
@@ -257,6 +258,7 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
     if (!(o.precision.model_units >= 0) || !(o.precision.mean_edges >= 0) || !std::isfinite(o.precision.model_units) ||
         !std::isfinite(o.precision.mean_edges) || (o.precision.model_units == 0 && o.precision.mean_edges == 0))
         fail("the precision must be a positive number of model units or mean edges");
+    if (!(o.input_error >= 0) || !std::isfinite(o.input_error)) fail("the input's error must be a finite distance >= 0");
     check_output_file(out_path, "the output");
     std::unique_ptr<tbb::global_control> threads;
     if (o.threads) threads = std::make_unique<tbb::global_control>(tbb::global_control::max_allowed_parallelism, o.threads);
@@ -294,8 +296,12 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
     DomainOptions domain_options;
     domain_options.target_triangles = o.domain_triangles;
     domain_options.smoothing_sweeps = o.smoothing_sweeps;
+    domain_options.retries = o.domain_triangles ? 0 : 3;  // a size the user chose is kept
     if (progress) progress->phase("base domain", surface.vertex_count(), "collapse");
     Parameterization param = build_parameterization(surface, domain_options, &r.domain, progress.get());
+    for (const auto& [triangles, why] : r.domain.refused)
+        r.warnings.push_back(strprintf("%zu base triangles were refused (%s); %zu gave a bijective map", triangles,
+                                       why.c_str(), r.domain.target_triangles));
     r.seconds_parameterize = seconds_since(t);
 
     // 3-4. Patches and resampling.
@@ -355,7 +361,7 @@ void build_aqp_dataset(const Mesh& input, const std::string& out_path, const Aqp
         },
         progress.get());
     for (auto& levels : error)
-        for (double& e : levels) e += shift_slack;
+        for (double& e : levels) e += shift_slack + o.input_error;
     r.seconds_errors = seconds_since(t);
 
     // 7. Nodes and the archive.

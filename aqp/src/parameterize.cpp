@@ -810,11 +810,14 @@ size_t default_domain_triangles(size_t triangles) {
     return size_t(std::clamp(n, 16.0, 4000.0)) & ~size_t(1);
 }
 
-Parameterization build_parameterization(const Mesh& surface, const DomainOptions& options, DomainReport* report_out,
-                                        Progress* progress) {
-    DomainReport report;
+namespace {
+
+// One attempt at `target` base triangles; throws on failure (`folds` says whether the map folded
+// rather than its charts being too small, for the next attempt's direction).
+Parameterization parameterize_once(const Mesh& surface, const DomainOptions& options, size_t target,
+                                   DomainReport& report, Progress* progress, bool& folds) {
     auto t0 = std::chrono::steady_clock::now();
-    report.target_triangles = options.target_triangles ? options.target_triangles : default_domain_triangles(surface.triangle_count());
+    report.target_triangles = target;
     DomainSimplifier simplifier(surface);
     simplifier.simplify(report.target_triangles + simplifier.frozen_triangles(), options.halves_min_vertices, progress,
                         report);
@@ -824,23 +827,51 @@ Parameterization build_parameterization(const Mesh& surface, const DomainOptions
              report.target_triangles, simplifier.alive_triangles());
     Parameterization param = simplifier.finish();
     auto t1 = std::chrono::steady_clock::now();
-    report.seconds_simplify = std::chrono::duration<double>(t1 - t0).count();
+    report.seconds_simplify += std::chrono::duration<double>(t1 - t0).count();
     smooth_parameterization(surface, param, options.smoothing_sweeps);
-    report.seconds_smooth = std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
+    report.seconds_smooth += std::chrono::duration<double>(std::chrono::steady_clock::now() - t1).count();
     report.base_vertices = param.domain.vertex_count();
     report.base_triangles = param.domain.triangle_count();
+    report.base_border_edges = 0;
     for (const auto& n : param.domain.neighbour)
         for (uint32_t t : n) report.base_border_edges += t == kNone;
     report.check = check_parameterization(surface, param);
     const ParamCheck& check = report.check;
     if (!check.bijective()) {
+        folds = !check.unfold_failures;
         const char* hint = check.unfold_failures
                                ? ": input triangles span more base triangles than a chart holds; ask for fewer domain triangles"
                                : ": folds the smoothing could not undo, usually needle-thin parts; more domain triangles may help";
         fail("the parameterization is not bijective (%s): refusing to build folded patches%s", check.describe().c_str(), hint);
     }
-    if (report_out) *report_out = report;
     return param;
+}
+
+}  // namespace
+
+Parameterization build_parameterization(const Mesh& surface, const DomainOptions& options, DomainReport* report_out,
+                                        Progress* progress) {
+    DomainReport report;
+    size_t target = options.target_triangles ? options.target_triangles : default_domain_triangles(surface.triangle_count());
+    for (int attempt = 0;; ++attempt) {
+        const size_t collapses = report.collapses, rejected = report.rejected_collapses, halves = report.half_collapses;
+        bool folds = false;
+        try {
+            Parameterization param = parameterize_once(surface, options, target, report, progress, folds);
+            if (report_out) *report_out = report;
+            return param;
+        } catch (const Error& e) {
+            // Only a map that folds or tears is worth another size (a surface that does not
+            // simplify far enough fails the same way at any nearby size).
+            if (attempt >= options.retries || report.check.triangles == 0 || report.check.bijective()) throw;
+            report.refused.emplace_back(target, e.what());
+            report.collapses = collapses, report.rejected_collapses = rejected, report.half_collapses = halves;
+            report.check = ParamCheck{};
+            const size_t next = size_t(double(target) * (folds ? 1.3 : 0.77)) & ~size_t(1);
+            if (next < 16 || next == target) throw;
+            target = next;
+        }
+    }
 }
 
 }  // namespace catpaq::aqp

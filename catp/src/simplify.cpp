@@ -331,6 +331,7 @@ private:
     void compact();
 
     const SimplifySettings settings_;
+    const double max_edge2_ = settings_.max_edge_length * settings_.max_edge_length;
     const uint32_t vertex_count_;
     Arena arena_;
     uint32_t* tris_ = nullptr;  // live triangles, 3 indices each
@@ -786,7 +787,9 @@ Simplifier::Outcome Simplifier::try_collapse(uint32_t x, uint32_t y, double max_
         if (!(d > 0)) return kRejected;
         const double l0 = dot(n0, n0), l1 = dot(n1, n1);
         if (d * d < kMinCosine * kMinCosine * l0 * l1) return kRejected;
-        if (l1 <= kMinSine2 * dot(ea, ea) * dot(eb, eb)) return kRejected;
+        const double la = dot(ea, ea), lb = dot(eb, eb);
+        if (l1 <= kMinSine2 * la * lb) return kRejected;
+        if (la > max_edge2_ || lb > max_edge2_) return kRejected;  // (never, unless asked)
         // Facing against the input surface that its corners stand for (the sum of their merged
         // normals): catches folds that build up over several collapses, each within the limit.
         const Vec& na = vertex_[a].n;

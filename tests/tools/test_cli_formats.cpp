@@ -188,6 +188,32 @@ TEST(CliFormats, PointsInCorePeakStaysWithinTheEstimate) {
     fs::remove(out);
 }
 
+// A PLY mesh above AQP's in-core estimate is reduced out of core to what fits, converted within
+// the budget (the peak from the kernel), and the dataset's bounds hold against the original file.
+TEST(CliFormats, AqpReducesAMeshAboveTheBudgetOutOfCoreAndStaysWithinIt) {
+    fs::path in = scratch() / "aqp_large.ply", out = scratch() / "aqp_large.cpq";
+    write_ply(in.string(), make_scan_like(400000, 3));  // in core: about 200 MiB
+    const uint64_t budget = uint64_t(150) << 20;
+    ChildRun r = run_measured({std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq", "convert", in.string(), "-o", out.string(),
+                               "--format", "aqp", "--memory", "150M", "--json", "--quiet"},
+                              (scratch() / "aqp_large.txt").string());
+    ASSERT_EQ(r.status, 0) << r.output;
+    const nlohmann::json report = nlohmann::json::parse(r.output);
+    const nlohmann::json& reduction = report.at("reduction");
+    ASSERT_FALSE(reduction.is_null());
+    EXPECT_EQ(reduction.at("input_triangles").get<uint64_t>(), 400000u);
+    EXPECT_EQ(report.at("input").at("triangles").get<uint64_t>(), 400000u);
+    EXPECT_LT(reduction.at("triangles").get<uint64_t>(), 400000u * 3 / 4);
+    EXPECT_GT(reduction.at("triangles").get<uint64_t>(), 400000u / 4);  // not far below what fits
+    EXPECT_EQ(report.at("clean").at("triangles").get<uint64_t>(), reduction.at("triangles").get<uint64_t>());
+    EXPECT_LE(r.peak_bytes, budget) << "peak " << (r.peak_bytes >> 20) << " MiB";
+    ToolRun v = run("verify " + out.string() + " --mesh " + in.string() + " --samples 20000");
+    EXPECT_EQ(v.status, 0) << v.output;
+    EXPECT_NE(v.output.find("verify: OK"), std::string::npos) << v.output;
+    fs::remove(in);
+    fs::remove(out);
+}
+
 // What AQP cannot map is refused with a message and leaves nothing behind: a mesh without
 // triangles, and a memory budget below the converter's estimate.
 TEST(CliFormats, AqpRefusesWhatItCannotConvertAndWritesNothing) {

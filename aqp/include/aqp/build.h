@@ -52,6 +52,10 @@ struct AqpBuildOptions {
     size_t tile_samples = 512;
     // Refuse to start when the estimated working memory exceeds this many bytes (0: no limit).
     uint64_t memory_budget = 0;
+    // How far the input mesh may be from the surface it stands for (model units), added to every
+    // node's error so the bounds hold against that surface: an out-of-core reduction's
+    // displacement bound (aqp/reduce.h), 0 for an input converted as it is.
+    double input_error = 0;
     uint32_t up_axis = 0;         // stored for viewers (AqpMeta::up_axis numbering; 0: unknown)
     unsigned threads = 0;         // 0: all cores
     bool progress = true;         // named phases on a terminal
@@ -102,7 +106,7 @@ struct AqpBuildReport {
 uint64_t aqp_memory_estimate(uint64_t input_triangles);
 
 // Throws Error, naming the estimate and what to do instead, when that estimate exceeds a non-zero
-// `budget`. For `convert` to call before it reads the mesh, from the count in the file's header.
+// `budget` (convert reduces a PLY above the budget out of core first, aqp/reduce.h).
 void check_aqp_memory_budget(uint64_t input_triangles, uint64_t budget);
 
 // Converts `input` into an AQP dataset at `out_path`. Throws Error with a clear message for what

@@ -126,6 +126,12 @@ struct DomainOptions {
     // convert in a second or two anyway, and the band between the halves weighs more there (the
     // bunny's distortion at the 99th percentile grew by a third).
     size_t halves_min_vertices = 100000;
+    // When the map is not bijective, build it again this many times with another domain size:
+    // 1.3x the base triangles after folds (they are what more base triangles cure), 0.77x after
+    // charts too small for their input triangles. The simplification's order changes with the
+    // target, and a fold left by one order (one triangle in millions on a 2.3M-triangle scan)
+    // is rarely left by another. The converter allows 3 when it chose the size.
+    int retries = 0;
 };
 
 // The default number of base triangles for a surface of `triangles` triangles.
@@ -162,6 +168,8 @@ struct DomainReport {
     size_t half_collapses = 0;      // of the collapses, those the two halves did at once
     double seconds_simplify = 0, seconds_smooth = 0;
     ParamCheck check;  // of the result
+    // Every domain size tried before the one that gave the result, and why it was refused.
+    std::vector<std::pair<size_t, std::string>> refused;
 };
 
 // Simplifies `surface` (an oriented two-manifold: aqp/clean.h) to a base domain and gives every

@@ -51,6 +51,10 @@ struct SimplifySettings {
     // false: a border vertex may only slide along the border, i.e. collapse onto one of its two
     // border neighbours along a border edge; the border's shape is kept by its edge quadrics.
     bool lock_topological_border = false;
+    // Never create an edge longer than this (object units): keeps the triangles of a simplified
+    // mesh within a size, where density matters more than adaptivity (the AQP converter's
+    // out-of-core reduction, aqp/reduce.h). Infinity, the default, never rejects anything.
+    double max_edge_length = std::numeric_limits<double>::infinity();
 };
 
 struct SimplifyResult {
