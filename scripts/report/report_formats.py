@@ -189,6 +189,7 @@ def aqp_section(raw, catp_verify_levels, catp_bunny_bytes, catp_convert_s, bunny
                  "%.1f" % m["bits_per_sample"], "%.1f" % m["levels"][-1]["bits"],
                  "%.2f / %.2f" % (m["angle_mean"], m["angle_p99"])] for m in models]))
     w("")
+    ooc_section(raw, w)
     render_rows(parse_aqp_render_bench(read(os.path.join(raw, "aqp_render_bench.txt"))), w)
     big = models[-1]
     w("Per level on %s: bits per sample %s (coarse to fine): every node is one PNG of byte planes "
@@ -202,6 +203,32 @@ def aqp_section(raw, catp_verify_levels, catp_bunny_bytes, catp_convert_s, bunny
       "900 images against 27 KB as one; section 8 streams the same mesh with and without tiles." %
       (big["name"], ", ".join("%.0f" % l["bits"] for l in big["levels"]),
        "met" if big["bits_per_sample"] <= 24 else "not met", big["levels"][-1]["bits"]))
+    w("")
+
+
+def ooc_section(raw, w):
+    """A mesh above the in-core budget: the out-of-core reduction, the conversion and verify."""
+    rep = json.loads(read(os.path.join(raw, "aqp_ooc.json")).strip().splitlines()[-1])
+    ms, budget = read(os.path.join(raw, "aqp_ooc_ms.txt")).split()
+    ver = parse_aqp_verify(read(os.path.join(raw, "aqp_ooc_verify.txt")))
+    red = rep["reduction"]
+    need(red is not None, "aqp_ooc.json: the mesh was not reduced (it fit the budget)")
+    units = {"K": 1 << 10, "M": 1 << 20, "G": 1 << 30}
+    budget_bytes = int(budget[:-1]) * units[budget[-1]]
+    diag = rep["diagonal"]
+    f = ver[-1]
+    w("A mesh above the budget (`convert --format aqp --memory %s` of a gen_mesh scan, `aqp/reduce.h`): the "
+      "PLY is simplified out of core, block by block from scratch files, to the most triangles whose "
+      "conversion fits, then converted; the largest distance of an input vertex to the reduced mesh is "
+      "added to every node's error, and `verify --mesh` measures the result against the original file." % budget)
+    w("")
+    w(md_table(["input triangles", "--memory", "reduced to", "blocks", "reduction s", "whole conversion s",
+                "peak MiB", "input vertex distance / diag", "finest bound / diag", "verify: finest max / diag"],
+               [[f"{red['input_triangles']:,}", budget, f"{red['triangles']:,}", str(red["blocks"]),
+                 "%.1f" % red["seconds"], "%.1f" % (int(ms) / 1000.0),
+                 "%d (%.0f%% of the budget)" % (rep["peak_rss"] >> 20, 100.0 * rep["peak_rss"] / budget_bytes),
+                 "%.2g" % (red["vertex_distance"] / diag), "%.2g" % (rep["levels"][-1]["max_error"] / diag),
+                 "%.2g" % max(f["l2o_rel"], f["o2l_rel"])]]))
     w("")
 
 
