@@ -1,7 +1,6 @@
 // Out-of-core reduction by block-wise simplification (aqp/reduce.h).
 #include "aqp/reduce.h"
 
-#include <tbb/enumerable_thread_specific.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_reduce.h>
@@ -340,10 +339,10 @@ uint64_t block_triangles(uint64_t budget) {
 }  // namespace
 
 uint64_t reduce_memory_estimate(uint64_t input_vertices, uint64_t target_triangles, uint64_t budget) {
-    // Per input vertex its block, then its new number, and a bit; and the larger of two phases: the rounds
-    // (two blocks at work, each up to twice the average, and round 1's result, about 1.5 target
-    // triangles as the seams are kept, twice while round 2 sorts it) and the measure (the output
-    // mesh, about 40 bytes a triangle, and the AABB tree over it, about 200).
+    // Per input vertex its block (then its new number) and a bit; and the larger of two phases:
+    // the rounds (two blocks at work, each up to twice the average, and round 1's result, about
+    // 1.5 target triangles as the seams are kept, twice while round 2 sorts it) and the measure
+    // (the output mesh, about 40 bytes a triangle, and the AABB tree over it, about 200).
     const uint64_t blocks = std::min(2 * 2 * block_triangles(budget), 2 * 2 * target_triangles) * kBlockBytesPerTriangle;
     const uint64_t rounds = blocks + target_triangles * 3 / 2 * 24, measure = target_triangles * 240;
     return input_vertices * 4 + std::max(rounds, measure) + (uint64_t(32) << 20);
@@ -397,7 +396,7 @@ Mesh reduce_ply_out_of_core(const std::string& path, const ReduceOptions& option
     }
 
     // 2. Faces to scratch (the PLY's face count is of polygons: triangles may be more, so the
-    //    triangles go to a growing file), with their blocks.
+    //    triangles go to a growing file), then sorted by block.
     const uint64_t per_block = options.block_triangles ? options.block_triangles : block_triangles(options.memory_budget);
     if (progress) progress->phase("reducing: faces", ply.face_count(), "face");
     TempFile tri_file(near);
