@@ -265,7 +265,7 @@ std::vector<uint32_t> simplify_block(const uint32_t* tris, size_t count, uint64_
     std::vector<double> positions(3 * ids.size());
     std::vector<uint8_t> locked(ids.size());
     for (size_t i = 0; i < ids.size(); ++i) {
-        std::memcpy(&positions[3 * i], store[ids[i]].p, 24);
+        std::memcpy(&positions[3 * i], store[ids[i]].p, 24);  // (simplify_mesh works relative to a vertex)
         locked[i] = vertex_block[ids[i]] == kSeam;
     }
     std::vector<uint32_t> local(3 * count);

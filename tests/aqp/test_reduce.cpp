@@ -112,6 +112,45 @@ TEST(AqpReduce, ADatasetFromTheResultKeepsItsBoundsAgainstTheOriginal) {
     aqp::test::expect_bounds_hold(r.input, b.path, false);
 }
 
+// Projected scan coordinates (an offset of 1e7): the same reduction as at the origin, within
+// rounding (simplify_mesh works relative to a vertex; the flips on differences).
+TEST(AqpReduce, LargeOffsetsReduceAsAtTheOrigin) {
+    const Reduced& r = scan();
+    Mesh far = r.input;
+    for (Vec3d& p : far.positions) p = {p[0] + 1e7, p[1] - 3e6, p[2] + 2e5};
+    const std::string path = (aqp::test::scratch_dir() / "reduce_far.ply").string();
+    write_ply(path, far);  // in double: coordinates above 1e5
+    ReduceReport report;
+    const Mesh out = reduce_ply_out_of_core(path, options(), &report);
+    EXPECT_NEAR(double(out.triangle_count()), double(r.out.triangle_count()), 0.01 * double(r.out.triangle_count()));
+    EXPECT_LT(report.vertex_distance, 2 * r.report.vertex_distance);
+    std::string why;
+    EXPECT_TRUE(is_oriented_manifold(out, &why)) << why;
+    EXPECT_EQ(count_edges(out.indices).border, 0u);
+}
+
+// An open surface (the blob with its top cut away) keeps its border: one loop, no new holes.
+TEST(AqpReduce, AnOpenSurfaceKeepsItsBorder) {
+    Mesh open = scan().input;
+    std::vector<uint32_t> kept;
+    for (size_t t = 0; t < open.triangle_count(); ++t) {
+        double y = 0;
+        for (int k = 0; k < 3; ++k) y += open.positions[open.indices[3 * t + size_t(k)]][1] / 3;
+        if (y < 1.0) kept.insert(kept.end(), &open.indices[3 * t], &open.indices[3 * t] + 3);
+    }
+    open.indices = kept;
+    const std::string path = (aqp::test::scratch_dir() / "reduce_open.ply").string();
+    write_ply(path, open);
+    const Mesh out = reduce_ply_out_of_core(path, options());
+    std::string why;
+    EXPECT_TRUE(is_oriented_manifold(out, &why)) << why;
+    const EdgeCounts e = count_edges(out.indices);
+    EXPECT_GT(e.border, 0u);
+    // Euler characteristic 1: a disc, as the input.
+    EXPECT_EQ(int64_t(out.vertex_count()) - int64_t(e.edges) + int64_t(out.triangle_count()), 1);
+    EXPECT_LT(e.border, count_edges(open.indices).border);  // the border is simplified too (sliding along itself)
+}
+
 TEST(AqpReduce, RefusesFilesWithoutFacesAndBudgetsTooSmall) {
     const std::string cloud = (aqp::test::scratch_dir() / "reduce_cloud.ply").string();
     Mesh points = make_sphere(500, 1);
