@@ -54,16 +54,18 @@ std::string lower_extension(const std::string& path) {
     return ext;
 }
 
-// True for files read as point clouds: the point formats by extension, and a PLY without faces.
-bool is_point_input(const std::string& path, const Mesh* mesh) {
+// True for files read as point clouds: the point formats by extension, and a PLY without faces
+// (its header says so).
+bool is_point_input(const std::string& path) {
     const std::string ext = lower_extension(path);
     if (ext == ".xyz" || ext == ".txt" || ext == ".pts" || ext == ".las" || ext == ".laz") return true;
-    return mesh && mesh->triangle_count() == 0;
+    return ext == ".ply" && PlyStream(path).face_count() == 0;
 }
 
-nlohmann::json poisson_json(const aqp::PoissonReport* p) {
+nlohmann::json poisson_json(const aqp::PoissonReport* p, uint64_t file_points) {
     if (!p) return nullptr;
-    return {{"input_points", p->input_points},       {"normals_estimated", p->normals_estimated},
+    return {{"file_points", file_points},  // in the file (input_points: those reconstructed, a sample when fewer)
+            {"input_points", p->input_points},       {"normals_estimated", p->normals_estimated},
             {"unoriented_dropped", p->unoriented_dropped}, {"average_spacing", p->average_spacing},
             {"vertices", p->vertices},               {"triangles", p->triangles},
             {"seconds", p->seconds}};
@@ -80,7 +82,7 @@ nlohmann::json reduction_json(const aqp::ReduceReport* p) {
 }
 
 void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::vector<std::string>& dropped,
-                const aqp::PoissonReport* poisson, const aqp::ReduceReport* reduction) {
+                const aqp::PoissonReport* poisson, uint64_t file_points, const aqp::ReduceReport* reduction) {
     const aqp::ParamCheck& pc = r.domain.check;
     nlohmann::json levels = nlohmann::json::array();
     for (const aqp::AqpLevelStats& l : r.levels)
@@ -93,7 +95,7 @@ void print_json(const aqp::AqpBuildReport& r, const ConvertJob& job, const std::
           {"vertices", reduction ? reduction->input_vertices : r.clean.input_vertices},
           {"triangles", reduction ? reduction->input_triangles : r.clean.input_triangles}}},
         {"output", {{"path", job.output}, {"bytes", r.file_bytes}, {"payload_bytes", r.payload_bytes}}},
-        {"poisson", poisson_json(poisson)},
+        {"poisson", poisson_json(poisson, file_points)},
         {"reduction", reduction_json(reduction)},
         {"clean", clean_json(r.clean)},
         {"domain",
@@ -200,6 +202,9 @@ uint64_t aqp_triangles_within(uint64_t budget, uint64_t input_vertices, uint64_t
     }
     return lo;
 }
+// Fewer points than this are not worth a reconstruction (a sample this small of a large cloud
+// would lose most of it).
+constexpr uint64_t kMinReconstructedPoints = 10000;
 // Fewer triangles than this are not worth a reduction (the domain alone wants a few hundred).
 constexpr uint64_t kMinReducedTriangles = 20000;
 // The smallest budget under which a file of this size reduces to kMinReducedTriangles.
@@ -238,7 +243,7 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     std::vector<std::string> dropped;
     Mesh input;
     std::unique_ptr<aqp::ReduceReport> reduction;
-    if (o.memory_budget && !is_point_input(job.input, nullptr) && lower_extension(job.input) == ".ply") {
+    if (o.memory_budget && !is_point_input(job.input) && lower_extension(job.input) == ".ply") {
         const PlyStream ply(job.input);
         const uint64_t faces = ply.face_count();
         if (faces && aqp::aqp_memory_estimate(faces) > o.memory_budget) {
@@ -266,11 +271,31 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     // A mesh is converted as it is; a point cloud (with normals, or they are estimated) becomes a
     // closed surface by Poisson reconstruction first, as the paper does for scans.
     std::unique_ptr<aqp::PoissonReport> poisson;
-    if (!reduction && !is_point_input(job.input, nullptr)) input = read_mesh(job.input, &dropped);
-    if (!reduction && is_point_input(job.input, &input)) {
+    if (!reduction && !is_point_input(job.input)) input = read_mesh(job.input, &dropped);
+    uint64_t cloud_points = 0;
+    if (!reduction && is_point_input(job.input)) {
+        // The reconstruction works in core: a cloud above the budget is sampled uniformly (in one
+        // pass over the file) to the points that fit.
+        const uint64_t fixed = aqp::poisson_memory_estimate(0), per_point = aqp::poisson_memory_estimate(1) - fixed;
+        const uint64_t fit = o.memory_budget > fixed ? (o.memory_budget - fixed) / per_point : 0;
         PointReadInfo info;
-        const PointCloud cloud = read_point_cloud(job.input, &info);
+        const PointCloud cloud = read_point_sample(job.input, size_t(std::clamp<uint64_t>(fit, 1, SIZE_MAX)), &info,
+                                                   &cloud_points);
+        if (cloud_points > cloud.size() && cloud.size() < kMinReconstructedPoints)
+            fail("reconstructing a surface from the %llu points of '%s' needs at least %llu MiB (the budget is %llu "
+                 "MiB): give --memory %lluM or more",
+                 (unsigned long long)cloud_points, job.input.c_str(),
+                 (unsigned long long)(aqp::poisson_memory_estimate(kMinReconstructedPoints) >> 20),
+                 (unsigned long long)(o.memory_budget >> 20),
+                 (unsigned long long)((aqp::poisson_memory_estimate(kMinReconstructedPoints) >> 20) + 1));
         dropped = info.dropped;
+        if (cloud_points > cloud.size())
+            std::fprintf(stderr,
+                         "catpaq convert: warning: '%s': %llu points need about %llu MiB to reconstruct, above the budget "
+                         "of %llu MiB: a uniform sample of %zu is reconstructed\n",
+                         job.input.c_str(), (unsigned long long)cloud_points,
+                         (unsigned long long)(aqp::poisson_memory_estimate(cloud_points) >> 20),
+                         (unsigned long long)(o.memory_budget >> 20), cloud.size());
         if (!job.quiet) std::fprintf(stderr, "catpaq convert: %zu points: Poisson reconstruction...\n", cloud.size());
         poisson = std::make_unique<aqp::PoissonReport>();
         input = aqp::poisson_reconstruct(cloud.positions, cloud.normals, aqp::PoissonOptions{}, poisson.get());
@@ -283,7 +308,7 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     aqp::build_aqp_dataset(input, job.output, o, &r);
     for (const std::string& w : r.warnings) std::fprintf(stderr, "catpaq convert: warning: %s\n", w.c_str());
     if (job.json)
-        print_json(r, job, dropped, poisson.get(), reduction.get());
+        print_json(r, job, dropped, poisson.get(), cloud_points, reduction.get());
     else if (!job.quiet)
         print_table(r, job, poisson.get(), reduction.get());
     return 0;

@@ -235,6 +235,48 @@ PointCloud read_point_cloud(const std::string& path, PointReadInfo* info) {
     return read_whole_file(reader, info);
 }
 
+PointCloud read_point_sample(const std::string& path, size_t max_points, PointReadInfo* info, uint64_t* total) {
+    if (max_points == 0) fail("a sample of '%s' needs at least one point", path.c_str());
+    PointFileReader reader(path);
+    if (reader.expected_points() && reader.expected_points() <= max_points) {
+        if (total) *total = reader.expected_points();
+        return read_whole_file(reader, info);
+    }
+    constexpr size_t kBatch = size_t(1) << 16;
+    PointCloud sample, batch;
+    uint64_t seen = 0, state = 0x9e3779b97f4a7c15ULL;  // splitmix64, fixed seed
+    auto random = [&state] {
+        uint64_t z = (state += 0x9e3779b97f4a7c15ULL);
+        z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+        z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+        return z ^ (z >> 31);
+    };
+    while (reader.next(batch, kBatch)) {
+        for (size_t i = 0; i < batch.size(); ++i, ++seen) {
+            // Algorithm R: point `seen` takes a random slot of the first seen + 1 ones.
+            size_t slot = sample.size();
+            if (seen >= max_points) {
+                const uint64_t j = random() % (seen + 1);
+                if (j >= max_points) continue;
+                slot = size_t(j);
+            } else {
+                sample.positions.emplace_back();
+                if (batch.has_normals()) sample.normals.emplace_back();
+                if (batch.has_colors()) sample.colors.emplace_back();
+                if (batch.has_radii()) sample.radii.emplace_back();
+            }
+            sample.positions[slot] = batch.positions[i];
+            if (batch.has_normals()) sample.normals[slot] = batch.normals[i];
+            if (batch.has_colors()) sample.colors[slot] = batch.colors[i];
+            if (batch.has_radii()) sample.radii[slot] = batch.radii[i];
+        }
+    }
+    if (info) *info = reader.info();
+    if (total) *total = seen;
+    validate_point_cloud(sample, "'" + reader.path() + "'");
+    return sample;
+}
+
 PointCloud read_ply_points(const std::string& path, PointReadInfo* info) {
     PointFileReader reader(open_ply_source(path));
     return read_whole_file(reader, info);

@@ -214,17 +214,52 @@ TEST(CliFormats, AqpReducesAMeshAboveTheBudgetOutOfCoreAndStaysWithinIt) {
     fs::remove(out);
 }
 
+// A point cloud whose reconstruction would exceed the budget is sampled uniformly to what fits
+// (the file read once), reconstructed and converted within the budget; a PLY without faces is
+// such a cloud.
+TEST(CliFormats, AqpSamplesAPointCloudAboveTheBudgetAndStaysWithinIt) {
+    fs::path in = scratch() / "aqp_big_cloud.ply", out = scratch() / "aqp_big_cloud.cpq";
+    {
+        const PointCloud cloud = sample_surface(make_scan_like(60000, 4), 60000, 5, true, false);
+        Mesh mesh;
+        mesh.positions = cloud.positions;
+        mesh.normals = cloud.normals;
+        write_ply(in.string(), mesh);
+    }
+    const uint64_t budget = uint64_t(120) << 20;
+    ChildRun r = run_measured({std::string(CATPAQ_BINARY_DIR) + "/apps/catpaq", "convert", in.string(), "-o", out.string(),
+                               "--format", "aqp", "--memory", "120M", "--json", "--quiet"},
+                              (scratch() / "aqp_big_cloud.txt").string());
+    ASSERT_EQ(r.status, 0) << r.output;
+    // The warning that says the cloud was sampled (stderr), then the report.
+    EXPECT_NE(r.output.find("60000 points need about"), std::string::npos) << r.output;
+    const nlohmann::json poisson = nlohmann::json::parse(r.output.substr(r.output.find('{'))).at("poisson");
+    EXPECT_EQ(poisson.at("file_points").get<uint64_t>(), 60000u);
+    const uint64_t kept = poisson.at("input_points").get<uint64_t>();
+    EXPECT_LT(kept, 30000u);
+    EXPECT_GT(kept, 10000u);
+    EXPECT_EQ(poisson.at("normals_estimated").get<uint64_t>(), 0u);  // the file's normals came along
+    EXPECT_LE(r.peak_bytes, budget) << "peak " << (r.peak_bytes >> 20) << " MiB";
+    EXPECT_EQ(ArchiveReader(out.string()).header().kind, ArchiveKind::Aqp);
+    fs::remove(in);
+    fs::remove(out);
+}
+
 // What AQP cannot map is refused with a message and leaves nothing behind: a mesh without
 // triangles, and a memory budget below the converter's estimate.
 TEST(CliFormats, AqpRefusesWhatItCannotConvertAndWritesNothing) {
     fs::path in = scratch() / "aqp_refused.ply", cloud = scratch() / "aqp_cloud.ply", out = scratch() / "aqp_refused.cpq";
     write_ply(in.string(), make_sphere(20000, 1));
+    // A PLY without faces is a point cloud (reconstructed first): ten points are too few.
     Mesh points_only = make_sphere(200, 1);
     points_only.indices.clear();
+    points_only.positions.resize(10);
+    points_only.normals.clear();
+    points_only.colors.clear();
     write_ply(cloud.string(), points_only);
     ToolRun none = run("convert " + cloud.string() + " -o " + out.string() + " --format aqp --quiet");
     EXPECT_EQ(none.status, 1) << none.output;
-    EXPECT_NE(none.output.find("triangles"), std::string::npos) << none.output;
+    EXPECT_NE(none.output.find("at least 16 points"), std::string::npos) << none.output;
     ToolRun budget = run("convert " + in.string() + " -o " + out.string() + " --format aqp --memory 1M --quiet");
     EXPECT_EQ(budget.status, 1) << budget.output;
     EXPECT_NE(budget.output.find("above the budget of 1 MiB"), std::string::npos) << budget.output;

@@ -80,6 +80,8 @@ Mesh mesh_zero_set(CGAL::Poisson_reconstruction_function<Kernel>& function, doub
 
 }  // namespace
 
+uint64_t poisson_memory_estimate(uint64_t points) { return points * 5200 + (uint64_t(24) << 20); }
+
 Mesh poisson_reconstruct(const std::vector<Vec3d>& positions, const std::vector<Vec3f>& normals,
                          const PoissonOptions& o, PoissonReport* report) {
     const auto start = std::chrono::steady_clock::now();

@@ -93,6 +93,13 @@ private:
 // case-insensitive): PointFileReader's batches gathered. The result passes validate_point_cloud.
 PointCloud read_point_cloud(const std::string& path, PointReadInfo* info = nullptr);
 
+// At most `max_points` (> 0) points of the file, a uniform random sample when it holds more (one
+// pass, reservoir sampling with a fixed seed: the same sample on every run), in no particular
+// order; every point when it holds no more. Memory: the sample and a batch. `total`, if given,
+// receives the file's point count. Checks and messages as read_point_cloud.
+PointCloud read_point_sample(const std::string& path, size_t max_points, PointReadInfo* info = nullptr,
+                             uint64_t* total = nullptr);
+
 // The readers of one format, whatever the extension (also through PointFileReader).
 PointCloud read_ply_points(const std::string& path, PointReadInfo* info = nullptr);
 // XYZ: one point per line, 3, 4, 6 or 7 numbers: x y z, x y z intensity, x y z r g b,

@@ -33,6 +33,14 @@ struct PoissonReport {
     double seconds = 0;
 };
 
+// Peak resident memory of converting a cloud of `points` to AQP through the reconstruction (the
+// cloud, the reconstruction and the AQP build of its surface), from measurements rounded up
+// (`catpaq convert --format aqp`, maximum resident size by /usr/bin/time or wait4). It depends
+// on how the points lie as much as on their count (the mesher's triangles follow the average
+// spacing): gen_mesh scans' vertices, 89 MiB for 22k points and 169 MiB for 60k; random samples
+// of a scan (sample_surface), 123 MiB for 21k. 5200 bytes a point and 24 MiB.
+uint64_t poisson_memory_estimate(uint64_t points);
+
 // Reconstructs a closed surface from `positions` with `normals` (unit, pointing out; empty: they
 // are estimated by jet fitting and oriented along a minimum spanning tree of the neighbour
 // graph). Throws Error when there are too few points (fewer than 16), when the positions are not
