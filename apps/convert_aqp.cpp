@@ -207,10 +207,11 @@ uint64_t aqp_triangles_within(uint64_t budget, uint64_t input_vertices, uint64_t
 constexpr uint64_t kMinReconstructedPoints = 10000;
 // Fewer triangles than this are not worth a reduction (the domain alone wants a few hundred).
 constexpr uint64_t kMinReducedTriangles = 20000;
-// The smallest budget under which a file of this size reduces to kMinReducedTriangles.
-uint64_t aqp_budget_for_reduction(uint64_t input_vertices, uint64_t input_faces) {
+// The smallest budget under which a file of this size reduces to `least` triangles (fewer than
+// its faces: a large enough budget reaches them).
+uint64_t aqp_budget_for_reduction(uint64_t input_vertices, uint64_t input_faces, uint64_t least) {
     uint64_t budget = aqp::aqp_memory_estimate(0);
-    while (aqp_triangles_within(budget, input_vertices, input_faces) < kMinReducedTriangles) budget += uint64_t(1) << 20;
+    while (aqp_triangles_within(budget, input_vertices, input_faces) < least) budget += uint64_t(1) << 20;
     return budget;
 }
 
@@ -246,6 +247,13 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     if (o.memory_budget && !is_point_input(job.input) && lower_extension(job.input) == ".ply") {
         const PlyStream ply(job.input);
         const uint64_t faces = ply.face_count();
+        // A mesh that small is not worth reducing: the in-core estimate is what it needs.
+        if (faces <= kMinReducedTriangles && aqp::aqp_memory_estimate(faces) > o.memory_budget)
+            fail("converting %llu triangles to AQP needs about %llu MiB (AQP converts in core), above the budget of %llu "
+                 "MiB: give --memory %lluM or more",
+                 (unsigned long long)faces, (unsigned long long)(aqp::aqp_memory_estimate(faces) >> 20),
+                 (unsigned long long)(o.memory_budget >> 20),
+                 (unsigned long long)((aqp::aqp_memory_estimate(faces) + (uint64_t(1) << 20) - 1) >> 20));
         if (faces && aqp::aqp_memory_estimate(faces) > o.memory_budget) {
             aqp::ReduceOptions ro;
             ro.target_triangles = aqp_triangles_within(o.memory_budget, ply.vertex_count(), faces);
@@ -254,7 +262,7 @@ int convert_aqp(Options& options, const ConvertJob& job) {
             ro.threads = o.threads;
             ro.progress = o.progress;
             if (ro.target_triangles < kMinReducedTriangles) {
-                const uint64_t needed = aqp_budget_for_reduction(ply.vertex_count(), faces);
+                const uint64_t needed = aqp_budget_for_reduction(ply.vertex_count(), faces, kMinReducedTriangles);
                 fail("converting %llu triangles to AQP needs about %llu MiB in core, above the budget of %llu MiB, and "
                      "reducing them out of core first to a mesh that fits needs at least %llu MiB: give --memory "
                      "%lluM or more",

@@ -263,6 +263,12 @@ TEST(CliFormats, AqpRefusesWhatItCannotConvertAndWritesNothing) {
     ToolRun budget = run("convert " + in.string() + " -o " + out.string() + " --format aqp --memory 1M --quiet");
     EXPECT_EQ(budget.status, 1) << budget.output;
     EXPECT_NE(budget.output.find("above the budget of 1 MiB"), std::string::npos) << budget.output;
+    // Too few faces to be worth a reduction: the in-core estimate is what is asked for.
+    fs::path small = scratch() / "aqp_refused_small.ply";
+    write_ply(small.string(), make_sphere(5000, 1));
+    ToolRun tiny = run("convert " + small.string() + " -o " + out.string() + " --format aqp --memory 40M --quiet");
+    EXPECT_EQ(tiny.status, 1) << tiny.output;
+    EXPECT_NE(tiny.output.find("AQP converts in core"), std::string::npos) << tiny.output;
     expect_nothing_written(out);
     // A PLY's face count is enough to refuse, before the mesh is read: this one's first vertex is
     // NaN, which reading it would report (a large mesh would take the memory and the time first).
