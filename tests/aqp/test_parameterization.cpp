@@ -12,6 +12,7 @@
 #include "aqp/domain.h"
 #include "aqp/quad_layout.h"
 #include "aqp/surface_map.h"
+#include "base/error.h"
 #include "mesh/generators.h"
 #include "mesh/io.h"
 
@@ -243,4 +244,27 @@ TEST(AqpParameterization, SurfaceMapFindsEveryVertexAtItsOwnDomainPoint) {
     }
     EXPECT_LT(worst, 1e-12);
     EXPECT_EQ(map.misses(), 0u);
+}
+
+// A map that folds is built again with 1.3x the base triangles when retries are allowed: the
+// bunny folds at 70 base triangles (its ears) and maps at 90. Without retries it is refused.
+TEST(AqpParameterization, AFoldedMapIsRetriedWithMoreBaseTriangles) {
+    const Mesh surface = clean_to_manifold(bunny(), {}).mesh;
+    DomainOptions options;
+    options.target_triangles = 70;
+    try {
+        build_parameterization(surface, options, nullptr);
+        FAIL() << "the bunny mapped at 70 base triangles: pick a size that folds for this test";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("not bijective"), std::string::npos) << e.what();
+    }
+    options.retries = 1;
+    Parameterized p;
+    p.surface = surface;
+    p.param = build_parameterization(p.surface, options, &p.report);
+    ASSERT_EQ(p.report.refused.size(), 1u);
+    EXPECT_EQ(p.report.refused[0].first, 70u);
+    EXPECT_NE(p.report.refused[0].second.find("not bijective"), std::string::npos);
+    EXPECT_EQ(p.report.target_triangles, 90u);
+    expect_bijective(p);
 }
