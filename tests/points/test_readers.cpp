@@ -5,12 +5,14 @@
 
 #include <malloc.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <filesystem>
 #include <functional>
 #include <sstream>
 
+#include "base/error.h"
 #include "mesh/io.h"
 #include "points/point_cloud.h"
 #include "support.h"
@@ -528,6 +530,46 @@ TEST(PointFileReader, StreamingHoldsABatchAndBuffersNotTheFile) {
         EXPECT_LT(held, file_size / 2) << path << ": " << held << " bytes held while streaming " << file_size;
         std::filesystem::remove(path);  // 20-30 MB each: not left in the scratch directory
     }
+}
+
+// read_point_sample: every point when the file holds no more than asked; else exactly that many,
+// each an input point with its colour, none twice, the same on every run; from a PLY (count in
+// the header) and from XYZ text (count unknown until the end).
+TEST(PointReaders, ASampleHoldsInputPointsOnceAndIsTheSameEveryRun) {
+    PointCloud cloud;
+    for (int i = 0; i < 5000; ++i) {
+        cloud.positions.push_back({double(i), double(i % 7), double(i % 13)});
+        cloud.colors.push_back({uint8_t(i), uint8_t(i >> 8), 7});
+    }
+    Mesh mesh;
+    mesh.positions = cloud.positions;
+    mesh.colors = cloud.colors;
+    const std::string ply = test::scratch("sample.ply");
+    write_ply(ply, mesh);
+    const std::string xyz = test::write_text("sample.xyz", xyz_text(cloud, false));
+    for (const std::string& path : {ply, xyz}) {
+        uint64_t total = 0;
+        const PointCloud all = read_point_sample(path, 5000, nullptr, &total);
+        EXPECT_EQ(total, 5000u);
+        EXPECT_EQ(all.positions, cloud.positions) << path;
+        const PointCloud sample = read_point_sample(path, 1000, nullptr, &total);
+        EXPECT_EQ(total, 5000u);
+        ASSERT_EQ(sample.size(), 1000u) << path;
+        ASSERT_EQ(sample.colors.size(), 1000u);
+        std::vector<bool> taken(5000, false);
+        for (size_t k = 0; k < sample.size(); ++k) {
+            const int i = int(sample.positions[k][0]);
+            ASSERT_TRUE(i >= 0 && i < 5000 && sample.positions[k] == cloud.positions[size_t(i)]) << path;
+            EXPECT_EQ(sample.colors[k], cloud.colors[size_t(i)]);
+            EXPECT_FALSE(taken[size_t(i)]) << "point " << i << " twice";
+            taken[size_t(i)] = true;
+        }
+        // Spread over the file, not its head: a uniform sample has points from each fifth.
+        for (int fifth = 0; fifth < 5; ++fifth)
+            EXPECT_GT(std::count(taken.begin() + fifth * 1000, taken.begin() + (fifth + 1) * 1000, true), 100);
+        EXPECT_EQ(read_point_sample(path, 1000).positions, sample.positions);
+    }
+    EXPECT_THROW(read_point_sample(ply, 0), Error);
 }
 
 }  // namespace

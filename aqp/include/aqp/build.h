@@ -53,8 +53,9 @@ struct AqpBuildOptions {
     // Refuse to start when the estimated working memory exceeds this many bytes (0: no limit).
     uint64_t memory_budget = 0;
     // How far the input mesh may be from the surface it stands for (model units), added to every
-    // node's error so the bounds hold against that surface: an out-of-core reduction's
-    // displacement bound (aqp/reduce.h), 0 for an input converted as it is.
+    // node's error so the bounds hold against that surface: for an out-of-core reduction's mesh
+    // the largest distance of an input vertex to it (aqp/reduce.h), 0 for an input converted as
+    // it is.
     double input_error = 0;
     uint32_t up_axis = 0;         // stored for viewers (AqpMeta::up_axis numbering; 0: unknown)
     unsigned threads = 0;         // 0: all cores
