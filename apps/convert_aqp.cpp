@@ -244,7 +244,8 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     std::vector<std::string> dropped;
     Mesh input;
     std::unique_ptr<aqp::ReduceReport> reduction;
-    if (o.memory_budget && !is_point_input(job.input) && lower_extension(job.input) == ".ply") {
+    const bool points = is_point_input(job.input);
+    if (o.memory_budget && !points && lower_extension(job.input) == ".ply") {
         const PlyStream ply(job.input);
         const uint64_t faces = ply.face_count();
         // A mesh that small is not worth reducing: the in-core estimate is what it needs.
@@ -279,9 +280,9 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     // A mesh is converted as it is; a point cloud (with normals, or they are estimated) becomes a
     // closed surface by Poisson reconstruction first, as the paper does for scans.
     std::unique_ptr<aqp::PoissonReport> poisson;
-    if (!reduction && !is_point_input(job.input)) input = read_mesh(job.input, &dropped);
+    if (!reduction && !points) input = read_mesh(job.input, &dropped);
     uint64_t cloud_points = 0;
-    if (!reduction && is_point_input(job.input)) {
+    if (points) {
         // The reconstruction works in core: a cloud above the budget is sampled uniformly (in one
         // pass over the file) to the points that fit.
         const uint64_t fixed = aqp::poisson_memory_estimate(0), per_point = aqp::poisson_memory_estimate(1) - fixed;

@@ -7,6 +7,7 @@
 #include <tbb/parallel_sort.h>
 
 #include "aqp/domain.h"
+#include "vec3.h"
 #include "base/error.h"
 
 namespace catpaq::aqp {
@@ -14,8 +15,6 @@ namespace {
 
 constexpr double kSqrt3Over4 = 0.43301270189221932338;  // area of the unit equilateral triangle
 
-Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
 bool point_valid(const DomainPoint& p, size_t triangles) {
     if (p.triangle >= triangles) return false;

@@ -20,6 +20,7 @@
 #include <tbb/parallel_for.h>
 
 #include "aqp/domain.h"
+#include "vec3.h"
 
 namespace catpaq::aqp {
 namespace {
@@ -27,8 +28,6 @@ namespace {
 constexpr double kSqrt3Over2 = 0.86602540378443864676;
 constexpr double kSliver = 1e-4;  // triangle shape quality (1: equilateral) below which it is a sliver
 
-Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 
 // Triangles in `tris` whose image is folded (zero or negative area) or ill-defined.
 size_t folded_around(const Mesh& surface, const Parameterization& param, const std::vector<uint32_t>& tris) {

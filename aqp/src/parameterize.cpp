@@ -24,6 +24,7 @@
 #include <tbb/parallel_invoke.h>
 
 #include "aqp/domain.h"
+#include "vec3.h"
 #include "base/error.h"
 #include "base/progress.h"
 
@@ -49,11 +50,6 @@ constexpr int kHalvesRounds = 2;
 // A half leaves at least this many of its side's vertices of any component to the whole.
 constexpr size_t kHalfComponentFloor = 64;
 
-Vec3d sub(const Vec3d& a, const Vec3d& b) { return {a[0] - b[0], a[1] - b[1], a[2] - b[2]}; }
-Vec3d cross(const Vec3d& a, const Vec3d& b) {
-    return {a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]};
-}
-double dot(const Vec3d& a, const Vec3d& b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 double length(const Vec3d& a) { return std::sqrt(dot(a, a)); }
 // 4 sqrt(3) area / (sum of squared edges): 1 for an equilateral triangle, 0 for a degenerate
 // one; about 0.35 with a 20 degree angle between equal sides.

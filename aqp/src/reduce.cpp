@@ -27,6 +27,7 @@
 #include "catp/distance.h"
 #include "catp/simplify.h"
 #include "mesh/io.h"
+#include "vec3.h"
 
 namespace catpaq::aqp {
 namespace {
@@ -95,15 +96,11 @@ struct BlockGrid {
     }
 };
 
-using V3 = std::array<double, 3>;
-V3 sub(const V3& x, const V3& y) { return {x[0] - y[0], x[1] - y[1], x[2] - y[2]}; }
-double dot(const V3& x, const V3& y) { return x[0] * y[0] + x[1] * y[1] + x[2] * y[2]; }
-V3 cross(const V3& x, const V3& y) { return {x[1] * y[2] - x[2] * y[1], x[2] * y[0] - x[0] * y[2], x[0] * y[1] - x[1] * y[0]}; }
 
 // Distance between the segments p0 p1 and q0 q1 (closest points by clamped parameters, Ericson
 // 5.1.9).
-double segment_distance(const V3& p0, const V3& p1, const V3& q0, const V3& q1) {
-    const V3 d1 = sub(p1, p0), d2 = sub(q1, q0), r = sub(p0, q0);
+double segment_distance(const Vec3d& p0, const Vec3d& p1, const Vec3d& q0, const Vec3d& q1) {
+    const Vec3d d1 = sub(p1, p0), d2 = sub(q1, q0), r = sub(p0, q0);
     const double a = dot(d1, d1), e = dot(d2, d2), f = dot(d2, r);
     double s = 0, t = 0;
     if (a <= 0 && e <= 0) return std::sqrt(dot(r, r));
@@ -121,7 +118,7 @@ double segment_distance(const V3& p0, const V3& p1, const V3& q0, const V3& q1) 
             else if (t > 1) t = 1, s = std::clamp((b - c) / a, 0.0, 1.0);
         }
     }
-    const V3 x{p0[0] + d1[0] * s, p0[1] + d1[1] * s, p0[2] + d1[2] * s}, y{q0[0] + d2[0] * t, q0[1] + d2[1] * t, q0[2] + d2[2] * t};
+    const Vec3d x{p0[0] + d1[0] * s, p0[1] + d1[1] * s, p0[2] + d1[2] * s}, y{q0[0] + d2[0] * t, q0[1] + d2[1] * t, q0[2] + d2[2] * t};
     return std::sqrt(dot(sub(x, y), sub(x, y)));
 }
 
@@ -132,16 +129,15 @@ double segment_distance(const V3& p0, const V3& p1, const V3& q0, const V3& q1) 
 // than pi, the segments a b and c d are within a fiftieth of |a b| (a tenth where one of the two
 // is a sliver: shape below 0.2; the flip moves the surface by no more than that distance), the
 // new triangles face the way the old ones did, with area, and (c, d) is no edge yet. Vertices
-// never move; borders and non-manifold edges stay. Returns the largest distance a flip moved
-// the surface by.
-double flip_towards_delaunay(const double* xyz, std::vector<uint32_t>& tri) {
-    auto at = [xyz](uint32_t v) { return V3{xyz[3 * v], xyz[3 * v + 1], xyz[3 * v + 2]}; };
-    auto angle = [&](const V3& apex, const V3& p, const V3& q) {
-        const V3 u = sub(p, apex), w = sub(q, apex);
+// never move; borders and non-manifold edges stay.
+void flip_towards_delaunay(const double* xyz, std::vector<uint32_t>& tri) {
+    auto at = [xyz](uint32_t v) { return Vec3d{xyz[3 * v], xyz[3 * v + 1], xyz[3 * v + 2]}; };
+    auto angle = [&](const Vec3d& apex, const Vec3d& p, const Vec3d& q) {
+        const Vec3d u = sub(p, apex), w = sub(q, apex);
         return std::atan2(std::sqrt(dot(cross(u, w), cross(u, w))), dot(u, w));
     };
     // 1 for an equilateral triangle, 0 for a degenerate one (twice the area: cross_length).
-    auto shape = [](double cross_length, const V3& p, const V3& q, const V3& r) {
+    auto shape = [](double cross_length, const Vec3d& p, const Vec3d& q, const Vec3d& r) {
         const double sum = dot(sub(q, p), sub(q, p)) + dot(sub(r, q), sub(r, q)) + dot(sub(p, r), sub(p, r));
         return sum > 0 ? 2 * std::sqrt(3.0) * cross_length / sum : 0.0;
     };
@@ -155,7 +151,6 @@ double flip_towards_delaunay(const double* xyz, std::vector<uint32_t>& tri) {
     }
     std::vector<uint32_t> queue(tri.size());
     for (uint32_t k = 0; k < tri.size(); ++k) queue[k] = k;
-    double moved = 0;
     size_t budget = 10 * tri.size();  // flips terminate in the plane; on a surface, bounded
     while (!queue.empty() && budget > 0) {
         const uint32_t k = queue.back();
@@ -165,19 +160,18 @@ double flip_towards_delaunay(const double* xyz, std::vector<uint32_t>& tri) {
         if (ab == edge.end() || ba == edge.end() || ab->second != k || ba->second == kNone) continue;
         const uint32_t m = ba->second, u = m / 3, d = tri[3 * u + (m + 2) % 3];
         if (c == d || edge.count(key(c, d)) || edge.count(key(d, c))) continue;
-        const V3 pa = at(a), pb = at(b), pc = at(c), pd = at(d);
+        const Vec3d pa = at(a), pb = at(b), pc = at(c), pd = at(d);
         if (angle(pc, pa, pb) + angle(pd, pb, pa) <= M_PI + 1e-9) continue;
-        const V3 nt = cross(sub(pb, pa), sub(pc, pa)), nu = cross(sub(pa, pb), sub(pd, pb));
+        const Vec3d nt = cross(sub(pb, pa), sub(pc, pa)), nu = cross(sub(pa, pb), sub(pd, pb));
         const double lt = std::sqrt(dot(nt, nt)), lu = std::sqrt(dot(nu, nu));
         if (!(lt > 0 && lu > 0)) continue;
         const double gap = segment_distance(pa, pb, pc, pd);
         const bool sliver = std::min(shape(lt, pa, pb, pc), shape(lu, pb, pa, pd)) < 0.2;
         if (!(gap <= (sliver ? 0.1 : 0.02) * std::sqrt(dot(sub(pb, pa), sub(pb, pa))))) continue;
-        const V3 n1 = cross(sub(pd, pa), sub(pc, pa)), n2 = cross(sub(pb, pd), sub(pc, pd));
+        const Vec3d n1 = cross(sub(pd, pa), sub(pc, pa)), n2 = cross(sub(pb, pd), sub(pc, pd));
         const bool same_way = (dot(n1, nt) > 0 || dot(n1, nu) > 0) && (dot(n2, nt) > 0 || dot(n2, nu) > 0) &&
                               dot(n1, n2) > 0;
         if (!same_way) continue;
-        moved = std::max(moved, gap);
         // (a, b, c), (b, a, d) -> (a, d, c) in t, (d, b, c) in u.
         for (uint32_t i = 0; i < 3; ++i) {
             edge.erase(key(tri[3 * t + i], tri[3 * t + (i + 1) % 3]));
@@ -193,7 +187,6 @@ double flip_towards_delaunay(const double* xyz, std::vector<uint32_t>& tri) {
         }
         --budget;
     }
-    return moved;
 }
 
 // Removes the unlocked vertices with exactly three triangles around them, which close into a
@@ -313,6 +306,26 @@ std::vector<uint32_t> simplify_blocks(const Sorted& sorted, const std::vector<ui
     return out;
 }
 
+// Counting sort of `n` triangles (3 ids each) by their blocks (< `blocks`) into `out`; returns
+// the offsets: block b's triangles are out[3 offsets[b] .. 3 offsets[b + 1]). `every_million`,
+// if given, runs after each million triangles of either pass (scratch mappings drop their
+// pages there, so they do not count as the process's memory).
+std::vector<uint64_t> sort_by_block(const uint32_t* tris, const uint32_t* block, uint64_t n, uint32_t blocks,
+                                    uint32_t* out, const std::function<void()>& every_million = {}) {
+    std::vector<uint64_t> offsets(size_t(blocks) + 1, 0);
+    for (uint64_t t = 0; t < n; ++t) {
+        ++offsets[block[t] + 1];
+        if (every_million && t % 1000000 == 999999) every_million();
+    }
+    for (size_t b = 1; b < offsets.size(); ++b) offsets[b] += offsets[b - 1];
+    std::vector<uint64_t> cursor(offsets.begin(), offsets.end() - 1);
+    for (uint64_t t = 0; t < n; ++t) {
+        std::memcpy(out + 3 * cursor[block[t]]++, tris + 3 * t, 12);
+        if (every_million && t % 1000000 == 999999) every_million();
+    }
+    return offsets;
+}
+
 // Marks vertex_block for the triangles of each block (offsets into sorted): the block, or kSeam
 // for a vertex of two.
 template <class Sorted>
@@ -412,42 +425,38 @@ Mesh reduce_ply_out_of_core(const std::string& path, const ReduceOptions& option
     }
     ply.finish();
     r.input_triangles = triangles;
-    r.scratch_bytes = store.bytes() + 2 * triangles * 12;
+    r.scratch_bytes = store.bytes() + 2 * triangles * 12 + triangles * 4;
     const BlockGrid grid1(bounds, blocks_along(triangles, per_block), 0.0);
-    if (progress) progress->phase("reducing: sorting by block", 2 * triangles, "tri");
-    std::vector<uint64_t> offsets(size_t(grid1.count()) + 1, 0);
-    ScratchArray<uint32_t> sorted(near, 3 * triangles);
+    if (progress) progress->phase("reducing: sorting by block", triangles, "tri");
+    ScratchArray<uint32_t> sorted(near, 3 * triangles), block(near, triangles);
     double area = 0;
     {
-        // Two passes over the triangles (count, then place), reading them back in chunks.
+        // Each triangle's block (and the surface's area) in one pass over the triangles, read back
+        // in chunks; then the counting sort reads only the blocks and the triangles, in order.
         std::vector<uint32_t> chunk(3 * kChunk);
-        auto for_each_chunk = [&](auto&& f) {
-            for (uint64_t t = 0; t < triangles; t += kChunk) {
-                const size_t n = size_t(std::min<uint64_t>(kChunk, triangles - t));
-                tri_file.read_at(t * 12, chunk.data(), n * 12);
-                f(n);
-                if (progress) progress->add(n);
-                if ((t / kChunk) % 64 == 63) store.release();
-            }
-        };
-        auto block_of = [&](size_t i) {
-            return grid1.block_of(store[chunk[3 * i]].p, store[chunk[3 * i + 1]].p, store[chunk[3 * i + 2]].p);
-        };
-        for_each_chunk([&](size_t n) {
+        for (uint64_t t = 0; t < triangles; t += kChunk) {
+            const size_t n = size_t(std::min<uint64_t>(kChunk, triangles - t));
+            tri_file.read_at(t * 12, chunk.data(), n * 12);
             for (size_t i = 0; i < n; ++i) {
-                ++offsets[block_of(i) + 1];
                 const double *a = store[chunk[3 * i]].p, *b = store[chunk[3 * i + 1]].p, *c = store[chunk[3 * i + 2]].p;
-                const V3 n3 = cross(V3{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, V3{c[0] - a[0], c[1] - a[1], c[2] - a[2]});
+                block[t + i] = grid1.block_of(a, b, c);
+                const Vec3d n3 = cross(Vec3d{b[0] - a[0], b[1] - a[1], b[2] - a[2]}, Vec3d{c[0] - a[0], c[1] - a[1], c[2] - a[2]});
                 area += 0.5 * std::sqrt(dot(n3, n3));
             }
-        });
-        for (size_t b = 1; b < offsets.size(); ++b) offsets[b] += offsets[b - 1];
-        std::vector<uint64_t> cursor(offsets.begin(), offsets.end() - 1);
-        for_each_chunk([&](size_t n) {
-            for (size_t i = 0; i < n; ++i) std::memcpy(&sorted[3 * cursor[block_of(i)]++], &chunk[3 * i], 12);
-        });
+            if (progress) progress->add(n);
+            if ((t / kChunk) % 64 == 63) store.release();
+        }
         store.release();
     }
+    uint32_t* const tris = static_cast<uint32_t*>(tri_file.map(triangles * 12));
+    const std::vector<uint64_t> offsets =
+        sort_by_block(tris, block.data(), triangles, grid1.count(), sorted.data(), [&] {
+            release_mapped_pages(tris, triangles * 12);
+            block.release();
+            sorted.release();
+        });
+    unmap_file(tris, triangles * 12);
+    block.release();
     for (size_t b = 0; b + 1 < offsets.size(); ++b) {
         r.blocks += offsets[b + 1] > offsets[b];
         r.largest_block = std::max(r.largest_block, offsets[b + 1] - offsets[b]);
@@ -481,17 +490,12 @@ Mesh reduce_ply_out_of_core(const std::string& path, const ReduceOptions& option
         round2.swap(round1);
     } else {
         const uint64_t t1 = round1.size() / 3;
-        std::vector<uint64_t> offsets2(size_t(grid2.count()) + 1, 0);
-        std::vector<uint32_t> block(t1);
-        for (uint64_t t = 0; t < t1; ++t) {
-            block[t] = grid2.block_of(store[round1[3 * t]].p, store[round1[3 * t + 1]].p, store[round1[3 * t + 2]].p);
-            ++offsets2[block[t] + 1];
-        }
-        for (size_t b = 1; b < offsets2.size(); ++b) offsets2[b] += offsets2[b - 1];
+        std::vector<uint32_t> block2(t1);
+        for (uint64_t t = 0; t < t1; ++t)
+            block2[t] = grid2.block_of(store[round1[3 * t]].p, store[round1[3 * t + 1]].p, store[round1[3 * t + 2]].p);
         std::vector<uint32_t> sorted2(round1.size());
-        std::vector<uint64_t> cursor(offsets2.begin(), offsets2.end() - 1);
-        for (uint64_t t = 0; t < t1; ++t) std::memcpy(&sorted2[3 * cursor[block[t]]++], &round1[3 * t], 12);
-        std::vector<uint32_t>().swap(block);
+        const std::vector<uint64_t> offsets2 = sort_by_block(round1.data(), block2.data(), t1, grid2.count(), sorted2.data());
+        std::vector<uint32_t>().swap(block2);
         std::vector<uint32_t>().swap(round1);
         for (uint32_t v : sorted2) vertex_block[v] = kNone;
         mark_seams(sorted2, offsets2, vertex_block.data());
