@@ -66,7 +66,8 @@ nlohmann::json poisson_json(const aqp::PoissonReport* p, uint64_t file_points) {
     if (!p) return nullptr;
     return {{"file_points", file_points},  // in the file (input_points: those reconstructed, a sample when fewer)
             {"input_points", p->input_points},       {"normals_estimated", p->normals_estimated},
-            {"unoriented_dropped", p->unoriented_dropped}, {"average_spacing", p->average_spacing},
+            {"repeated_dropped", p->repeated_dropped}, {"unoriented_dropped", p->unoriented_dropped},
+            {"average_spacing", p->average_spacing},  {"evaluations", p->evaluations},
             {"vertices", p->vertices},               {"triangles", p->triangles},
             {"seconds", p->seconds}};
 }
@@ -144,6 +145,8 @@ void print_table(const aqp::AqpBuildReport& r, const ConvertJob& job, const aqp:
                     "(spacing %.4g",
                     job.input.c_str(), poisson->input_points, poisson->vertices, poisson->triangles, poisson->seconds,
                     poisson->average_spacing);
+        if (poisson->repeated_dropped)
+            std::printf("; %zu repeated points left out", poisson->repeated_dropped);
         if (poisson->normals_estimated)
             std::printf("; normals estimated, %zu points left out unoriented", poisson->unoriented_dropped);
         std::printf(")\n");

@@ -46,26 +46,33 @@ struct DepthCut {
 };
 
 // Whether each point has a centre within `radius` (a uniform grid of cells of that size; the
-// 27 cells around a point hold every centre within it).
+// 27 cells around a point hold every centre within it). Cells are counted from `origin` in
+// integers: far from the world's origin (1e6, with cells of 1e-7) the cell of p + cell, divided
+// out in doubles, was at times p's own, and points beside a centre were reported uncovered.
 size_t count_uncovered(const std::vector<std::array<double, 3>>& centres, const std::vector<Vec3d>& points,
-                       double radius, Progress* progress) {
+                       const double origin[3], double radius, Progress* progress) {
     const double cell = std::max(radius, 1e-300);
-    auto key = [cell](double x, double y, double z) {
-        const auto q = [cell](double v) { return uint64_t(int64_t(std::clamp(std::floor(v / cell), -4e18, 4e18))) & 0x1fffff; };
-        return q(x) << 42 | q(y) << 21 | q(z);
+    auto cell_of = [&](const double* p) {
+        std::array<int64_t, 3> c;
+        for (int a = 0; a < 3; ++a) c[size_t(a)] = int64_t(std::clamp(std::floor((p[a] - origin[a]) / cell), -1e15, 1e15));
+        return c;
+    };
+    auto key = [](const std::array<int64_t, 3>& c) {
+        return (uint64_t(c[0]) & 0x1fffff) << 42 | (uint64_t(c[1]) & 0x1fffff) << 21 | (uint64_t(c[2]) & 0x1fffff);
     };
     std::unordered_multimap<uint64_t, uint32_t> grid;
     grid.reserve(centres.size());
-    for (size_t i = 0; i < centres.size(); ++i) grid.emplace(key(centres[i][0], centres[i][1], centres[i][2]), uint32_t(i));
+    for (size_t i = 0; i < centres.size(); ++i) grid.emplace(key(cell_of(centres[i].data())), uint32_t(i));
     std::vector<uint8_t> covered(points.size(), 0);
     const double r2 = radius * radius;
     tbb::parallel_for(tbb::blocked_range<size_t>(0, points.size(), 4096), [&](const tbb::blocked_range<size_t>& range) {
         for (size_t i = range.begin(); i < range.end(); ++i) {
             const Vec3d& p = points[i];
+            const std::array<int64_t, 3> home = cell_of(p.data());
             for (int dz = -1; dz <= 1 && !covered[i]; ++dz)
                 for (int dy = -1; dy <= 1 && !covered[i]; ++dy)
                     for (int dx = -1; dx <= 1 && !covered[i]; ++dx) {
-                        auto [first, last] = grid.equal_range(key(p[0] + dx * cell, p[1] + dy * cell, p[2] + dz * cell));
+                        auto [first, last] = grid.equal_range(key({home[0] + dx, home[1] + dy, home[2] + dz}));
                         for (auto it = first; it != last; ++it) {
                             const auto& c = centres[it->second];
                             const double d2 = (c[0] - p[0]) * (c[0] - p[0]) + (c[1] - p[1]) * (c[1] - p[1]) +
@@ -177,7 +184,7 @@ int verify_points_dataset(const VerifyJob& job) {
             }
             // Relative slack: the bound is computed in doubles from float positions.
             const double radius = cut.bound * (1 + 1e-6) + 1e-9;
-            const size_t uncovered = count_uncovered(cut.centres, original.positions, radius, bar.get());
+            const size_t uncovered = count_uncovered(cut.centres, original.positions, m.origin, radius, bar.get());
             std::printf("%5d %12zu %12.4g %12zu\n", depth, cut.centres.size(), cut.bound, uncovered);
             if (uncovered) {
                 ok = false;

@@ -293,6 +293,16 @@ void Builder::prepare(const PointInputSummary& input, PointsBuildReport& report)
     report.input_points = n;
     if (n >= (size_t(1) << 32)) fail("%zu points: more than this converter's 2^32", n);
     bounds_ = input.bounds;
+    // The neighbour searches and splat radii work in single precision relative to the origin:
+    // squared distances must stay normal floats. A cloud 1e30 wide overflowed them (infinite
+    // radii, an assertion in the encoder); one 1e-30 wide underflowed them (every radius the
+    // floor's). Real clouds, nanometres to planets, lie far within.
+    const double extent = std::max({bounds_.max[0] - bounds_.min[0], bounds_.max[1] - bounds_.min[1],
+                                    bounds_.max[2] - bounds_.min[2]});
+    if (extent > kPointMaxExtent || (extent > 0 && extent < kPointMinExtent))
+        fail("the %zu points span %g units, outside the %g to %g this converter supports (it measures distances "
+             "in single precision): rescale the coordinates",
+             n, extent, kPointMinExtent, kPointMaxExtent);
     for (int a = 0; a < 3; ++a) origin_[a] = 0.5 * (bounds_.min[a] + bounds_.max[a]);
     radius_floor_ = std::max(bounds_.diagonal(), double(input.largest_radius)) * 0x1p-20;
     if (!(radius_floor_ > 0))

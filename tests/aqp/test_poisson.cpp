@@ -102,3 +102,78 @@ TEST(Poisson, TooFewOrNonFinitePointsAreRefusedWithAMessage) {
         EXPECT_NE(std::string(e.what()).find("not finite"), std::string::npos) << e.what();
     }
 }
+
+// The reconstruction works on the cloud moved to the origin and scaled to a unit box: the same
+// sphere converts at any size and offset. (A sphere 2e-3 wide at 1e6 failed CGAL's mesher before.)
+TEST(Poisson, SpheresOfAnySizeAndOffsetBecomeClosedSpheres) {
+    const struct {
+        double radius;
+        Vec3d centre;
+    } cases[] = {{1e-3, {1e6, 1e6, 1e6}}, {1e-12, {0, 0, 0}}, {1e15, {0, 0, 0}}, {1e25, {-3e25, 0, 0}}, {1.0, {1e7, -1e7, 0}}};
+    for (const auto& c : cases) {
+        SCOPED_TRACE(testing::Message() << "radius " << c.radius << " at " << c.centre[0]);
+        std::vector<Vec3d> points;
+        std::vector<Vec3f> normals;
+        sample_sphere(6000, c.radius, c.centre, points, normals);
+        PoissonReport report;
+        const Mesh m = poisson_reconstruct(points, {}, PoissonOptions{}, &report);
+        expect_closed_sphere(m, c.radius, c.centre, 0.04 * c.radius);
+        EXPECT_NEAR(report.average_spacing / c.radius, 0.03, 0.02) << "reported in the input's units";
+    }
+}
+
+// An open surface's zero set does not close around the points: refused at once with a message
+// (it ran for minutes and gigabytes in the surface mesher before), at any scale.
+TEST(Poisson, AnOpenSheetIsRefusedAsNotClosed) {
+    for (double scale : {1.0, 1e-20, 1e19}) {
+        std::mt19937_64 rng(7);
+        std::uniform_real_distribution<double> u(0, 1);
+        std::vector<Vec3d> points;
+        for (int i = 0; i < 3000; ++i) {
+            const double x = u(rng), y = u(rng);
+            points.push_back({scale * x, scale * y, scale * 0.1 * (x * x + y)});
+        }
+        try {
+            poisson_reconstruct(points, {}, PoissonOptions{});
+            FAIL() << "an open sheet accepted at scale " << scale;
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find("do not enclose a volume"), std::string::npos) << e.what();
+        }
+    }
+}
+
+// Repeated points are left out (CGAL's jet fit crashed on a cloud of a few distinct positions);
+// too few distinct points, and points on one plane, are refused with a message that says so.
+TEST(Poisson, RepeatedPointsAreDroppedAndFlatOrFewPointsRefused) {
+    std::vector<Vec3d> points;
+    std::vector<Vec3f> normals;
+    sample_sphere(3000, 1.0, {0, 0, 0}, points, normals);
+    const size_t distinct = points.size();
+    for (size_t i = 0; i < distinct; i += 2) points.push_back(points[i]);
+    PoissonReport report;
+    const Mesh m = poisson_reconstruct(points, {}, PoissonOptions{}, &report);
+    EXPECT_EQ(report.repeated_dropped, (distinct + 1) / 2);
+    expect_closed_sphere(m, 1.0, {0, 0, 0}, 0.03);
+
+    auto refused = [](const std::vector<Vec3d>& cloud, const char* why) {
+        try {
+            poisson_reconstruct(cloud, {}, PoissonOptions{});
+            ADD_FAILURE() << "accepted; expected: " << why;
+        } catch (const Error& e) {
+            EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+        }
+    };
+    std::vector<Vec3d> few;
+    for (int i = 0; i < 3000; ++i) few.push_back({1e7 + double(i % 4), 0, double(i % 3)});
+    refused(few, "at least 16 distinct points");
+    std::vector<Vec3d> plane, line;
+    std::mt19937_64 rng(9);
+    std::uniform_real_distribution<double> u(0, 1);
+    for (int i = 0; i < 3000; ++i) {
+        const double x = u(rng), y = u(rng);
+        plane.push_back({x, y, 2.0});
+        line.push_back({x, 2 * x, 3 * x});
+    }
+    refused(plane, "lie on one plane");
+    refused(line, "lie on one plane (or line)");
+}

@@ -82,6 +82,11 @@ struct PointsBuildSettings {
 // Out of core, the bytes a chunk's point takes at the peak (its data read, its partition's items
 // and permutation, its arrays in partition order while its nodes are built, the halo around it).
 constexpr uint64_t kOutOfCorePointBytes = 160;
+// The widest and narrowest clouds (the longest side of their box, input units) the converter
+// takes: it measures distances in single precision, whose squares must stay normal floats; the
+// radius floor (a millionth of the diagonal) sets the lower end. Others are refused.
+constexpr double kPointMaxExtent = 1e18;
+constexpr double kPointMinExtent = 1e-12;
 // The smallest budget the converter works out of core with (clouds whose in-core estimate
 // exceeds a smaller budget are refused).
 constexpr uint64_t kPointsMinimumBudget = uint64_t(48) << 20;

@@ -4,6 +4,7 @@
 // 2006, Poisson_surface_reconstruction_3), meshed by CGAL's surface mesher as a closed manifold.
 // The only CGAL translation unit of the AQP side: the converter itself stays CGAL-free.
 #include <cstddef>
+#include <cstdint>
 #include <string>
 #include <vector>
 
@@ -22,13 +23,18 @@ struct PoissonOptions {
     double distance = 0.25;
     double min_angle = 20.0;  // degrees, smallest facet angle the mesher aims for
     size_t normal_neighbours = 18;  // k of the jet fit and the orientation's minimum spanning tree
+    // The surface mesher may evaluate the implicit function this many times per point (plus
+    // 2^20) before the reconstruction is refused as not closed (poisson_reconstruct).
+    uint64_t evaluations_per_point = 2000;
 };
 
 struct PoissonReport {
     size_t input_points = 0;
     size_t normals_estimated = 0;   // 0 when the input had normals
+    size_t repeated_dropped = 0;    // points at the position of an earlier one (left out)
     size_t unoriented_dropped = 0;  // points whose normal could not be oriented (left out)
     double average_spacing = 0;
+    uint64_t evaluations = 0;  // of the implicit function by the surface mesher
     size_t vertices = 0, triangles = 0;
     double seconds = 0;
 };
