@@ -62,6 +62,9 @@ CaseResult run_case(HardCase c, const Mesh& mesh, const std::string& path, int c
     settings.leaf_triangles = 200;
     settings.leaf_level = 7;
     settings.progress = false;
+    // Centred, as the cases are built: their geometry lies on the lattice planes of every level
+    // (the default placement shifts models off them; tests/catp check both).
+    settings.centred_placement = true;
     try {
         build_catp(mesh, path, settings);
     } catch (const Error& e) {

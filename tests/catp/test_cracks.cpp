@@ -28,7 +28,7 @@ struct Built {
 };
 
 Built build(const Mesh& mesh, const std::string& name, size_t leaf_triangles, int leaf_level = -1,
-            LayoutChoice layout = LayoutChoice::Auto) {
+            LayoutChoice layout = LayoutChoice::Auto, bool centred = false) {
     Built b;
     b.path = (scratch_dir() / (name + ".cpq")).string();
     CatpBuildSettings settings;
@@ -36,6 +36,7 @@ Built build(const Mesh& mesh, const std::string& name, size_t leaf_triangles, in
     settings.leaf_level = leaf_level;
     settings.layout = layout;
     settings.progress = false;
+    settings.centred_placement = centred;
     b.report = build_catp(mesh, b.path, settings);
     return b;
 }
@@ -105,15 +106,18 @@ TEST(CatpCracks, EveryCutOfTheBunnyIsClosed) {
     expect_every_cut_closed(b.path, 30);
 }
 
+// In both placements: centred, as the cases are built (geometry on the lattice planes of every
+// level), and the default, shifted off them.
 TEST(CatpCracks, HardCasesAreCrackFreeOrRefused) {
+    for (bool centred : {true, false})
     for (HardCase c : kAllHardCases) {
         Mesh mesh = make_hard_case(c, 1);
-        SCOPED_TRACE(hard_case_name(c));
+        SCOPED_TRACE(std::string(hard_case_name(c)) + (centred ? ", centred" : ", shifted"));
         size_t border = count_border_edges(mesh.indices);
         Built b;
         try {
             // A deep leaf level, so many lattice planes, edges and corners cut the model.
-            b = build(mesh, hard_case_name(c), 200, 7);
+            b = build(mesh, hard_case_name(c), 200, 7, LayoutChoice::Auto, centred);
         } catch (const Error& e) {
             ADD_FAILURE() << "refused: " << e.what();
             continue;

@@ -56,6 +56,11 @@ struct CatpBuildSettings {
     // converter's data and worker threads, not the process's code and libraries (`catpaq convert
     // --memory` subtracts those, so there the budget bounds the whole process).
     uint64_t memory_budget = 0;
+    // true: the model's centre at the lattice cube's centre, where the planes of every level meet
+    // (the hard cases are built to put geometry on those planes); false, the default: shifted off
+    // them (builder.cpp, kCentreShift), so that flat noisy models do not lie along a face of the
+    // diamonds of every level.
+    bool centred_placement = false;
 };
 
 // Working memory the converter reserves per worker thread, and needs at least beyond that.
