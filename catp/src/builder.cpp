@@ -70,28 +70,30 @@ struct Placement {
     double cell;  // world units per lattice unit (a power of two)
 };
 
-// How far (lattice units) the model's centre sits from the cube's centre, per axis: 0b1010101010101
-// and that halved twice, so that the centre is at least a third of a spacing from the planes of
-// every level (the cube's middle planes at spacing 2^19, then 2^18, ..., down to 2 units) and
-// the three differ (the diagonal planes x - y = c of the tetrahedra do not meet it either).
-// Centred, a flat model (a wall, a floor, a relief scan: thin along one axis) lay on the cube's
-// middle plane, a face of the diamonds of every level; with scanner noise its surface crossed
-// that face everywhere, every crossing vertex was locked on the diamonds' outer faces, and the
-// coarse levels could not simplify: a 220 x 220 grid with noise of 1e-6 of its side took 1.4 MB
-// (187 KB without noise), level 0 held 24,773 triangles with the model's diagonal as its error
-// bound, and verify found the two sides of those faces ending differently. Shifted: 208 KB,
-// 3,301 triangles at level 0, verify OK; the bunny and the 1M scan within 0.5% of their bytes.
-constexpr int64_t kCentreShift[3] = {5461, 2731, 1365};
+// A flat model (a wall, a floor, a relief scan: thin along one axis) is placed with its centre
+// off the cube's middle plane across that axis, by 5461 lattice units (0b1010101010101: at least
+// a third of a spacing from the planes of every level, spacings 2^19 down to 2). Centred, it lay
+// on that plane, a face of the diamonds of every level; scanner noise made its surface cross the
+// face everywhere, every crossing vertex was locked on the diamonds' outer faces, and the coarse
+// levels could not simplify: a 220 x 220 grid with noise of 1e-6 of its side took 1.4 MB (187 KB
+// without noise), level 0 held 24,773 triangles with the model's diagonal as its error bound,
+// and verify found the two sides of those faces ending differently. Shifted: 208 KB, 3,301
+// triangles at level 0, verify OK. Only thin axes move (thinner than kThinAxis of the longest
+// side, but not exactly planar: a plane lying in the face is drawn as patches in it, as it always
+// was). Shifting every model also changed where the lattice cuts the bunny and the scans, their
+// sizes by 0.2-0.5% but the 2M scan's streaming by chance (the orbit view's fetched / drawn from
+// 1.06 to 1.77), so other models keep the centred placement and their datasets, byte for byte.
+constexpr int64_t kThinAxisShift = 5461;
+constexpr double kThinAxis = 0.125;
 
 Placement place_model(const Bounds& b, bool centred) {
     double extent = 0;
     for (int i = 0; i < 3; ++i) extent = std::max(extent, b.max[i] - b.min[i]);
     if (!(extent > 0) || !std::isfinite(extent))
         fail("the model has zero extent (all vertices coincide): nothing to build a hierarchy over");
-    // A power-of-two cube with at least 2% margin on every side (3%, less the shift above), so
-    // no geometry touches the root cube's boundary and the lattice mapping is an exact
-    // power-of-two scaling. (A cube fitted
-    // to the model would make the leaves' steps up to twice finer for the same triangles per
+    // A power-of-two cube with at least 3% margin on every side (across a thin axis far more,
+    // even after the shift above), so no geometry touches the root cube's boundary and the
+    // lattice mapping is an exact power-of-two scaling. (A cube fitted to the model would make the leaves' steps up to twice finer for the same triangles per
     // leaf, but it was measured to break the hard case FlatTilted: the inexact scaling moves a
     // plane that contained lattice lines exactly to one that nearly contains them, and the
     // clipper's triangle x line constructions then disagree between neighbouring cells (cracks,
@@ -103,7 +105,9 @@ Placement place_model(const Bounds& b, bool centred) {
     for (int i = 0; i < 3; ++i) {
         double centre = 0.5 * (b.min[i] + b.max[i]);
         p.origin[i] = std::floor((centre - 0.5 * side) / p.cell) * p.cell;
-        if (!centred) p.origin[i] -= double(kCentreShift[i]) * p.cell;
+        const double thickness = b.max[i] - b.min[i];
+        if (!centred && thickness > 0 && thickness < kThinAxis * extent)
+            p.origin[i] -= double(kThinAxisShift) * p.cell;
         if (b.min[i] < p.origin[i] || b.max[i] > p.origin[i] + side)
             fail("cannot place the model in a lattice cube (coordinates too large for double precision?)");
     }

@@ -177,3 +177,23 @@ TEST(Poisson, RepeatedPointsAreDroppedAndFlatOrFewPointsRefused) {
     refused(plane, "lie on one plane");
     refused(line, "lie on one plane (or line)");
 }
+
+// The surface mesher's evaluations of the implicit function are bounded (about 100 a point on a
+// closed surface): past the limit the reconstruction is refused with a message, not left to run.
+TEST(Poisson, TheMeshersWorkIsBounded) {
+    std::vector<Vec3d> points;
+    std::vector<Vec3f> normals;
+    sample_sphere(12000, 1.0, {0, 0, 0}, points, normals);
+    PoissonOptions options;
+    options.evaluations_per_point = 0;  // the limit is then the fixed 2^20, below this sphere's needs
+    try {
+        poisson_reconstruct(points, normals, options);
+        FAIL() << "the mesher ran past its limit";
+    } catch (const Error& e) {
+        EXPECT_NE(std::string(e.what()).find("far larger than they are"), std::string::npos) << e.what();
+    }
+    PoissonReport report;
+    poisson_reconstruct(points, normals, PoissonOptions{}, &report);
+    EXPECT_GT(report.evaluations, uint64_t(1) << 20) << "the refusal above proves nothing";
+    EXPECT_LT(report.evaluations, 200 * points.size());
+}

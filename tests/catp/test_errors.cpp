@@ -184,15 +184,18 @@ TEST(CatpErrors, ADiamondThatDrawsNothingLeavesItsAncestorsALocalBound) {
 
 namespace {
 
-// An n x n grid of side 2.2 in the plane z = 0 (its thin axis: the model's centre lies in its
-// plane), with Gaussian noise of `noise` in z: a flat scan, a wall or a floor.
+// An n x n grid of side 2.2 about the plane z = 0 (its thin axis: the model's centre lies in its
+// plane), with Gaussian noise of `noise` in z (a flat scan, a wall or a floor), or without noise
+// tilted by 1e-9 (thin, not planar: placed as the noisy one is).
 Mesh noisy_flat_grid(int n, double noise) {
     Mesh m;
     std::mt19937_64 rng(17);
     std::normal_distribution<double> z(0.0, noise);
     for (int j = 0; j < n; ++j)
-        for (int i = 0; i < n; ++i)
-            m.positions.push_back({2.2 * i / (n - 1), 2.2 * j / (n - 1), noise > 0 ? z(rng) : 0.0});
+        for (int i = 0; i < n; ++i) {
+            const double x = 2.2 * i / (n - 1), y = 2.2 * j / (n - 1);
+            m.positions.push_back({x, y, noise > 0 ? z(rng) : 1e-9 * x});
+        }
     for (int j = 0; j + 1 < n; ++j)
         for (int i = 0; i + 1 < n; ++i) {
             const uint32_t a = uint32_t(j * n + i);

@@ -57,9 +57,10 @@ struct CatpBuildSettings {
     // --memory` subtracts those, so there the budget bounds the whole process).
     uint64_t memory_budget = 0;
     // true: the model's centre at the lattice cube's centre, where the planes of every level meet
-    // (the hard cases are built to put geometry on those planes); false, the default: shifted off
-    // them (builder.cpp, kCentreShift), so that flat noisy models do not lie along a face of the
-    // diamonds of every level.
+    // (the hard cases are built to put geometry on those planes); false, the default: a flat
+    // model's centre is shifted off the middle plane across its thin axis (builder.cpp,
+    // kThinAxisShift), so that a flat noisy scan does not lie along a face of the diamonds of
+    // every level. Other models are centred either way.
     bool centred_placement = false;
 };
 
