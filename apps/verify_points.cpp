@@ -54,7 +54,8 @@ size_t count_uncovered(const std::vector<std::array<double, 3>>& centres, const 
     const double cell = std::max(radius, 1e-300);
     auto cell_of = [&](const double* p) {
         std::array<int64_t, 3> c;
-        for (int a = 0; a < 3; ++a) c[size_t(a)] = int64_t(std::clamp(std::floor((p[a] - origin[a]) / cell), -1e15, 1e15));
+        for (int a = 0; a < 3; ++a)
+            c[size_t(a)] = int64_t(std::clamp(std::floor((p[a] - origin[a]) / cell), -1e15, 1e15));
         return c;
     };
     auto key = [](const std::array<int64_t, 3>& c) {

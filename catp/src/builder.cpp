@@ -93,12 +93,13 @@ Placement place_model(const Bounds& b, bool centred) {
         fail("the model has zero extent (all vertices coincide): nothing to build a hierarchy over");
     // A power-of-two cube with at least 3% margin on every side (across a thin axis far more,
     // even after the shift above), so no geometry touches the root cube's boundary and the
-    // lattice mapping is an exact power-of-two scaling. (A cube fitted to the model would make the leaves' steps up to twice finer for the same triangles per
-    // leaf, but it was measured to break the hard case FlatTilted: the inexact scaling moves a
-    // plane that contained lattice lines exactly to one that nearly contains them, and the
-    // clipper's triangle x line constructions then disagree between neighbouring cells (cracks,
-    // and the finest level 30 times its bound). The precision is reached by the vertex layout's
-    // grid and the leaf level instead.)
+    // lattice mapping is an exact power-of-two scaling. (A cube fitted to the model would make
+    // the leaves' steps up to twice finer for the same triangles per leaf, but it was measured
+    // to break the hard case FlatTilted: the inexact scaling moves a plane that contained
+    // lattice lines exactly to one that nearly contains them, and the clipper's triangle x line
+    // constructions then disagree between neighbouring cells (cracks, and the finest level 30
+    // times its bound). The precision is reached by the vertex layout's grid and the leaf level
+    // instead.)
     double side = std::exp2(std::ceil(std::log2(extent * 1.0625)));
     Placement p;
     p.cell = side / double(kLatticeSize);

@@ -109,7 +109,11 @@ TEST(Poisson, SpheresOfAnySizeAndOffsetBecomeClosedSpheres) {
     const struct {
         double radius;
         Vec3d centre;
-    } cases[] = {{1e-3, {1e6, 1e6, 1e6}}, {1e-12, {0, 0, 0}}, {1e15, {0, 0, 0}}, {1e25, {-3e25, 0, 0}}, {1.0, {1e7, -1e7, 0}}};
+    } cases[] = {{1e-3, {1e6, 1e6, 1e6}},
+                 {1e-12, {0, 0, 0}},
+                 {1e15, {0, 0, 0}},
+                 {1e25, {-3e25, 0, 0}},
+                 {1.0, {1e7, -1e7, 0}}};
     for (const auto& c : cases) {
         SCOPED_TRACE(testing::Message() << "radius " << c.radius << " at " << c.centre[0]);
         std::vector<Vec3d> points;

@@ -81,8 +81,8 @@ std::unique_ptr<Mesh> mesh_zero_set(const CGAL::Poisson_reconstruction_function<
     const double radius = std::sqrt(CGAL::to_double(bounding.squared_radius()));
     const double sphere_radius = 5.0 * radius;
     const double dichotomy_error = o.distance * spacing / 1000.0;
-    Surface surface(CountedFunction{&function, evaluations, limit}, Kernel::Sphere_3(inner, sphere_radius * sphere_radius),
-                    dichotomy_error / sphere_radius);
+    Surface surface(CountedFunction{&function, evaluations, limit},
+                    Kernel::Sphere_3(inner, sphere_radius * sphere_radius), dichotomy_error / sphere_radius);
     CGAL::Surface_mesh_default_criteria_3<Triangulation> criteria(o.min_angle, o.radius * spacing, o.distance * spacing);
     Triangulation triangulation;
     Complex complex(triangulation);
@@ -191,7 +191,8 @@ Mesh poisson_reconstruct(const std::vector<Vec3d>& positions, const std::vector<
         r.unoriented_dropped = estimate_and_orient_normals(points, o.normal_neighbours);
         if (points.size() < 16) fail("Poisson reconstruction: too few points kept an oriented normal");
     }
-    const double spacing = CGAL::compute_average_spacing<CGAL::Sequential_tag>(points, 6, CGAL::parameters::point_map(PointMap()));
+    const double spacing =
+        CGAL::compute_average_spacing<CGAL::Sequential_tag>(points, 6, CGAL::parameters::point_map(PointMap()));
     if (!(spacing > 0)) fail("Poisson reconstruction: the points have no spacing (all coincide?)");
     r.average_spacing = spacing * extent;
     CGAL::Poisson_reconstruction_function<Kernel> function(points.begin(), points.end(), PointMap(), NormalMap());
@@ -210,7 +211,8 @@ Mesh poisson_reconstruct(const std::vector<Vec3d>& positions, const std::vector<
         const double z = 1.0 - (2.0 * k + 1.0) / kSphereSamples, ring = std::sqrt(std::max(0.0, 1.0 - z * z));
         const double angle = 2.399963229728653 * k;
         const Point q(around.center().x() + around_radius * ring * std::cos(angle),
-                      around.center().y() + around_radius * ring * std::sin(angle), around.center().z() + around_radius * z);
+                      around.center().y() + around_radius * ring * std::sin(angle),
+                      around.center().z() + around_radius * z);
         if (!(CGAL::to_double(function(q)) > 0))
             fail("Poisson reconstruction: the %zu points do not enclose a volume (the implicit surface reaches past "
                  "1.5 times their radius): they do not sample a closed surface (a terrain, a facade, a scan with "
