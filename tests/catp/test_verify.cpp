@@ -23,12 +23,11 @@ const fs::path& scratch_dir() {
     return dir.path();
 }
 
-std::string build(const Mesh& mesh, const std::string& name, size_t leaf_triangles, bool centred = false) {
+std::string build(const Mesh& mesh, const std::string& name, size_t leaf_triangles) {
     std::string path = (scratch_dir() / (name + ".cpq")).string();
     CatpBuildSettings settings;
     settings.leaf_triangles = leaf_triangles;
     settings.progress = false;
-    settings.centred_placement = centred;
     build_catp(mesh, path, settings);
     return path;
 }
@@ -162,9 +161,7 @@ TEST(Verify, PassesDatasetsOfOpenAndNonManifoldInputs) {
     for (auto [name, mesh] : {std::pair{"grid_fin_bowtie", grid_with_fin_and_bowtie()},
                               std::pair{"sphere_extra", sphere_with_extra_triangles()}}) {
         SCOPED_TRACE(name);
-        // Centred: these inputs' borders and fins are built to lie in the lattice planes of the
-        // cube's centre (the default placement shifts them off).
-        std::string path = build(mesh, name, 200, true);
+        std::string path = build(mesh, name, 200);
         VerifyReport alone = verify(path, nullptr);
         EXPECT_TRUE(alone.ok()) << problems(alone);
         EXPECT_GT(alone.face_border_edges, 0u) << "the case this test is about does not occur";
