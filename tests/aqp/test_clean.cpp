@@ -78,6 +78,40 @@ TEST(AqpClean, ExactlyCoincidentVerticesAreWelded) {
     EXPECT_EQ(r.border_edges, 4u);
 }
 
+// A UV sphere whose poles are rings of 40 vertices computed with sin(0) and sin(pi): the north
+// ring coincides exactly, the south one spreads over 1.2e-16. Both are welded into one pole
+// (edges under 1e-9 of the diagonal), so the sphere is one closed genus-0 surface; before, the
+// south ring stayed a fan of needles that AQP's domain could not simplify. Two parallel
+// sheets 1e-12 apart share no edge and stay apart.
+TEST(AqpClean, VerticesAFewUlpsApartAlongAnEdgeAreWelded) {
+    const int rows = 20, columns = 40;
+    Mesh sphere;
+    for (int j = 0; j <= rows; ++j)
+        for (int i = 0; i < columns; ++i) {
+            const double t = M_PI * j / rows, f = 2 * M_PI * i / columns;
+            sphere.positions.push_back({std::sin(t) * std::cos(f), std::sin(t) * std::sin(f), std::cos(t)});
+        }
+    for (int j = 0; j < rows; ++j)
+        for (int i = 0; i < columns; ++i) {
+            const uint32_t a = uint32_t(j * columns + i), b = uint32_t(j * columns + (i + 1) % columns);
+            sphere.indices.insert(sphere.indices.end(), {a, a + columns, b + columns, a, b + columns, b});
+        }
+    CleanMesh c;
+    CleanReport r = clean_report(sphere, &c);
+    EXPECT_EQ(r.welded_vertices, 2u * (columns - 1));
+    EXPECT_EQ(r.components, 1u);
+    EXPECT_EQ(r.border_edges, 0u);
+    EXPECT_EQ(r.genus, 0);
+    EXPECT_EQ(c.mesh.vertex_count(), size_t((rows - 1) * columns + 2));
+
+    Mesh sheets;
+    sheets.positions = {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {0, 0, 1e-12}, {1, 0, 1e-12}, {0, 1, 1e-12}};
+    sheets.indices = {0, 1, 2, 3, 5, 4};
+    CleanReport apart = clean_report(sheets);
+    EXPECT_EQ(apart.welded_vertices, 0u);
+    EXPECT_EQ(apart.components, 2u);
+}
+
 TEST(AqpClean, NonManifoldEdgesAreSplitIntoManifoldPieces) {
     // Three sheets on one hinge and two boxes sharing an edge: 2 non-manifold edges.
     Mesh input = make_hard_case(HardCase::NonManifoldEdges);

@@ -3,8 +3,10 @@
 // without border), or an Error saying why it cannot be made one.
 //
 // The steps, in order (each counted in CleanReport):
-// 1. weld vertices at exactly the same position (bit-equal coordinates; -0 and +0 are equal);
-//    the first vertex of a group keeps its normal and colour;
+// 1. weld vertices at exactly the same position (bit-equal coordinates; -0 and +0 are equal),
+//    then the ends of edges shorter than 1e-9 of the diagonal (rings of vertices a few ulps
+//    apart, as a pole computed with sin(pi)); the first vertex of a group keeps its normal and
+//    colour;
 // 2. remove degenerate triangles: a repeated corner after welding, or three exactly collinear
 //    corners (exact predicates: zero area, not "small");
 // 3. remove duplicate triangles: the same three vertices as an earlier triangle, in either
@@ -37,7 +39,8 @@ struct CleanOptions {
 
 struct CleanReport {
     size_t input_vertices = 0, input_triangles = 0;
-    size_t welded_vertices = 0;           // merged into an earlier vertex at the same position
+    size_t welded_vertices = 0;           // merged into an earlier vertex at the same position, or
+                                          // joined to one by an edge under 1e-9 of the diagonal
     size_t degenerate_triangles = 0;      // repeated corner or exactly collinear corners
     size_t duplicate_triangles = 0;       // same vertices as an earlier triangle
     size_t nonmanifold_edges = 0;         // edges with three or more triangles (first round)
