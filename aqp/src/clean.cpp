@@ -263,15 +263,7 @@ std::vector<uint32_t> weld_equal_positions(const Mesh& input, size_t& welded) {
 // Only vertices that a triangle joins are welded: separate sheets that nearly touch stay apart.
 void weld_short_edges(const Mesh& input, std::vector<uint32_t>& rep, size_t& welded) {
     const size_t n = input.positions.size();
-    Vec3d lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
-    for (const Vec3d& p : input.positions)
-        for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], p[a]);
-            hi[a] = std::max(hi[a], p[a]);
-        }
-    const double diagonal = std::sqrt((hi[0] - lo[0]) * (hi[0] - lo[0]) + (hi[1] - lo[1]) * (hi[1] - lo[1]) +
-                                      (hi[2] - lo[2]) * (hi[2] - lo[2]));
-    const double limit2 = (1e-9 * diagonal) * (1e-9 * diagonal);
+    const double limit = 1e-9 * input.bounds().diagonal(), limit2 = limit * limit;
     if (!(limit2 > 0)) return;
     std::vector<uint32_t> parent(n);
     std::iota(parent.begin(), parent.end(), 0u);

@@ -6,7 +6,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
-#include <memory>
+#include <optional>
 #include <unordered_map>
 #include <utility>
 
@@ -69,9 +69,9 @@ struct CountedFunction {
 
 // The implicit function's zero set meshed as a closed manifold (Manifold_tag), copied into a
 // Mesh: vertices in the mesher's order, triangles oriented outwards (CGAL orients the facet
-// with the largest z towards +z and propagates). Null when the mesher used up `limit`
+// with the largest z towards +z and propagates). None when the mesher used up `limit`
 // evaluations.
-std::unique_ptr<Mesh> mesh_zero_set(const CGAL::Poisson_reconstruction_function<Kernel>& function, double spacing,
+std::optional<Mesh> mesh_zero_set(const CGAL::Poisson_reconstruction_function<Kernel>& function, double spacing,
                                     const PoissonOptions& o, uint64_t limit, uint64_t* evaluations) {
     using Triangulation = CGAL::Surface_mesher::Surface_mesh_default_triangulation_3_generator<Kernel>::Type;
     using Complex = CGAL::Surface_mesh_complex_2_in_triangulation_3<Triangulation>;
@@ -89,21 +89,21 @@ std::unique_ptr<Mesh> mesh_zero_set(const CGAL::Poisson_reconstruction_function<
     try {
         CGAL::make_surface_mesh(complex, surface, criteria, CGAL::Manifold_tag());
     } catch (const CountedFunction::Exhausted&) {
-        return nullptr;
+        return std::nullopt;
     }
     if (triangulation.number_of_vertices() == 0 || complex.number_of_facets() == 0)
         fail("Poisson reconstruction: the surface mesher found no surface (are the normals oriented outwards?)");
     CGAL::Surface_mesh<Point> sm;
     CGAL::facets_in_complex_2_to_triangle_mesh(complex, sm);
-    auto mesh = std::make_unique<Mesh>();
+    Mesh mesh;
     std::unordered_map<uint32_t, uint32_t> index;
     for (auto v : sm.vertices()) {
-        index[uint32_t(v)] = uint32_t(mesh->positions.size());
+        index[uint32_t(v)] = uint32_t(mesh.positions.size());
         const Point& p = sm.point(v);
-        mesh->positions.push_back({p.x(), p.y(), p.z()});
+        mesh.positions.push_back({p.x(), p.y(), p.z()});
     }
     for (auto f : sm.faces())
-        for (auto v : CGAL::vertices_around_face(sm.halfedge(f), sm)) mesh->indices.push_back(index.at(uint32_t(v)));
+        for (auto v : CGAL::vertices_around_face(sm.halfedge(f), sm)) mesh.indices.push_back(index.at(uint32_t(v)));
     return mesh;
 }
 
@@ -123,18 +123,19 @@ Mesh poisson_reconstruct(const std::vector<Vec3d>& positions, const std::vector<
     // CGAL works on the points moved to the origin and scaled to a unit box (the mesh is mapped
     // back), where its tolerances hold: a sphere 2e-3 wide a million units from the origin failed
     // the mesher's own assertion ("a facet is not in conflict with its refinement point").
-    Vec3d lo{INFINITY, INFINITY, INFINITY}, hi{-INFINITY, -INFINITY, -INFINITY};
+    Bounds box;
     for (size_t i = 0; i < positions.size(); ++i) {
         const Vec3d& p = positions[i];
         if (!std::isfinite(p[0]) || !std::isfinite(p[1]) || !std::isfinite(p[2]))
             fail("Poisson reconstruction: point %zu is not finite", i);
-        for (int a = 0; a < 3; ++a) {
-            lo[a] = std::min(lo[a], p[a]);
-            hi[a] = std::max(hi[a], p[a]);
-        }
+        box.add(p);
     }
-    const Vec3d centre{0.5 * lo[0] + 0.5 * hi[0], 0.5 * lo[1] + 0.5 * hi[1], 0.5 * lo[2] + 0.5 * hi[2]};
-    const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+    Vec3d centre;
+    double extent = 0;
+    for (int a = 0; a < 3; ++a) {
+        centre[a] = 0.5 * box.min[a] + 0.5 * box.max[a];
+        extent = std::max(extent, box.max[a] - box.min[a]);
+    }
     if (!(extent > 0) || !std::isfinite(extent))
         fail("Poisson reconstruction: the points have no extent (all coincide), or one too large for doubles");
     const double scale = 1.0 / extent;
@@ -222,7 +223,7 @@ Mesh poisson_reconstruct(const std::vector<Vec3d>& positions, const std::vector<
     }
     uint64_t evaluations = 0;
     const uint64_t limit = o.evaluations_per_point * uint64_t(points.size()) + (uint64_t(1) << 20);
-    std::unique_ptr<Mesh> meshed = mesh_zero_set(function, spacing, o, limit, &evaluations);
+    std::optional<Mesh> meshed = mesh_zero_set(function, spacing, o, limit, &evaluations);
     if (!meshed)
         fail("Poisson reconstruction: the surface of the %zu points is far larger than they are (the mesher stopped "
              "after %llu evaluations of the implicit function): the points do not sample a closed surface (a "
