@@ -15,6 +15,9 @@ StreamingSession::StreamingSession(const std::string& location, const SessionSet
     std::vector<uint8_t> prefix_bytes = fetch_prefix(*source);
     prefix_bytes_ = prefix_bytes.size();
     DatasetPrefix prefix = DatasetPrefix::parse(prefix_bytes.data(), prefix_bytes.size(), location);
+    first_nodes_offset_ = prefix.header.index_offset + prefix.header.index_size;
+    if (prefix_bytes.size() > first_nodes_offset_)
+        first_nodes_.assign(prefix_bytes.begin() + ptrdiff_t(first_nodes_offset_), prefix_bytes.end());
     const FormatModule& module = (settings.formats ? *settings.formats : builtin_formats()).module_for(prefix);
     format_ = module.open(prefix);
     const Hierarchy& hierarchy = format_->hierarchy();
@@ -180,6 +183,13 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
             supplied_.insert(fetch.id);
             return;
         }
+        // Brought by the first request: decoded from those bytes (checked as a transfer's are).
+        if (fetch.offset >= first_nodes_offset_ && fetch.offset - first_nodes_offset_ + fetch.size <= first_nodes_.size()) {
+            const auto begin = first_nodes_.begin() + ptrdiff_t(fetch.offset - first_nodes_offset_);
+            fetcher_->supply(fetch, std::make_shared<const std::vector<uint8_t>>(begin, begin + ptrdiff_t(fetch.size)));
+            supplied_.insert(fetch.id);
+            return;
+        }
         wanted.push_back(fetch);
     };
     for (const CutRequest& r : frame.requests) {
@@ -237,7 +247,7 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
     s.requests = fs.transfers;
     s.pending = frame.requests.size();
     s.gpu_bytes = renderer_->gpu_bytes();
-    s.cpu_bytes = frame.stats.cpu_bytes + compressed_->bytes();
+    s.cpu_bytes = frame.stats.cpu_bytes + compressed_->bytes() + first_nodes_.size();
     s.cut_ms = frame.stats.seconds * 1000.0;
     s.certified_error_px = frame.stats.certified_error_px;
     s.holes = frame.stats.holes;

@@ -364,6 +364,16 @@ FirstFrame archive_first_frame(const ArchiveHeader& header, const std::vector<Ar
     return f;
 }
 
+uint64_t archive_first_request_size(const ArchiveHeader& header, const std::vector<ArchiveEntry>& entries,
+                                    uint64_t limit) {
+    uint64_t end = header.index_offset + header.index_size;
+    for (const ArchiveEntry& e : entries) {
+        if (e.level != 0 || e.offset != end || e.offset + e.size > limit) break;
+        end += e.size;
+    }
+    return end;
+}
+
 uint64_t ArchiveReader::prefix_size() const { return impl_->header.index_offset + impl_->header.index_size; }
 
 int64_t ArchiveReader::find(uint64_t key) const {

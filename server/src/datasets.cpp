@@ -172,7 +172,10 @@ void Registry::add(const std::string& relative, const std::string& resolved, con
     uint64_t header_checksum = 0;
     for (int i = 0; i < 8; ++i) header_checksum |= uint64_t(r.data()[kArchiveHeaderSize - 8 + i]) << (8 * i);
     d->etag = "\"" + http::hex64(header_checksum) + "\"";
-    d->prefix_etag = "\"" + http::hex64(header_checksum) + "-prefix\"";
+    // ("-first": the route once served the prefix alone, under "-prefix"; a cache that kept that
+    // body must not be told it is still current.)
+    d->prefix_etag = "\"" + http::hex64(header_checksum) + "-first\"";
+    d->first_request_size = archive_first_request_size(h, entries);
 
     json details{{"name", d->name},
                  {"kind", archive_kind_name(h.kind)},
@@ -187,6 +190,7 @@ void Registry::add(const std::string& relative, const std::string& resolved, con
                  {"index_checksum", http::hex64(h.index_checksum)},
                  {"node_count", h.node_count},
                  {"prefix_size", r.prefix_size()},
+                 {"first_request_size", d->first_request_size},
                  {"payload_bytes", d->payload_bytes},
                  {"etag", d->etag}};
     json level_list = json::array();

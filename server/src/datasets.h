@@ -24,7 +24,8 @@ struct Dataset {
     std::unordered_map<uint64_t, uint32_t> by_key;  // node key -> entry index (first in index order)
     uint64_t payload_bytes = 0;
     std::string etag;         // "\"<header checksum>\"": identifies the file's content
-    std::string prefix_etag;  // "\"<header checksum>-prefix\""
+    std::string prefix_etag;  // "\"<header checksum>-first\""
+    uint64_t first_request_size = 0;  // the /prefix route's bytes (archive_first_request_size)
     bool has_bounds = false;  // from the describer of its kind
     double bounds_min[3] = {0, 0, 0}, bounds_max[3] = {0, 0, 0};
     std::string details_json;  // GET /api/datasets/{name}

@@ -212,7 +212,7 @@ void Router::handle(const http::Request& req, bool close, WorkerContext& context
             } else {
                 begin(200, route, context, out);
                 out.body = dataset->reader->data();
-                out.body_size = dataset->reader->prefix_size();
+                out.body_size = dataset->first_request_size;
                 out.head += kOctets;
                 content_length(out.head, out.body_size);
             }

@@ -10,6 +10,7 @@
 #include "box_format.h"
 #include "box_renderer.h"
 #include "client/gl_context.h"
+#include "common_codec/archive.h"
 #include "client/session.h"
 #include "client/viewer.h"
 #include "scratch_directory.h"
@@ -172,6 +173,75 @@ TEST(FormatSeam, AServerThatKnowsNoFormatServesItToTheSession) {
         SessionFrameStats s = settle(session, top_camera());
         expect_all_leaves_drawn(session, s);
         EXPECT_GT(s.requests, 0u);
+    }
+    server.stop();
+    server.wait();
+}
+
+// The first request brings the first frame. From a server, the /prefix route answers with the
+// prefix and level 0's nodes (archive_first_request_size); from a local file or a static file
+// server, the first 64 KiB. Nodes inside those bytes are decoded from them: a view that needs
+// only them makes no further request, and none is fetched twice. (Before, the bytes past the
+// prefix were dropped and level 0 was fetched again: 28 KB more for the bunny.)
+TEST(FormatSeam, TheFirstRequestBringsTheFirstFrameAndItsNodesAreNotFetchedAgain) {
+    std::string why;
+    if (!HeadlessGlContext::available(&why)) GTEST_SKIP() << why;
+    const std::string path = box_dataset();
+    ArchiveReader reader(path);
+    const uint64_t first_request = archive_first_request_size(reader.header(), reader.entries());
+    ASSERT_GT(first_request, reader.prefix_size());  // the root fits
+    // Level 1's nodes lie within the first 64 KiB of the file, past what the server sends.
+    uint64_t level1_end = 0;
+    for (const ArchiveEntry& e : reader.entries())
+        if (e.level == 1) level1_end = std::max(level1_end, e.offset + e.size);
+    ASSERT_LE(level1_end, kFirstRequestBytes);
+    ASSERT_GT(reader.size(), kFirstRequestBytes);
+
+    ServerSettings server_settings;
+    server_settings.root = root_dir().string();
+    server_settings.port = 0;
+    server_settings.threads = 1;
+    server_settings.log_level = LogLevel::Error;
+    server_settings.log = [](LogLevel, std::string_view) {};
+    StreamingServer server(server_settings);
+    const std::string base = "http://127.0.0.1:" + std::to_string(server.start());
+
+    HeadlessGlContext context;
+    SessionSettings settings;
+    settings.formats = &box_registry();
+    settings.skip_factor = 0;  // every level on the way is fetched and drawn
+    struct Location {
+        std::string name;
+        uint64_t first_bytes;  // what the first request brings
+        bool serves_level1;    // whether those bytes hold level 1
+    };
+    for (const Location& at : {Location{path, kFirstRequestBytes, true},
+                               Location{base + "/files/boxes.cpq", kFirstRequestBytes, true},
+                               Location{base + "/api/datasets/boxes", first_request, false}}) {
+        SCOPED_TRACE(at.name);
+        settings.tolerance_px = 100;  // the root alone
+        StreamingSession session(at.name, settings);
+        SessionFrameStats s = settle(session, top_camera());
+        EXPECT_TRUE(session.failures().empty());
+        EXPECT_EQ(s.drawn_nodes, 1u);
+        EXPECT_EQ(s.requests, 0u);
+        EXPECT_EQ(s.bytes_fetched, at.first_bytes);
+        // Level 1 projects to about 9.6 px: drawn at 12 px, the root refined.
+        session.set_tolerance(12);
+        s = settle(session, top_camera());
+        EXPECT_EQ(s.drawn_nodes, 4u);
+        EXPECT_EQ(s.requests == 0, at.serves_level1);
+        if (at.serves_level1) {
+            EXPECT_EQ(s.bytes_fetched, at.first_bytes);
+        }
+        // The leaves: every other node is fetched once (the root and level 1 not again).
+        session.set_tolerance(1.5);
+        s = settle(session, top_camera());
+        expect_all_leaves_drawn(session, s);
+        uint64_t rest = 0;  // the nodes the first request did not hold whole
+        for (const ArchiveEntry& e : reader.entries())
+            if (e.offset + e.size > at.first_bytes) rest += e.size;
+        EXPECT_EQ(s.bytes_fetched, at.first_bytes + rest);
     }
     server.stop();
     server.wait();

@@ -228,3 +228,24 @@ TEST(ArchiveContainer, CorruptIndexNodeOrNodeCountIsRefusedWithAMessage) {
     EXPECT_EQ(reader.node(reader.entries().size() - 1, &error), nullptr);
     EXPECT_NE(error.find("checksum"), std::string::npos) << error;
 }
+
+// A server's first answer: the prefix, then level 0's nodes in file order, each whole, within the
+// limit; never less than the prefix.
+TEST(ArchiveContainer, TheFirstRequestIsThePrefixAndTheWholeLevelZeroNodesThatFit) {
+    const std::vector<Node> nodes = assorted_nodes();
+    const fs::path path = write_archive(nodes, {1, 2, 3}, "first_request.cpq");
+    ArchiveReader reader(path.string());
+    const uint64_t prefix = reader.prefix_size();
+    std::vector<uint64_t> ends;  // the end of each level-0 node, in file order
+    for (const ArchiveEntry& e : reader.entries())
+        if (e.level == 0) ends.push_back(e.offset + e.size);
+    ASSERT_EQ(ends.size(), 20u);
+    ASSERT_LE(ends.back(), kFirstRequestBytes);
+    EXPECT_EQ(archive_first_request_size(reader.header(), reader.entries()), ends.back());
+    // A limit inside the fourth node: three nodes.
+    EXPECT_EQ(archive_first_request_size(reader.header(), reader.entries(), ends[3] - 1), ends[2]);
+    EXPECT_EQ(archive_first_request_size(reader.header(), reader.entries(), ends[3]), ends[3]);
+    // Below the prefix: the prefix all the same (a client cannot do without it).
+    EXPECT_EQ(archive_first_request_size(reader.header(), reader.entries(), 10), prefix);
+    EXPECT_EQ(archive_first_request_size(reader.header(), reader.entries(), prefix), prefix);
+}

@@ -71,7 +71,8 @@ TEST_F(Routes, WithoutDescribersEveryKindIsServedByItsContainerAlone) {
         const std::string path = fixture->root() + "/" + name + ".cpq";
         const std::string file = read_whole_file(path);
         ArchiveReader reader(path);
-        EXPECT_TRUE(client.get("/api/datasets/" + name + "/prefix").body == file.substr(0, reader.prefix_size()));
+        EXPECT_TRUE(client.get("/api/datasets/" + name + "/prefix").body ==
+                    file.substr(0, archive_first_request_size(reader.header(), reader.entries())));
         for (const ArchiveEntry& e : reader.entries()) {
             HttpResponse node = client.get(node_path(name, e.key));
             EXPECT_EQ(node.status, 200);
@@ -110,6 +111,7 @@ TEST_F(Routes, DatasetDetailsReportHeaderFieldsLevelsAndPayloadBytes) {
     EXPECT_EQ(d.at("index_size").get<uint64_t>(), h.index_size);
     EXPECT_EQ(d.at("node_count").get<uint64_t>(), h.node_count);
     EXPECT_EQ(d.at("prefix_size").get<uint64_t>(), reader.prefix_size());
+    EXPECT_EQ(d.at("first_request_size").get<uint64_t>(), archive_first_request_size(h, reader.entries()));
     EXPECT_EQ(d.at("meta_checksum"), hex64(h.meta_checksum));
     EXPECT_EQ(d.at("index_checksum"), hex64(h.index_checksum));
     std::map<uint64_t, std::pair<uint64_t, uint64_t>> levels;
@@ -134,13 +136,25 @@ TEST_F(Routes, DatasetDetailsReportHeaderFieldsLevelsAndPayloadBytes) {
     EXPECT_EQ(client.get("/api/datasets/nope").status, 404);
 }
 
-TEST_F(Routes, PrefixIsHeaderMetaAndIndexBytesOfTheFile) {
+// The first request: header, meta and index, then the level-0 nodes that fit whole in 64 KiB,
+// so that a client draws the first frame from it (here level 0 is larger: it brings some).
+TEST_F(Routes, PrefixIsHeaderMetaIndexAndLevelZeroBytesOfTheFile) {
     RawClient client(port());
     HttpResponse r = client.get("/api/datasets/alpha/prefix");
     ASSERT_EQ(r.status, 200);
     ArchiveReader reader(fixture->root() + "/alpha.cpq");
     std::string file = read_whole_file(fixture->root() + "/alpha.cpq");
-    EXPECT_EQ(r.body, file.substr(0, reader.prefix_size()));
+    // Level 0's nodes follow the index; those that fit whole in 64 KiB come along.
+    uint64_t end = reader.prefix_size();
+    size_t nodes = 0;
+    for (const ArchiveEntry& e : reader.entries()) {
+        if (e.level != 0 || e.offset + e.size > kFirstRequestBytes) break;
+        ASSERT_EQ(e.offset, end);
+        end += e.size;
+        nodes++;
+    }
+    ASSERT_GT(nodes, 0u);
+    EXPECT_EQ(r.body, file.substr(0, end));
     EXPECT_EQ(r.header("Content-Type"), "application/octet-stream");
     std::string etag = r.header("ETag");
     ASSERT_FALSE(etag.empty());

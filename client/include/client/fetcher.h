@@ -51,7 +51,9 @@
 
 namespace catpaq {
 
-constexpr size_t kPrefixProbeBytes = 64 * 1024;
+// The first request (common_codec/archive.h): a raw file's first 64 KiB; a server's /prefix
+// route answers with the prefix and what of level 0 fits in as much.
+constexpr size_t kPrefixProbeBytes = kFirstRequestBytes;
 
 struct SourceRequest {
     enum class Kind : uint8_t {

@@ -146,6 +146,11 @@ private:
     std::unordered_set<uint64_t> supplied_;  // fetch ids handed to the fetcher, not arrived yet
     std::vector<DrawnPart> items_;
     uint64_t prefix_bytes_ = 0;
+    // The first request's bytes past the prefix (level 0's payloads, and from a static server
+    // whatever else its first 64 KiB held) and their file offset: fetches inside them are
+    // served from here (Fetcher::supply), not fetched a second time.
+    std::vector<uint8_t> first_nodes_;
+    uint64_t first_nodes_offset_ = 0;
     bool settled_ = false;
     std::vector<NodeFailure> failures_;
     // data_distance's last measure per node: the eye it was taken from and the distance.

@@ -108,6 +108,17 @@ struct FirstFrame {
 };
 FirstFrame archive_first_frame(const ArchiveHeader& header, const std::vector<ArchiveEntry>& entries);
 
+// What a client's first request asks for: the first 64 KiB of the file (the mission's first
+// frame). A server answers it with archive_first_request_size bytes; a static file server with
+// the 64 KiB (or the whole file when smaller).
+constexpr uint64_t kFirstRequestBytes = 64 * 1024;
+// The first request's bytes from a server that knows the index: the prefix, then level 0's
+// payloads (they follow the index in file order), whole, while the total stays within `limit`;
+// at least the prefix (which may itself be larger). A client draws the first frame from them
+// without a second request.
+uint64_t archive_first_request_size(const ArchiveHeader& header, const std::vector<ArchiveEntry>& entries,
+                                    uint64_t limit = kFirstRequestBytes);
+
 // Reads an archive from a local file (memory-mapped). Validates header, meta and index on open;
 // node bytes are checked against their checksum when read.
 class ArchiveReader {
