@@ -519,6 +519,32 @@ def rd_rows(v, rd):
     return out
 
 
+def draco_at(rows, haus):
+    """Draco against a CATP accuracy: the smallest setting at least as accurate, and the bytes at
+    exactly that Hausdorff interpolated between the two settings around it (log Hausdorff and
+    bytes linear in -qp); None where the settings do not reach it."""
+    dr = sorted((r for r in rows if r["codec"] == "draco"), key=lambda r: int(r["setting"].split()[-1]))
+    ok = [r for r in dr if r["haus"] <= haus]
+    smallest = min(ok, key=lambda r: r["bytes"]) if ok else None
+    at = None
+    for a, b in zip(dr, dr[1:]):
+        if a["haus"] >= haus >= b["haus"] and a["haus"] > b["haus"] > 0:
+            t = math.log(a["haus"] / haus) / math.log(a["haus"] / b["haus"])
+            at = a["bytes"] + t * (b["bytes"] - a["bytes"])
+            break
+    return smallest, at
+
+
+def finest_fetch(raw, dataset, skip):
+    """The stats of render's one converged frame showing the finest level everywhere."""
+    rows = read_jsonl(os.path.join(raw, "finest_%s_%s.jsonl" % (dataset, skip)))
+    require(len(rows) == 1, "finest_%s_%s.jsonl: expected one frame" % (dataset, skip))
+    r = rows[0]
+    require(r.get("settled") and "finest_level" in r.get("limited_by", []),
+            "finest_%s_%s.jsonl: the view did not settle on the finest level everywhere" % (dataset, skip))
+    return r
+
+
 def rd_summary(rows):
     """One measured sentence: CATP's finest level against the smallest peer encoding at least as accurate."""
     ours = [r for r in rows if r["codec"] == "catpaq"]
@@ -948,6 +974,42 @@ def write_report(raw, work, docs):
     if best:
         w(best)
         w("")
+
+    w("**What a client fetches to show the finest level everywhere.** The cumulative rows above count "
+      "every level; a client need not fetch them all. `catpaq render URL --orbit 1 --size 1600x1200 "
+      "--tolerance 0.05` over HTTP from a cold start (the served datasets above; the whole model in view, "
+      "so that every drawn node is a leaf: each run settled with the finest level as its limit) with "
+      "the default level skipping (`--skip 8`: coarser levels drawn on the way, as a viewer shows them) "
+      "and skipping every level a refinement passes at once (`--skip 1000000`: the first frame, then "
+      "the leaves). *Fetched* includes the first request (prefix and level 0). Draco: the smallest "
+      "setting at least as accurate as CATP's finest level (Hausdorff), and its bytes at exactly that "
+      "Hausdorff, interpolated between the two settings around it (log Hausdorff and bytes linear in -qp).")
+    w("")
+    frows = []
+    finest_ratios = []
+    for title, v, rd, ds in (("bunny", ver, rd_bunny, "bunny"), ("scan %s" % f"{rd_tris:,}", ver_scan, rd_scan, "scanrd")):
+        rows = rd_rows(v, rd)
+        fin = [r for r in rows if r["codec"] == "catpaq"][-1]
+        alone = v["levels"][-1]["bytes"]
+        smallest, at = draco_at(rows, fin["haus"])
+        for skip, label in ((8, "levels on the way (--skip 8)"), (1000000, "straight to the leaves (--skip 1000000)")):
+            f = finest_fetch(raw, ds, skip)
+            got = f["bytes_fetched"]
+            if skip == 1000000:
+                finest_ratios.append((title, got / smallest["bytes"] if smallest else None, got / at if at else None))
+            frows.append([title, label, f"{got:,}", str(f["requests"]), f"{f['triangles']:,}", f"{alone:,}", f"{fin['bytes']:,}",
+                          "%s: %s" % (smallest["setting"], f"{smallest['bytes']:,}") if smallest else "-",
+                          "%.2f" % (got / smallest["bytes"]) if smallest else "-",
+                          f"{at:,.0f}" if at else "-", "%.2f" % (got / at) if at else "-"])
+    w(md_table(["mesh", "client", "fetched bytes", "requests", "triangles drawn", "finest level alone", "all levels",
+                "Draco, smallest at least as accurate", "fetched / it", "Draco at equal Hausdorff",
+                "fetched / it"], frows))
+    w("")
+    w("Target (issue 16): what a client fetches to show the finest level everywhere at most 2x Draco's file "
+      "at equal Hausdorff, on the bunny and the scan: " +
+      "; ".join("%s %s against the smallest Draco at least as accurate, %s at equal Hausdorff" %
+                (t, "%.2fx" % a if a else "-", "%.2fx" % b if b else "-") for t, a, b in finest_ratios) + ".")
+    w("")
 
     w("### 1.5 Where the bytes go, per level")
     w("")

@@ -228,6 +228,10 @@ for d in scan scanaqp scanaqp1 scanpts; do
     required "info $d" "$RAW/info_$d.txt" "$CATPAQ" info "$WORK/root/$d.cpq"
 done
 
+# Section 1.4's client measure: the rate-distortion scan served too (the streaming scan is a
+# larger one in the full run).
+cp "$WORK/rd/scan.cpq" "$WORK/root/scanrd.cpq"
+
 log "serve"
 "$CATPAQ" serve --root "$WORK/root" --port 0 --log-level warn > "$WORK/serve.log" 2>&1 &
 SERVER_PID=$!
@@ -241,6 +245,18 @@ done
 [[ -n "$URL" ]] || { echo "server did not start" >&2; exit 1; }
 grep 'serving' "$WORK/serve.log" > "$RAW/serve.txt"
 curl -fsS "${URL}api/datasets" > "$RAW/datasets.json" || echo '{}' > "$RAW/datasets.json"
+
+# What a client fetches to show the finest level everywhere (section 1.4): the whole model in a
+# 1600x1200 view at 0.05 px, so that every drawn node is a leaf; with the default level skipping
+# (coarser levels drawn on the way) and skipping every level a refinement passes at once.
+for d in bunny scanrd; do
+    for skip in 8 1000000; do
+        log "render $d, finest level everywhere, --skip $skip"
+        required "finest $d skip $skip" "$RAW/finest_render_${d}_$skip.txt" "$CATPAQ" render "${URL}api/datasets/$d" \
+            --orbit 1 --size 1600x1200 --tolerance 0.05 --skip "$skip" --timeout 300 --quiet \
+            --stats "$RAW/finest_${d}_$skip.jsonl"
+    done
+done
 
 for p in orbit zoom; do
     log "render $p over HTTP ($URL)"
