@@ -1067,7 +1067,11 @@ def write_report(raw, work, docs):
         w("")
         w("codec_bench cuts the mesh into Kuhn-tetrahedron fragments itself (dropping triangles that cross "
           "a fragment, see its header) and encodes them with our fragment codec and meshoptimizer; Draco "
-          "encodes the whole mesh. Position step %s mesh units (%s bits over the diagonal); catpaq encode "
+          "encodes the whole mesh. Each peer's speed is compared with ours on the same attributes: "
+          "meshoptimizer's vertices and Draco's `-qg 8` files carry the fragments' synthetic colours, and "
+          "are compared with our coloured fragments; Draco's other files have positions and normals only, "
+          "and are compared with the same fragments encoded without colour (the layout a colourless input "
+          "gets). Position step %s mesh units (%s bits over the diagonal); catpaq encode "
           "%s ms." % (cd["step"], cd["precision_bits"], cd["ours_encode_ms"]))
         w("")
         w(md_table(["codec", "bits/vertex", "decode ms", "Mtri/s", "catpaq decode faster by"],
