@@ -52,10 +52,24 @@ struct FaceCheck {
     size_t one_sided = 0;    // odd edges in components of one side only
 };
 
-FaceCheck check_face(const std::array<FaceSide, 2>& sides) {
+// on_input_border: with the original mesh, whether an edge lies on its border. There the input
+// itself ends in the face's plane, and when the surface lies in the face on both sides (a noisy
+// scan whose noise is below a coarse level's grid step collapses into the face), each side's
+// patch may take part of that border: a two-sided border that is no crack (the border check of
+// the welded cut judges those edges).
+FaceCheck check_face(const std::array<FaceSide, 2>& sides, const std::function<bool(const Edge&)>& on_input_border) {
     std::set<Edge> odd = symmetric_difference(symmetric_difference(sides[0].open, sides[1].open),
                                               symmetric_difference(sides[0].patch, sides[1].patch));
     FaceCheck out;
+    if (on_input_border)
+        for (auto it = odd.begin(); it != odd.end();) {
+            if (on_input_border(*it)) {
+                out.one_sided++;
+                it = odd.erase(it);
+            } else {
+                ++it;
+            }
+        }
     if (odd.empty()) return out;
     // Components of the odd edges (union-find on their end points), and which side left each
     // edge only it has (an edge both sides have, as a three-sheet edge, belongs to neither).
@@ -130,8 +144,11 @@ public:
     }
 
     // Decodes cut R; checks that the fragment borders on every face shared by two drawn
-    // tetrahedra match (as multisets of integer edges). Returns the welded world mesh.
-    DecodedCut decode_cut(const RefinedSet& refined) {
+    // tetrahedra match (as multisets of integer edges). Returns the welded world mesh. With the
+    // original's border, edges whose midpoint lies within `tolerance` of it are the input's own
+    // border (check_face).
+    DecodedCut decode_cut(const RefinedSet& refined, const SegmentDistance* input_border = nullptr,
+                          double tolerance = 0) {
         DecodedCut out;
         std::map<IntPoint, uint32_t> weld;
         std::map<FaceKey, std::vector<FaceSide>> faces;
@@ -214,7 +231,16 @@ public:
                     side.open.erase(e);
                     side.patch.erase(e);
                 }
-            FaceCheck c = check_face({sides[0], sides[1]});
+            std::function<bool(const Edge&)> on_input_border;
+            if (input_border)
+                on_input_border = [&](const Edge& e) {
+                    std::array<double, 3> mid;
+                    for (int k = 0; k < 3; ++k)
+                        mid[size_t(k)] = meta.origin[k] +
+                                         double(e.first[size_t(k)] + e.second[size_t(k)]) / (2.0 * meta.layout.grid) * meta.cell;
+                    return input_border->distance(mid) <= tolerance;
+                };
+            FaceCheck c = check_face({sides[0], sides[1]}, on_input_border);
             report_.face_border_edges += c.one_sided;
             if (c.crack_edges) {
                 report_.face_mismatches++;
@@ -411,7 +437,7 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
         RefinedSet refined;
         for (const ArchiveEntry& e : index.entries())
             if (e.level < level && !(e.flags & kCatpLeafFlag)) refined.refine(DiamondId{e.key});
-        DecodedCut cut = checker.decode_cut(refined);
+        DecodedCut cut = checker.decode_cut(refined, original_border.get(), lv.stored_error + lv.quantization_step);
         lv.cut_vertices = cut.positions.size();
         if (!original || cut.indices.empty()) continue;
         lv.border_edges_off_original = check_borders(cut, *original_border, lv.stored_error + lv.quantization_step);
@@ -449,7 +475,7 @@ VerifyReport verify_catp(const std::string& path, const Mesh* original, const Ve
         std::uniform_real_distribution<double> u(0, 1);
         for (const ArchiveEntry& e : index.entries())
             if (!(e.flags & kCatpLeafFlag) && u(rng) < 0.5) refined.refine(DiamondId{e.key});
-        DecodedCut cut = checker.decode_cut(refined);
+        DecodedCut cut = checker.decode_cut(refined, original_border.get(), largest_stored);
         if (original && !cut.indices.empty()) {
             size_t off = check_borders(cut, *original_border, largest_stored);
             if (off)

@@ -204,6 +204,10 @@ TEST(Verify, FailsACrackWhereTheTwoSidesOfAFaceDisagree) {
     EXPECT_FALSE(r.ok());
     EXPECT_GT(r.face_mismatches, 0u);
     EXPECT_NE(problems(r).find("crack"), std::string::npos) << problems(r);
+    // With the original too (a closed sphere: no edge of it is the input's border).
+    VerifyReport with_original = verify(cracked, &sphere);
+    EXPECT_FALSE(with_original.ok());
+    EXPECT_GT(with_original.face_mismatches, 0u);
 }
 
 // A triangle touching a shared face removed: only one side ends there, which the face alone
