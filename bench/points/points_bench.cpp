@@ -64,6 +64,7 @@
 #include "mesh/io.h"
 #include "base/options.h"
 #include "base/sysinfo.h"
+#include "common_codec/archive.h"
 #include "mesh/generators.h"
 #include "points/builder.h"
 #include "points/dataset.h"
@@ -622,6 +623,13 @@ int main(int argc, char** argv) {
                         100 * c.share[0], 100 * c.share[1], 100 * c.share[2], 100 * c.share[3], 100 * c.share[4]);
             std::printf("%10s phases (wall s): partition %.2f, search tree %.2f, nodes %.2f, write %.2f\n", "", c.phases[0],
                         c.phases[1], c.phases[2], c.phases[3]);
+            {
+                // What a client needs before it draws the whole cloud (the mission: at most 64 KiB).
+                ArchiveReader reader(output);
+                const FirstFrame first = archive_first_frame(reader.header(), reader.entries());
+                std::printf("%10s first frame: %" PRIu64 " bytes (prefix %" PRIu64 ", level 0 %" PRIu64 ")\n", "",
+                            first.bytes(), first.prefix_bytes, first.level0_bytes);
+            }
             std::fflush(stdout);
             if (last_dataset.empty()) {
                 last_dataset = output;

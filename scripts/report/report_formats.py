@@ -83,6 +83,10 @@ def parse_points_bench(text):
                                   "b_stored": float(r[7]), "err_r": float(r[8]), "meshopt_mpts": float(r[9]),
                                   "ratio": float(r[10]), "split": r[11]})
     need(out["conversion"], "points_bench: no conversion rows")
+    firsts = re.findall(r"^\s+first frame: (\d+) bytes \(prefix (\d+), level 0 (\d+)\)$", text, re.M)
+    need(len(firsts) == len(out["conversion"]), "points_bench: one first-frame line per conversion expected")
+    for c, f in zip(out["conversion"], firsts):
+        c["first_frame"], c["prefix"], c["level0"] = int(f[0]), int(f[1]), int(f[2])
     d = re.search(r"^ours:\s+(%s) M points/s\s+(%s) B/point" % (NUM, NUM), text, re.M)
     mo = re.search(r"^meshopt:\s+(%s) M points/s\s+(%s) B/point" % (NUM, NUM), text, re.M)
     need(d and mo, "points_bench: no decode lines")
@@ -276,6 +280,16 @@ def points_section(raw, w):
                [[f"{c['points']:,}", "%.2f" % c["wall"], "%.2f" % c["cpu"], "%.3f" % c["mpts"], c["peak"],
                  "%.2f" % c["bpt"], c["nodes"], "%.2f" % c["b_stored"], "%.3f" % c["err_r"],
                  "%.2f" % c["meshopt_mpts"], "%.2f" % c["ratio"]] for c in pb["conversion"]]))
+    w("")
+    w("The first frame of each dataset (what a client fetches before it draws the whole cloud: header, "
+      "metadata and index, then level 0; `archive_first_frame`), against the mission's 64 KiB. The "
+      "prefix grows with the number of nodes (the index and the metadata's node table hold every node):")
+    w("")
+    w(md_table(["input points", "nodes", "prefix bytes", "prefix bytes / node", "level 0 bytes", "first frame bytes",
+                "within 64 KiB"],
+               [[f"{c['points']:,}", c["nodes"], f"{c['prefix']:,}", "%.1f" % (c["prefix"] / max(1, c["nodes"])),
+                 f"{c['level0']:,}", f"{c['first_frame']:,}", "yes" if c["first_frame"] <= 65536 else "**no**"]
+                for c in pb["conversion"]]))
     w("")
     d = pb["decode"]
     w("Decoding every node of the first dataset on one thread: **%.1f M points/s** at %.2f bytes per "
