@@ -38,7 +38,9 @@ std::string Camera::problem() const {
     if (!(fov_y_degrees > 0 && fov_y_degrees < 180)) return strprintf("fov %g is not in (0, 180) degrees", fov_y_degrees);
     glm::dvec3 d = target - eye;
     double len = glm::length(d);
-    if (!(len > 0) || !std::isfinite(len)) return "eye and target coincide";
+    if (!std::isfinite(len))  // finite coordinates whose difference or its square overflows
+        return "eye and target are too far apart: their distance overflows a double";
+    if (!(len > 0)) return "eye and target coincide";
     double up_len = glm::length(up);
     if (!(up_len > 0)) return "up is the zero vector";
     double sine = glm::length(glm::cross(d / len, up / up_len));

@@ -121,6 +121,7 @@ double StreamingSession::data_distance(uint32_t node, const std::array<double, 3
 void StreamingSession::integrate(std::vector<FetchedNode>& arrived) {
     for (FetchedNode& f : arrived) {
         supplied_.erase(f.id);
+        from_first_request_.erase(f.id);
         if (!f.ok || !f.decoded || f.node == kNoNode) {
             // Failed every attempt: recorded once (the fetcher retries it later if still wanted).
             if (!f.ok && f.node != kNoNode) residency_->set_failed(f.node, true);
@@ -177,7 +178,12 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
     wanted.reserve(frame.requests.size());
     const Hierarchy& h = hierarchy();
     auto want = [&](const FetchRequest& fetch) {
-        if (supplied_.count(fetch.id)) return;
+        if (supplied_.count(fetch.id)) {
+            // Bytes of the first request stay wanted while they are decoded: if they are bad, the
+            // fetcher fetches the node instead (a supplied node nobody wants is dropped).
+            if (from_first_request_.count(fetch.id)) wanted.push_back(fetch);
+            return;
+        }
         if (const auto* bytes = compressed_->get(fetch.id)) {  // evicted earlier: decode again, no fetch
             fetcher_->supply(fetch, *bytes);
             supplied_.insert(fetch.id);
@@ -188,7 +194,7 @@ SessionFrameStats StreamingSession::step(const Camera& camera) {
             const auto begin = first_nodes_.begin() + ptrdiff_t(fetch.offset - first_nodes_offset_);
             fetcher_->supply(fetch, std::make_shared<const std::vector<uint8_t>>(begin, begin + ptrdiff_t(fetch.size)));
             supplied_.insert(fetch.id);
-            return;
+            from_first_request_.insert(fetch.id);
         }
         wanted.push_back(fetch);
     };

@@ -150,6 +150,8 @@ TEST(CameraPath, RejectsMalformedFilesClearly) {
     expect_error_containing(R"({"frames": [{"eye": [1,0], "target": [0,0,0]}]})", "array of 3 numbers");
     expect_error_containing(R"({"frames": [{"eye": [1,0,"x"], "target": [0,0,0]}]})", "must be a number");
     expect_error_containing(R"({"frames": [{"eye": [1,0,0], "target": [1,0,0]}]})", "coincide");
+    // Finite, but their distance overflows: not "coincide".
+    expect_error_containing(R"({"frames": [{"eye": [1e308,0,0], "target": [-1e308,0,0]}]})", "too far apart");
     expect_error_containing(R"({"frames": [{"eye": [0,0,1], "target": [0,0,0]}]})", "parallel");
     expect_error_containing(R"({"frames": [{"eye": [1,0,0], "target": [0,0,0]}, 3]})", "frame 1: must be an object");
 }

@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <fstream>
 
 #include "box_format.h"
 #include "box_renderer.h"
@@ -245,4 +246,51 @@ TEST(FormatSeam, TheFirstRequestBringsTheFirstFrameAndItsNodesAreNotFetchedAgain
     }
     server.stop();
     server.wait();
+}
+
+// Bytes of the first request that do not check out are no dead end: the node is fetched again.
+// (A supplied node nobody lists is dropped by the fetcher, so the session keeps it listed while
+// it is decoded.) A level-1 node is corrupt in the file while the session reads its first 64 KiB,
+// and mended before the view needs it.
+TEST(FormatSeam, ANodeWhoseFirstRequestBytesAreBadIsFetchedAgain) {
+    std::string why;
+    if (!HeadlessGlContext::available(&why)) GTEST_SKIP() << why;
+    const std::string path = (root_dir() / "boxes_mended.cpq").string();
+    fs::copy_file(box_dataset(), path, fs::copy_options::overwrite_existing);
+    ArchiveEntry level1;
+    {
+        ArchiveReader reader(path);
+        for (const ArchiveEntry& e : reader.entries())
+            if (e.level == 1) level1 = e;
+    }
+    ASSERT_GT(level1.size, 0u);
+    ASSERT_LE(level1.offset + level1.size, kFirstRequestBytes);
+    auto flip = [&] {
+        std::fstream f(path, std::ios::in | std::ios::out | std::ios::binary);
+        const std::streamoff at = std::streamoff(level1.offset + level1.size / 2);
+        char c = 0;
+        f.seekg(at);
+        f.read(&c, 1);
+        c = char(c ^ 0x10);
+        f.seekp(at);
+        f.write(&c, 1);
+        ASSERT_TRUE(f.good());
+    };
+
+    HeadlessGlContext context;
+    SessionSettings settings;
+    settings.formats = &box_registry();
+    settings.skip_factor = 0;
+    settings.tolerance_px = 100;
+    flip();
+    StreamingSession session(path, settings);
+    SessionFrameStats s = settle(session, top_camera());
+    EXPECT_EQ(s.drawn_nodes, 1u);
+    flip();  // mended
+    session.set_tolerance(12);
+    s = settle(session, top_camera());
+    EXPECT_TRUE(session.failures().empty());
+    EXPECT_EQ(s.drawn_nodes, 4u);
+    EXPECT_EQ(s.requests, 1u);  // the bad node, fetched again
+    EXPECT_EQ(s.bytes_fetched, kFirstRequestBytes + level1.size);
 }

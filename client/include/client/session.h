@@ -151,6 +151,7 @@ private:
     // served from here (Fetcher::supply), not fetched a second time.
     std::vector<uint8_t> first_nodes_;
     uint64_t first_nodes_offset_ = 0;
+    std::unordered_set<uint64_t> from_first_request_;  // supplied from first_nodes_, not arrived yet
     bool settled_ = false;
     std::vector<NodeFailure> failures_;
     // data_distance's last measure per node: the eye it was taken from and the distance.
