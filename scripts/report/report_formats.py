@@ -320,7 +320,7 @@ def points_section(raw, w):
         w(md_table(["colour bits", "error / radius allowed", "bytes / input point", "bytes / stored point",
                     "error / radius measured"], pb["rate"]))
         w("")
-    best = max(c["mpts"] for c in pb["conversion"])
+    slowest = min(c["mpts"] for c in pb["conversion"])
     largest = max(pb["conversion"], key=lambda c: c["points"])
     w("In core, the largest cloud (%s points) peaked at %s MiB, %.0f bytes per input point." %
       (f"{largest['points']:,}", largest["peak"], float(largest["peak"]) * 1048576 / largest["points"]))
@@ -338,12 +338,18 @@ def points_section(raw, w):
                      "%.3f" % r["peak_budget"], r["chunks"], r["passes"], "%.2f" % r["ratio"],
                      "yes" if r["same"] else "**NO**"] for r in pb["out_of_core"]]))
         w("")
-    w("Targets (issue 18): conversion at least 1M points/s on 2 cores: %s (best %.2f M points/s); "
+    w("Targets (issue 18): conversion at least 1M points/s on 2 cores at every size: %s (slowest %.2f M points/s); "
       "at most 3.6 bytes per stored point at a quarter radius error: %s (%.2f with lossless colour); "
       "decoding at least 100 M points/s per core: %s (%.0f in this run)." %
-      ("met" if best >= 1 else "not met", best,
+      ("met" if slowest >= 1 else "not met", slowest,
        "met" if min(c["b_stored"] for c in pb["conversion"]) <= 3.6 else "not met with lossless colour",
        min(c["b_stored"] for c in pb["conversion"]), "met" if d["ours"] >= 100 else "not met", d["ours"]))
+    w("")
+    w("The conversion rate depends on the host as well as on the code; the same-run baseline says how fast "
+      "this host was: meshoptimizer's `meshopt_simplifyPoints` ran at %.1f-%.1f M points/s here, and our rate "
+      "over its was %.2f-%.2f." %
+      (min(c["meshopt_mpts"] for c in pb["conversion"]), max(c["meshopt_mpts"] for c in pb["conversion"]),
+       min(c["ratio"] for c in pb["conversion"]), max(c["ratio"] for c in pb["conversion"])))
     w("")
 
 
