@@ -8,12 +8,14 @@
 #include "base/output_path.h"
 #include "base/sysinfo.h"
 #include "catp/builder.h"
+#include "common_codec/archive.h"
 #include "catp/lattice.h"
 #include "mesh/io.h"
 
 #include <nlohmann/json.hpp>
 
 #include "apps/convert_formats.h"
+#include "common_codec/archive.h"
 
 namespace catpaq {
 
@@ -178,6 +180,18 @@ void prepare_output(const ConvertJob& job) {
         std::fprintf(stderr, "catpaq convert: removed '%s', left by an interrupted run\n", stale.c_str());
 }
 
+void warn_about_first_frame(const ConvertJob& job, const char* fewer_nodes) {
+    ArchiveReader reader(job.output);
+    const FirstFrame first = archive_first_frame(reader.header(), reader.entries());
+    if (first.bytes() <= kFirstRequestBytes) return;
+    std::fprintf(stderr,
+                 "catpaq convert: warning: a client needs %llu bytes before it draws the model (the prefix, %llu "
+                 "bytes listing all %zu nodes, and level 0), over the 64 KiB of a first request; larger nodes "
+                 "(%s) make fewer\n",
+                 (unsigned long long)first.bytes(), (unsigned long long)first.prefix_bytes, reader.entries().size(),
+                 fewer_nodes);
+}
+
 // CATP: build_catp_file (catp/builder.h) with the options above; the report as a table or JSON.
 int convert_catp(Options& options, const ConvertJob& job) {
     CatpBuildSettings settings;
@@ -233,6 +247,7 @@ int convert_catp(Options& options, const ConvertJob& job) {
     for (const std::string& d : r.dropped_input)
         std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", input.c_str(), d.c_str());
     warn_about_lost_geometry(r);
+    warn_about_first_frame(job, "--leaf-triangles");
     if (job.json) {
         print_catp_json(r, job, own);
         return 0;

@@ -319,6 +319,7 @@ int convert_aqp(Options& options, const ConvertJob& job) {
     aqp::AqpBuildReport r;
     aqp::build_aqp_dataset(input, job.output, o, &r);
     for (const std::string& w : r.warnings) std::fprintf(stderr, "catpaq convert: warning: %s\n", w.c_str());
+    warn_about_first_frame(job, "--tile-samples");
     if (job.json)
         print_json(r, job, dropped, poisson.get(), cloud_points, reduction.get());
     else if (!job.quiet)

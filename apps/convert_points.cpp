@@ -143,6 +143,7 @@ int convert_points(Options& options, const ConvertJob& job) {
     }
     for (const std::string& d : r.dropped_input)
         std::fprintf(stderr, "catpaq convert: warning: '%s': left out: %s\n", job.input.c_str(), d.c_str());
+    warn_about_first_frame(job, "--node-points");
     if (job.json)
         print_json(r, job, surface_samples);
     else if (!job.quiet)

@@ -18,6 +18,11 @@ struct ConvertJob {
 // Removes temporaries an interrupted run left next to the output (after the options are read).
 void prepare_output(const ConvertJob& job);
 
+// Warns on stderr when the dataset written to job.output needs more than the 64 KiB of a first
+// request before a client draws it (the prefix lists every node): `fewer_nodes` names the option
+// that makes nodes larger, hence fewer.
+void warn_about_first_frame(const ConvertJob& job, const char* fewer_nodes);
+
 int convert_catp(Options& options, const ConvertJob& job);
 int convert_aqp(Options& options, const ConvertJob& job);
 int convert_points(Options& options, const ConvertJob& job);

@@ -104,6 +104,22 @@ TEST(CliFormats, PointsConvertAndVerifyEveryInputPointIsCovered) {
     EXPECT_NE(f.output.find("1 input points are farther than the bound"), std::string::npos) << f.output;
 }
 
+// A dataset whose first frame needs more than a first request's 64 KiB (the prefix lists every
+// node: here 100,000 points in nodes of at most 16) gets a warning naming the option that makes fewer
+// nodes; with the default node size it does not.
+TEST(CliFormats, ConvertWarnsWhenTheFirstFrameExceedsSixtyFourKiB) {
+    fs::path in = scratch() / "cloud_small_nodes.xyz", out = scratch() / "cloud_small_nodes.cpq";
+    write_xyz(in, sample_surface(make_sphere(4000, 3), 100000, 9, false, false));
+    ToolRun small = run("convert " + in.string() + " -o " + out.string() + " --format points --node-points 16 --quiet");
+    ASSERT_EQ(small.status, 0) << small.output;
+    EXPECT_NE(small.output.find("over the 64 KiB of a first request; larger nodes (--node-points) make fewer"),
+              std::string::npos)
+        << small.output;
+    ToolRun fine = run("convert " + in.string() + " -o " + out.string() + " --format points --quiet");
+    ASSERT_EQ(fine.status, 0) << fine.output;
+    EXPECT_EQ(fine.output.find("64 KiB"), std::string::npos) << fine.output;
+}
+
 // verify --mesh at a million units from the origin, on a cloud 2e-5 wide (cells of 1e-7; a
 // sphere's vertices, some on its axes, exactly 1e6): every
 // input point is still found beside its splat. (Its grid divided world coordinates by the cell in
