@@ -233,12 +233,9 @@ public:
                 }
             std::function<bool(const Edge&)> on_input_border;
             if (input_border)
-                on_input_border = [&](const Edge& e) {
-                    std::array<double, 3> mid;
-                    for (int k = 0; k < 3; ++k)
-                        mid[size_t(k)] = meta.origin[k] +
-                                         double(e.first[size_t(k)] + e.second[size_t(k)]) / (2.0 * meta.layout.grid) * meta.cell;
-                    return input_border->distance(mid) <= tolerance;
+                on_input_border = [&](const Edge& e) {  // its ends are welded cut vertices
+                    const std::array<double, 3>& a = out.positions[weld.at(e.first)], &b = out.positions[weld.at(e.second)];
+                    return input_border->distance({(a[0] + b[0]) / 2, (a[1] + b[1]) / 2, (a[2] + b[2]) / 2}) <= tolerance;
                 };
             FaceCheck c = check_face({sides[0], sides[1]}, on_input_border);
             report_.face_border_edges += c.one_sided;

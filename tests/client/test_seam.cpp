@@ -64,6 +64,17 @@ Camera top_camera() {
     return c;
 }
 
+// `catpaq serve` of the root on a free port, one thread, silent.
+ServerSettings served_root_settings() {
+    ServerSettings s;
+    s.root = root_dir().string();
+    s.port = 0;
+    s.threads = 1;
+    s.log_level = LogLevel::Error;
+    s.log = [](LogLevel, std::string_view) {};
+    return s;
+}
+
 SessionFrameStats settle(StreamingSession& session, const Camera& camera) {
     SessionFrameStats s = session.step(camera);
     for (int i = 0; i < 20000 && !session.settled(); ++i) {
@@ -155,13 +166,7 @@ TEST(FormatSeam, AServerThatKnowsNoFormatServesItToTheSession) {
     std::string why;
     if (!HeadlessGlContext::available(&why)) GTEST_SKIP() << why;
     box_dataset();
-    ServerSettings server_settings;
-    server_settings.root = root_dir().string();
-    server_settings.port = 0;
-    server_settings.threads = 1;
-    server_settings.log_level = LogLevel::Error;
-    server_settings.log = [](LogLevel, std::string_view) {};
-    StreamingServer server(server_settings);
+    StreamingServer server(served_root_settings());
     uint16_t port = server.start();
 
     HeadlessGlContext context;
@@ -198,13 +203,7 @@ TEST(FormatSeam, TheFirstRequestBringsTheFirstFrameAndItsNodesAreNotFetchedAgain
     ASSERT_LE(level1_end, kFirstRequestBytes);
     ASSERT_GT(reader.size(), kFirstRequestBytes);
 
-    ServerSettings server_settings;
-    server_settings.root = root_dir().string();
-    server_settings.port = 0;
-    server_settings.threads = 1;
-    server_settings.log_level = LogLevel::Error;
-    server_settings.log = [](LogLevel, std::string_view) {};
-    StreamingServer server(server_settings);
+    StreamingServer server(served_root_settings());
     const std::string base = "http://127.0.0.1:" + std::to_string(server.start());
 
     HeadlessGlContext context;
